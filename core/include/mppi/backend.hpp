@@ -1,0 +1,74 @@
+// The rollout-backend interface: one MPPI update (sample, roll out, weight, update the
+// plan) for a task. The CPU (OpenMP) and CUDA backends implement it; the optimizer above
+// owns the plan, the warm start and the smoothing.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mppi/hd.hpp"
+#include "mppi/sampling.hpp"
+#include "mppi/settings.hpp"
+
+namespace mppi {
+
+struct UpdateStats {
+  float min_cost = 0.0f;        // lowest S~(tau_0,k)
+  float mean_cost = 0.0f;       // mean S~(tau_0,k) over finite rollouts
+  float ess = 0.0f;             // effective sample size 1 / sum w^2 of the step-0 weights
+  int crashed = 0;              // rollouts that crashed somewhere in the horizon
+  bool finite = true;           // every number of the update was finite
+};
+
+// Costs at or above this are treated as "infinitely bad" but stay finite, so the min
+// subtraction never computes inf - inf.
+constexpr float kCostCeiling = 1e30f;
+
+MPPI_HD float sanitize_cost(float q) {
+  return (q == q) ? fmin_(fmax_(q, -kCostCeiling), kCostCeiling) : kCostCeiling;
+}
+
+// Unnormalised weight of a rollout whose cost exceeds the minimum by `excess` (>= 0).
+MPPI_HD float unnormalised_weight(float excess, float inv_lambda) { return fexp(-excess * inv_lambda); }
+
+template <int NU>
+SamplerConstants<NU> make_sampler_constants(const MppiSettings& s) {
+  SamplerConstants<NU> c{};
+  const float root_nu = std::sqrt(s.nu);
+  for (int j = 0; j < NU; ++j) {
+    c.noise_std[j] = root_nu * s.sigma[j];
+    c.r[j] = s.control_cost_scale * s.lambda / (s.sigma[j] * s.sigma[j]);
+    c.u_min[j] = s.u_min[j];
+    c.u_max[j] = s.u_max[j];
+    c.u_nominal[j] = s.u_nominal.empty() ? 0.0f : s.u_nominal[j];
+  }
+  c.inv_nu_term = 0.5f * (1.0f - 1.0f / s.nu);
+  return c;
+}
+
+template <class TaskT>
+class RolloutBackend {
+ public:
+  using Task = TaskT;
+  using Params = typename Task::Params;
+  static constexpr int kNx = Task::kNx;
+  static constexpr int kNu = Task::kNu;
+
+  virtual ~RolloutBackend() = default;
+  virtual const char* name() const = 0;
+
+  // Sample K sequences around `plan` (T x NU, row-major, inside the limits), roll each out
+  // from x0 with `params`, weight them, and overwrite `plan` with the weighted update.
+  // `cycle` keys the noise with the settings' seed. Allocates nothing.
+  virtual void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan,
+                      UpdateStats* stats) = 0;
+
+  // S~(tau_0,k) of every rollout of the last update (tests and tools; may allocate).
+  virtual std::vector<float> rollout_costs() const = 0;
+
+  // Bytes allocated at start-up (host, device).
+  virtual std::size_t host_bytes() const = 0;
+  virtual std::size_t device_bytes() const { return 0; }
+};
+
+}  // namespace mppi

@@ -1,0 +1,73 @@
+// The quadrotor forest cost of Sec. VI.C, for any vehicle whose state starts with position
+// and velocity, and for teams (a separation term couples the vehicles):
+//   q = 2.5 (px - gx)^2 + 2.5 (py - gy)^2 + 150 (pz - gz)^2 + 50 yaw^2 + |v|^2
+//       + 350 exp(-d^2 / 12) + 1000 C
+// with d the distance to the nearest obstacle surface and C = 1 on a crash (ground,
+// obstacle, or, in a team, another vehicle).
+#pragma once
+
+#include "mppi/costs/obstacles.hpp"
+#include "mppi/hd.hpp"
+
+namespace mppi {
+
+template <class Vehicle>
+struct ForestCost {
+  static constexpr int kMaxVehicles = 32;
+  struct Params {
+    float goal[kMaxVehicles][3] = {};  // per vehicle
+    float w_xy = 2.5f;
+    float w_z = 150.0f;
+    float w_yaw = 50.0f;
+    float w_speed = 1.0f;
+    float w_obstacle = 350.0f;
+    float obstacle_scale = 12.0f;  // m^2, in exp(-d^2 / scale)
+    float w_crash = 1000.0f;
+    float vehicle_radius = 0.15f;   // m
+    float ground_z = 0.0f;          // m
+    float w_separation = 350.0f;    // team only: exp barrier on vehicle-vehicle distance
+    float separation_scale = 1.0f;  // m^2
+    float w_terminal = 0.0f;        // multiplies the goal terms at the horizon's end
+    ObstacleSet obstacles;
+  };
+
+  MPPI_HD static float vehicle(const Params& p, int j, const float* x, float t, bool* crash) {
+    float pos[3];
+    Vehicle::position(x, pos);
+    const float* g = p.goal[j];
+    const float yaw = Vehicle::yaw(x);
+    float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
+              p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
+    const float d = p.obstacles.nearest_surface(pos[0], pos[1], t);
+    if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
+    const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z;
+    if (hit) {
+      q += p.w_crash;
+      *crash = true;
+    }
+    return q;
+  }
+
+  MPPI_HD static float pair(const Params& p, const float* xa, const float* xb, bool* crash) {
+    float a[3], b[3];
+    Vehicle::position(xa, a);
+    Vehicle::position(xb, b);
+    const float d2 = fsq(a[0] - b[0]) + fsq(a[1] - b[1]) + fsq(a[2] - b[2]);
+    float q = p.w_separation * fexp(-d2 / p.separation_scale);
+    if (d2 < fsq(2.0f * p.vehicle_radius)) {
+      q += p.w_crash;
+      *crash = true;
+    }
+    return q;
+  }
+
+  MPPI_HD static float terminal(const Params& p, int j, const float* x) {
+    if (p.w_terminal == 0.0f) return 0.0f;
+    float pos[3];
+    Vehicle::position(x, pos);
+    const float* g = p.goal[j];
+    return p.w_terminal * (p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]));
+  }
+};
+
+}  // namespace mppi

@@ -1,0 +1,43 @@
+// Cart-pole of Appendix C: state (x, x_dot, theta, theta_dot, f), theta from the downward
+// vertical, f the motor force with a first-order response to the desired force (the
+// control). Sec. VI.A describes a velocity input instead; Appendix C is the model used.
+#pragma once
+
+#include "mppi/hd.hpp"
+
+namespace mppi {
+
+struct Cartpole {
+  static constexpr int kNx = 5;
+  static constexpr int kNu = 1;
+  static constexpr const char* kName = "cartpole";
+  enum : int { X, XDOT, THETA, THETADOT, FORCE };
+
+  struct Params {
+    float gravity = 9.81f;
+    float cart_mass = 1.0f;   // m_c, kg
+    float pole_mass = 0.01f;  // m_p, kg
+    float length = 0.25f;     // l, m
+    float motor_gain = 20.0f; // 1/s
+  };
+
+  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
+    const float s = fsin(x[THETA]), c = fcos(x[THETA]);
+    const float w = x[THETADOT], f = x[FORCE];
+    const float den = p.cart_mass + p.pole_mass * s * s;
+    dx[X] = x[XDOT];
+    dx[XDOT] = (f + p.pole_mass * s * (p.length * w * w + p.gravity * c)) / den;
+    dx[THETA] = w;
+    dx[THETADOT] = (-f * c - p.pole_mass * p.length * w * w * c * s - (p.cart_mass + p.pole_mass) * p.gravity * s) /
+                   (p.length * den);
+    dx[FORCE] = p.motor_gain * (u[0] - f);
+  }
+
+  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
+    float dx[kNx];
+    derivative(p, x, u, dx);
+    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+  }
+};
+
+}  // namespace mppi

@@ -1,0 +1,91 @@
+// 16-state quadrotor of Appendix E (Williams et al. 2017): position, velocity, ZXY Euler
+// angles, body rates, motor speeds; controls are desired motor speeds in rpm.
+#pragma once
+
+#include "mppi/hd.hpp"
+
+namespace mppi {
+
+struct Quadrotor {
+  static constexpr int kNx = 16;
+  static constexpr int kNu = 4;
+  static constexpr const char* kName = "quadrotor";
+
+  // State layout.
+  enum : int { PX, PY, PZ, VX, VY, VZ, ROLL, PITCH, YAW, WX, WY, WZ, M1, M2, M3, M4 };
+
+  struct Params {
+    float mass = 0.25f;         // kg
+    float gravity = 9.81f;      // m/s^2
+    float arm = 0.1f;           // L, m
+    float ixx = 2.5e-4f;        // kg m^2
+    float iyy = 2.5e-4f;
+    float izz = 1.2e-3f;
+    float motor_gain = 20.0f;   // k_m, 1/s
+    float k_force = 6.11e-8f;   // N / rpm^2
+    float k_moment = 1.5e-9f;   // N m / rpm^2
+    float drag = 0.0f;          // linear drag, N s/m (0 in the paper; the SITL plant may differ)
+  };
+
+  // Motor speed at which the four motors hold the vehicle level.
+  MPPI_HD static float hover_speed(const Params& p) {
+    return fsqrt(p.mass * p.gravity / (4.0f * p.k_force));
+  }
+
+  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
+    const float sphi = fsin(x[ROLL]), cphi_raw = fcos(x[ROLL]);
+    const float sth = fsin(x[PITCH]), cth = fcos(x[PITCH]);
+    const float spsi = fsin(x[YAW]), cpsi = fcos(x[YAW]);
+    // The ZXY Euler map is singular at roll = +-90 deg; keep it finite there.
+    const float cphi = fabs_(cphi_raw) < 1e-3f ? (cphi_raw < 0.0f ? -1e-3f : 1e-3f) : cphi_raw;
+
+    float force[4], moment[4];
+    for (int i = 0; i < 4; ++i) {
+      const float w = x[M1 + i];
+      force[i] = p.k_force * w * w;
+      moment[i] = p.k_moment * w * w;
+    }
+    const float thrust = force[0] + force[1] + force[2] + force[3];
+    const float a = thrust / p.mass;
+
+    dx[PX] = x[VX];
+    dx[PY] = x[VY];
+    dx[PZ] = x[VZ];
+    // Third column of R_WB times the collective thrust.
+    const float drag = p.drag / p.mass;
+    dx[VX] = a * (cpsi * sth + cth * sphi * spsi) - drag * x[VX];
+    dx[VY] = a * (spsi * sth - cpsi * cth * sphi) - drag * x[VY];
+    dx[VZ] = a * (cphi_raw * cth) - p.gravity - drag * x[VZ];
+
+    const float wx = x[WX], wy = x[WY], wz = x[WZ];
+    dx[ROLL] = cth * wx + sth * wz;
+    dx[PITCH] = wy + (sphi / cphi) * (sth * wx - cth * wz);
+    dx[YAW] = (-sth * wx + cth * wz) / cphi;
+
+    const float tx = p.arm * (force[1] - force[3]);
+    const float ty = p.arm * (force[2] - force[0]);
+    const float tz = moment[0] - moment[1] + moment[2] - moment[3];
+    // omega_dot = I^-1 (tau - omega x I omega)
+    dx[WX] = (tx - (wy * p.izz * wz - wz * p.iyy * wy)) / p.ixx;
+    dx[WY] = (ty - (wz * p.ixx * wx - wx * p.izz * wz)) / p.iyy;
+    dx[WZ] = (tz - (wx * p.iyy * wy - wy * p.ixx * wx)) / p.izz;
+
+    for (int i = 0; i < 4; ++i) dx[M1 + i] = p.motor_gain * (u[i] - x[M1 + i]);
+  }
+
+  // Explicit Euler, as Algorithm 1.
+  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
+    float dx[kNx];
+    derivative(p, x, u, dx);
+    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+  }
+
+  MPPI_HD static void position(const float* x, float* pos) {
+    pos[0] = x[PX];
+    pos[1] = x[PY];
+    pos[2] = x[PZ];
+  }
+  MPPI_HD static float yaw(const float* x) { return x[YAW]; }
+};
+
+}  // namespace mppi

@@ -1,0 +1,76 @@
+// Rate-controlled quadrotor (13 states): what the controller flies through an autopilot,
+// which takes collective thrust and body-rate setpoints. State: position, velocity,
+// attitude quaternion (w, x, y, z; body to world), body rates. Controls: thrust (N) and
+// body-rate setpoints (rad/s), tracked by the autopilot's rate loop as a first-order lag.
+#pragma once
+
+#include "mppi/hd.hpp"
+
+namespace mppi {
+
+struct QuadrotorRate {
+  static constexpr int kNx = 13;
+  static constexpr int kNu = 4;
+  static constexpr const char* kName = "quadrotor_rate";
+
+  enum : int { PX, PY, PZ, VX, VY, VZ, QW, QX, QY, QZ, WX, WY, WZ };
+  enum : int { THRUST, RATE_X, RATE_Y, RATE_Z };
+
+  struct Params {
+    float mass = 1.0f;        // kg
+    float gravity = 9.81f;    // m/s^2
+    float rate_tau = 0.05f;   // s, first-order time constant of the autopilot's rate loop
+    float drag = 0.0f;        // linear drag, N s/m
+  };
+
+  MPPI_HD static float hover_thrust(const Params& p) { return p.mass * p.gravity; }
+
+  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
+    const float qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
+    const float wx = x[WX], wy = x[WY], wz = x[WZ];
+    dx[PX] = x[VX];
+    dx[PY] = x[VY];
+    dx[PZ] = x[VZ];
+    // Body z axis in the world frame: third column of R(q).
+    const float bx = 2.0f * (qx * qz + qw * qy);
+    const float by = 2.0f * (qy * qz - qw * qx);
+    const float bz = 1.0f - 2.0f * (qx * qx + qy * qy);
+    const float a = u[THRUST] / p.mass;
+    const float drag = p.drag / p.mass;
+    dx[VX] = a * bx - drag * x[VX];
+    dx[VY] = a * by - drag * x[VY];
+    dx[VZ] = a * bz - p.gravity - drag * x[VZ];
+    // q_dot = 1/2 q (x) (0, omega)
+    dx[QW] = 0.5f * (-qx * wx - qy * wy - qz * wz);
+    dx[QX] = 0.5f * (qw * wx + qy * wz - qz * wy);
+    dx[QY] = 0.5f * (qw * wy - qx * wz + qz * wx);
+    dx[QZ] = 0.5f * (qw * wz + qx * wy - qy * wx);
+    const float k = 1.0f / p.rate_tau;
+    dx[WX] = k * (u[RATE_X] - wx);
+    dx[WY] = k * (u[RATE_Y] - wy);
+    dx[WZ] = k * (u[RATE_Z] - wz);
+  }
+
+  // Explicit Euler, then back onto the unit quaternions.
+  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
+    float dx[kNx];
+    derivative(p, x, u, dx);
+    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+    const float n = fsqrt(x[QW] * x[QW] + x[QX] * x[QX] + x[QY] * x[QY] + x[QZ] * x[QZ]);
+    const float inv = n > 0.0f ? 1.0f / n : 1.0f;
+    for (int i = QW; i <= QZ; ++i) x[i] *= inv;
+  }
+
+  MPPI_HD static void position(const float* x, float* pos) {
+    pos[0] = x[PX];
+    pos[1] = x[PY];
+    pos[2] = x[PZ];
+  }
+  // Heading (yaw about world z) of the body x axis.
+  MPPI_HD static float yaw(const float* x) {
+    const float qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
+    return ::atan2f(2.0f * (qw * qz + qx * qy), 1.0f - 2.0f * (qy * qy + qz * qz));
+  }
+};
+
+}  // namespace mppi

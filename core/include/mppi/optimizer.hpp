@@ -1,0 +1,101 @@
+// The MPPI optimizer of Algorithm 1 above a rollout backend: it owns the plan, runs one
+// update per control cycle, smooths the plan inside the limits, hands out u_0 and warm
+// starts the next cycle by shifting (u_{N-1} <- u_init).
+#pragma once
+
+#include <algorithm>
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "mppi/backend.hpp"
+#include "mppi/settings.hpp"
+
+namespace mppi {
+
+template <class TaskT>
+class Mppi {
+ public:
+  using Task = TaskT;
+  using Params = typename Task::Params;
+  static constexpr int kNx = Task::kNx;
+  static constexpr int kNu = Task::kNu;
+
+  Mppi(const MppiSettings& s, std::unique_ptr<RolloutBackend<Task>> backend)
+      : settings_(s),
+        backend_(std::move(backend)),
+        plan_(static_cast<std::size_t>(s.horizon) * kNu),
+        scratch_(plan_.size()) {
+    const std::string err = validate(s, kNu);
+    if (!err.empty()) throw std::invalid_argument(err);
+    if (!backend_) throw std::invalid_argument("backend: none given");
+    reset();
+  }
+
+  // One control cycle from state x0: update the plan, smooth it, write u_0 to u_out and
+  // shift the plan for the next cycle. Returns the update's statistics.
+  const UpdateStats& iterate(const float* x0, const Params& params, float* u_out) {
+    backend_->update(x0, params, cycle_++, plan_.data(), &stats_);
+    if (settings_.smoothing_window > 1) smooth();
+    std::copy_n(plan_.data(), kNu, u_out);
+    shift();
+    return stats_;
+  }
+
+  // The fallback after a missed deadline or a bad update: the previous plan, shifted.
+  void fallback(float* u_out) {
+    std::copy_n(plan_.data(), kNu, u_out);
+    shift();
+  }
+
+  // Drop u_0 and append u_init (warm start).
+  void shift() {
+    std::copy(plan_.begin() + kNu, plan_.end(), plan_.begin());
+    std::copy_n(settings_.u_init.data(), kNu, plan_.end() - kNu);
+  }
+
+  void reset() {
+    for (int i = 0; i < settings_.horizon; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
+  }
+
+  // Replace the plan (tests; a restored plan). Values are clamped into the limits.
+  void set_plan(const std::vector<float>& plan) {
+    for (std::size_t n = 0; n < plan_.size(); ++n) {
+      const int j = static_cast<int>(n % kNu);
+      plan_[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);
+    }
+  }
+
+  const std::vector<float>& plan() const { return plan_; }
+  const UpdateStats& stats() const { return stats_; }
+  const MppiSettings& settings() const { return settings_; }
+  RolloutBackend<Task>& backend() { return *backend_; }
+  std::uint32_t cycle() const { return cycle_; }
+
+ private:
+  // Centred moving average over time, the window shrinking at the ends. Each output is a
+  // convex combination of in-limit controls, so the limits still hold.
+  void smooth() {
+    const int half = settings_.smoothing_window / 2;
+    const int t = settings_.horizon;
+    for (int i = 0; i < t; ++i) {
+      const int lo = std::max(0, i - half), hi = std::min(t - 1, i + half);
+      const float inv = 1.0f / static_cast<float>(hi - lo + 1);
+      for (int j = 0; j < kNu; ++j) {
+        float acc = 0.0f;
+        for (int m = lo; m <= hi; ++m) acc += plan_[m * kNu + j];
+        scratch_[i * kNu + j] = acc * inv;
+      }
+    }
+    plan_.swap(scratch_);
+  }
+
+  MppiSettings settings_;
+  std::unique_ptr<RolloutBackend<Task>> backend_;
+  std::vector<float> plan_;
+  std::vector<float> scratch_;
+  UpdateStats stats_;
+  std::uint32_t cycle_ = 0;
+};
+
+}  // namespace mppi

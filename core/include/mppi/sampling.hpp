@@ -1,0 +1,48 @@
+// Per-sample pieces of one MPPI iteration (Sec. II-III of the notes), shared by the CPU and
+// CUDA backends: the perturbed, limited control and the importance-sampled control cost.
+#pragma once
+
+#include <cstdint>
+
+#include "mppi/hd.hpp"
+#include "mppi/rng.hpp"
+
+namespace mppi {
+
+// Per-channel constants of the sampler, precomputed once from the settings.
+template <int NU>
+struct SamplerConstants {
+  float noise_std[NU];  // sqrt(nu) * sigma
+  float r[NU];          // R = lambda / sigma^2, times control_cost_scale
+  float u_min[NU];
+  float u_max[NU];
+  float u_nominal[NU];
+  float inv_nu_term;    // 1/2 (1 - 1/nu)
+};
+
+// u = clamp(plan + noise); du = u - plan is the variation actually applied (the limits
+// are part of the sampling, so the update stays inside them).
+template <int NU>
+MPPI_HD void perturb(const SamplerConstants<NU>& c, const NoiseKey& key, std::uint32_t sample,
+                     std::uint32_t step, const float* plan_u, float* u, float* du) {
+  float n[NU];
+  gaussian<NU>(key, sample, step, n);
+  for (int j = 0; j < NU; ++j) {
+    u[j] = fclamp(plan_u[j] + c.noise_std[j] * n[j], c.u_min[j], c.u_max[j]);
+    du[j] = u[j] - plan_u[j];
+  }
+}
+
+// Control terms of q~ (Eq. 33): 1/2 (1 - 1/nu) du'R du + u'R du + 1/2 u'R u, with u measured
+// from the nominal control.
+template <int NU>
+MPPI_HD float control_cost(const SamplerConstants<NU>& c, const float* plan_u, const float* du) {
+  float q = 0.0f;
+  for (int j = 0; j < NU; ++j) {
+    const float u = plan_u[j] - c.u_nominal[j];
+    q += c.r[j] * (c.inv_nu_term * du[j] * du[j] + u * du[j] + 0.5f * u * u);
+  }
+  return q;
+}
+
+}  // namespace mppi

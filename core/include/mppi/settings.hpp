@@ -1,0 +1,42 @@
+// Optimizer settings: one validated, immutable snapshot per controller. Loading from a
+// file lives outside core (config/); validate() names the first bad field.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace mppi {
+
+enum class Weighting {
+  kCostToGo,    // the paper's: step i weighted by the cost-to-go from i
+  kTrajectory,  // every step weighted by the whole-trajectory cost
+};
+
+struct MppiSettings {
+  int rollouts = 1024;          // K
+  int horizon = 100;            // T, control steps
+  float dt = 0.02f;             // s per control step
+  int substeps = 1;             // Euler steps per control step inside a rollout
+  float lambda = 1.0f;          // temperature
+  float nu = 1.0f;              // exploration variance (>= 1)
+  std::vector<float> sigma;     // per-channel natural std deviation; R = lambda / sigma^2
+  std::vector<float> u_min;     // per-channel limits, applied before costing
+  std::vector<float> u_max;
+  std::vector<float> u_init;    // appended by the shift (warm start)
+  std::vector<float> u_nominal; // control cost is on (u - u_nominal); zero if empty
+  float control_cost_scale = 1.0f;  // multiplies the control terms of q~ (paper: 1)
+  Weighting weighting = Weighting::kCostToGo;
+  int smoothing_window = 1;     // moving average over the plan, odd; 1 = off
+  std::uint64_t seed = 1;
+  int threads = 0;              // CPU backend: 0 = all cores (OpenMP default)
+};
+
+// Empty when valid, else "field: reason" for the first bad field. nu is the control
+// dimension the settings must match.
+std::string validate(const MppiSettings& s, int nu);
+
+const char* to_string(Weighting w);
+bool parse_weighting(const std::string& text, Weighting* out);
+
+}  // namespace mppi

@@ -1,0 +1,73 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <numeric>
+#include <vector>
+
+#include "mppi/cpu_backend.hpp"
+#include "mppi/optimizer.hpp"
+#include "mppi/tasks.hpp"
+
+namespace mppi {
+namespace {
+
+MppiSettings quad_settings(int k = 256, int t = 50) {
+  MppiSettings s;
+  s.rollouts = k;
+  s.horizon = t;
+  s.lambda = 10.0f;
+  s.nu = 2.0f;
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+  s.sigma.assign(4, 150.0f);
+  s.u_min.assign(4, 0.0f);
+  s.u_max.assign(4, 6000.0f);
+  s.u_init.assign(4, hover);
+  s.u_nominal.assign(4, hover);
+  s.control_cost_scale = 0.01f;
+  return s;
+}
+
+QuadrotorForest::Params forest_params() {
+  QuadrotorForest::Params p{};
+  p.cost.goal[0][0] = 20.0f;
+  p.cost.goal[0][1] = 0.0f;
+  p.cost.goal[0][2] = 2.0f;
+  p.cost.obstacles.count = 1;
+  p.cost.obstacles.items[0] = Cylinder{5.0f, 0.5f, 0.5f, 0.0f, 0.0f};
+  return p;
+}
+
+std::vector<float> hover_state() {
+  std::vector<float> x(Quadrotor::kNx, 0.0f);
+  x[Quadrotor::PZ] = 2.0f;
+  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(Quadrotor::Params{});
+  return x;
+}
+
+std::vector<float> run_cycles(int threads, int cycles) {
+  MppiSettings s = quad_settings();
+  s.threads = threads;
+  Mppi<QuadrotorForest> mppi(s, std::make_unique<CpuBackend<QuadrotorForest>>(s));
+  const auto params = forest_params();
+  auto x = hover_state();
+  float u[4];
+  for (int c = 0; c < cycles; ++c) mppi.iterate(x.data(), params, u);
+  return mppi.plan();
+}
+
+TEST(CpuBackend, SameSeedSamePlan) { EXPECT_EQ(run_cycles(1, 3), run_cycles(1, 3)); }
+
+TEST(CpuBackend, ThreadCountDoesNotChangeThePlan) { EXPECT_EQ(run_cycles(1, 3), run_cycles(2, 3)); }
+
+TEST(CpuBackend, PlanStaysInsideLimitsAndFinite) {
+  const auto plan = run_cycles(2, 5);
+  for (float u : plan) {
+    EXPECT_TRUE(std::isfinite(u));
+    EXPECT_GE(u, 0.0f);
+    EXPECT_LE(u, 6000.0f);
+  }
+}
+
+}  // namespace
+}  // namespace mppi
