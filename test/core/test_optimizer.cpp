@@ -71,3 +71,19 @@ TEST(CpuBackend, PlanStaysInsideLimitsAndFinite) {
 
 }  // namespace
 }  // namespace mppi
+
+#include "mppi/controller.hpp"
+namespace mppi {
+namespace {
+TEST(Controller, EveryTaskInstantiates) {
+  for (const auto& name : task_names()) {
+    const bool known = visit_task(name, [&](auto tag) {
+      using T = typename decltype(tag)::type;
+      typename T::Params params{};
+      EXPECT_EQ(set_task_param<T>(params, "model.nonexistent", 1.0), "model.nonexistent: unknown parameter");
+    });
+    EXPECT_TRUE(known) << name;
+  }
+}
+}  // namespace
+}  // namespace mppi

@@ -70,6 +70,7 @@ class Mppi {
   const UpdateStats& stats() const { return stats_; }
   const MppiSettings& settings() const { return settings_; }
   RolloutBackend<Task>& backend() { return *backend_; }
+  const RolloutBackend<Task>& backend() const { return *backend_; }
   std::uint32_t cycle() const { return cycle_; }
 
  private:

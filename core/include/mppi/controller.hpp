@@ -1,0 +1,107 @@
+// A controller for one named task, with its type erased: what the daemon, the offline
+// runner and the benchmark hold. It owns the optimizer and the task's parameters; what the
+// world says each cycle (goals, reference, obstacles) arrives as TaskInputs between cycles.
+#pragma once
+
+#include <cstring>
+#include <memory>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "mppi/costs/obstacles.hpp"
+#include "mppi/costs/reference.hpp"
+#include "mppi/optimizer.hpp"
+#include "mppi/params.hpp"
+#include "mppi/tasks.hpp"
+
+namespace mppi {
+
+struct TaskInputs {
+  static constexpr int kMaxVehicles = 32;
+  int vehicle_count = 1;
+  float goals[kMaxVehicles][3] = {};
+  Reference reference;
+  float reference_time = 0.0f;  // reference time at the state's sample time, s
+  ObstacleSet obstacles;
+};
+
+class Controller {
+ public:
+  virtual ~Controller() = default;
+  virtual const std::string& task() const = 0;
+  virtual const char* backend() const = 0;
+  virtual int nx() const = 0;
+  virtual int nu() const = 0;
+  virtual int vehicles() const = 0;
+  virtual int horizon() const = 0;
+  virtual float dt() const = 0;
+
+  // Between cycles only.
+  virtual void set_inputs(const TaskInputs& in) = 0;
+  virtual std::string set_param(const std::string& key, double value) = 0;  // "" on success
+
+  // One cycle from state x0 (nx floats): writes nu floats of command to u_out.
+  virtual const UpdateStats& iterate(const float* x0, float* u_out) = 0;
+  // Shifted previous plan, for a missed deadline or a rejected update.
+  virtual void fallback(float* u_out) = 0;
+  virtual void reset() = 0;
+
+  virtual const std::vector<float>& plan() const = 0;
+  virtual const MppiSettings& settings() const = 0;
+  virtual std::vector<float> rollout_costs() const = 0;
+  virtual std::size_t host_bytes() const = 0;
+  virtual std::size_t device_bytes() const = 0;
+};
+
+template <class T>
+class TaskController final : public Controller {
+ public:
+  TaskController(std::string name, const MppiSettings& s, typename T::Params params,
+                 std::unique_ptr<RolloutBackend<T>> backend)
+      : name_(std::move(name)), params_(params), mppi_(s, std::move(backend)) {}
+
+  const std::string& task() const override { return name_; }
+  const char* backend() const override { return mppi_.backend().name(); }
+  int nx() const override { return T::kNx; }
+  int nu() const override { return T::kNu; }
+  int vehicles() const override { return T::kVehicles; }
+  int horizon() const override { return mppi_.settings().horizon; }
+  float dt() const override { return mppi_.settings().dt; }
+
+  void set_inputs(const TaskInputs& in) override {
+    using Cost = typename T::Cost;
+    if constexpr (std::is_same_v<Cost, ForestCost<typename T::Vehicle>>) {
+      for (int j = 0; j < T::kVehicles; ++j)
+        for (int d = 0; d < 3; ++d) params_.cost.goal[j][d] = in.goals[j][d];
+      params_.cost.obstacles = in.obstacles;
+    } else if constexpr (std::is_same_v<Cost, TrackingCost<typename T::Vehicle>>) {
+      params_.cost.reference = in.reference;
+      params_.cost.time0 = in.reference_time;
+    }
+  }
+
+  std::string set_param(const std::string& key, double value) override {
+    return set_task_param<T>(params_, key, value);
+  }
+
+  const UpdateStats& iterate(const float* x0, float* u_out) override { return mppi_.iterate(x0, params_, u_out); }
+  void fallback(float* u_out) override { mppi_.fallback(u_out); }
+  void reset() override { mppi_.reset(); }
+
+  const std::vector<float>& plan() const override { return mppi_.plan(); }
+  const MppiSettings& settings() const override { return mppi_.settings(); }
+  std::vector<float> rollout_costs() const override { return mppi_.backend().rollout_costs(); }
+  std::size_t host_bytes() const override { return mppi_.backend().host_bytes(); }
+  std::size_t device_bytes() const override { return mppi_.backend().device_bytes(); }
+
+  typename T::Params& params() { return params_; }
+  Mppi<T>& optimizer() { return mppi_; }
+
+ private:
+  std::string name_;
+  typename T::Params params_;
+  Mppi<T> mppi_;
+};
+
+}  // namespace mppi
