@@ -1,0 +1,283 @@
+#include "sim/scenario.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <set>
+#include <stdexcept>
+
+#include "sim/rng.hpp"
+
+namespace sim {
+namespace {
+
+struct Context {
+  std::string file;
+  [[noreturn]] void fail(const std::string& where, const std::string& what) const {
+    throw std::runtime_error(file + ": " + where + ": " + what);
+  }
+};
+
+// Every section lists the keys it knows, so a typo is an error, not a silent default.
+void check_keys(const Context& c, const YAML::Node& n, const std::string& where,
+                const std::set<std::string>& known) {
+  if (!n) return;
+  if (!n.IsMap()) c.fail(where, "expected a mapping");
+  for (const auto& kv : n) {
+    const auto key = kv.first.as<std::string>();
+    if (known.count(key) == 0) c.fail(where + "." + key, "unknown key");
+  }
+}
+
+template <class T>
+void read(const Context& c, const YAML::Node& n, const std::string& where, const char* key, T& out) {
+  if (!n || !n[key]) return;
+  try {
+    out = n[key].as<T>();
+  } catch (const YAML::Exception& e) {
+    c.fail(where + "." + key, std::string("bad value: ") + e.what());
+  }
+}
+
+void read_vec3(const Context& c, const YAML::Node& n, const std::string& where, const char* key, Vec3& out) {
+  if (!n || !n[key]) return;
+  std::vector<double> v;
+  read(c, n, where, key, v);
+  if (v.size() != 3) c.fail(where + "." + key, "expected 3 numbers");
+  out = {v[0], v[1], v[2]};
+}
+
+void positive(const Context& c, double v, const std::string& where) {
+  if (!(v > 0.0) || !std::isfinite(v)) c.fail(where, "must be > 0");
+}
+
+}  // namespace
+
+Vec3 Scenario::goal_of(int v) const {
+  const double off = (v - 0.5 * (vehicles - 1)) * team_spacing;
+  return {goal[0], goal[1] + off, goal[2]};
+}
+Vec3 Scenario::start_of(int v) const {
+  const double off = (v - 0.5 * (vehicles - 1)) * team_spacing;
+  return {start[0], start[1] + off, start[2]};
+}
+
+Scenario load_scenario(const std::string& path, std::uint64_t seed) {
+  const Context c{path};
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    c.fail("file", e.what());
+  }
+  check_keys(c, root, "scenario",
+             {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
+              "success", "mppid"});
+  Scenario s;
+  s.seed = seed;
+  read(c, root, "scenario", "name", s.name);
+  read(c, root, "scenario", "task", s.task);
+  if (s.task.empty()) c.fail("task", "required (names config/tasks/<task>.yaml)");
+
+  const auto plant = root["plant"];
+  if (!plant) c.fail("plant", "required");
+  check_keys(c, plant, "plant",
+             {"model", "vehicles", "params", "initial_state", "max_motor_speed", "max_thrust", "max_body_rate"});
+  read(c, plant, "plant", "model", s.model);
+  read(c, plant, "plant", "vehicles", s.vehicles);
+  read(c, plant, "plant", "initial_state", s.initial_state);
+  read(c, plant, "plant", "max_motor_speed", s.max_motor_speed);
+  read(c, plant, "plant", "max_thrust", s.max_thrust);
+  read(c, plant, "plant", "max_body_rate", s.max_body_rate);
+  if (plant["params"]) {
+    if (!plant["params"].IsMap()) c.fail("plant.params", "expected a mapping");
+    for (const auto& kv : plant["params"]) {
+      const auto key = kv.first.as<std::string>();
+      try {
+        s.params[key] = kv.second.as<double>();
+      } catch (const YAML::Exception&) {
+        c.fail("plant.params." + key, "expected a number");
+      }
+    }
+  }
+  if (s.model != "quadrotor" && s.model != "quadrotor_rate" && s.model != "cartpole" && s.model != "racecar")
+    c.fail("plant.model", "unknown model '" + s.model + "'");
+  if (s.vehicles < 1 || s.vehicles > 32) c.fail("plant.vehicles", "must be 1..32");
+  if ((s.model == "cartpole" || s.model == "racecar") && s.vehicles != 1)
+    c.fail("plant.vehicles", "teams are quadrotors only");
+
+  const auto timing = root["timing"];
+  check_keys(c, timing, "timing",
+             {"physics_hz", "state_hz", "actuation_delay", "duration", "lockstep_timeout", "startup_timeout",
+              "obstacles_hz"});
+  read(c, timing, "timing", "physics_hz", s.physics_hz);
+  read(c, timing, "timing", "state_hz", s.state_hz);
+  read(c, timing, "timing", "actuation_delay", s.actuation_delay);
+  read(c, timing, "timing", "duration", s.duration);
+  read(c, timing, "timing", "lockstep_timeout", s.lockstep_timeout);
+  read(c, timing, "timing", "startup_timeout", s.startup_timeout);
+  read(c, timing, "timing", "obstacles_hz", s.obstacles_hz);
+  if (s.physics_hz < 500.0) c.fail("timing.physics_hz", "must be >= 500");
+  positive(c, s.state_hz, "timing.state_hz");
+  positive(c, s.duration, "timing.duration");
+  positive(c, s.lockstep_timeout, "timing.lockstep_timeout");
+  positive(c, s.obstacles_hz, "timing.obstacles_hz");
+  if (s.actuation_delay < 0.0) c.fail("timing.actuation_delay", "must be >= 0");
+  {
+    // The physics step must divide the state period, so every state falls on a step.
+    const double ratio = s.physics_hz / s.state_hz;
+    if (std::fabs(ratio - std::round(ratio)) > 1e-9)
+      c.fail("timing.physics_hz", "must be a whole multiple of timing.state_hz");
+  }
+
+  const auto world = root["world"];
+  check_keys(c, world, "world",
+             {"start", "goal", "team_spacing", "goal_radius", "stop_at_goal", "stop_on_collision", "ground_z",
+              "vehicle_radius", "arena_margin", "track_limit", "off_track", "max_published_obstacles", "forest",
+              "moving", "obstacles"});
+  read_vec3(c, world, "world", "start", s.start);
+  read_vec3(c, world, "world", "goal", s.goal);
+  read(c, world, "world", "team_spacing", s.team_spacing);
+  read(c, world, "world", "goal_radius", s.goal_radius);
+  read(c, world, "world", "stop_at_goal", s.stop_at_goal);
+  read(c, world, "world", "stop_on_collision", s.stop_on_collision);
+  read(c, world, "world", "ground_z", s.ground_z);
+  read(c, world, "world", "vehicle_radius", s.vehicle_radius);
+  read(c, world, "world", "arena_margin", s.arena_margin);
+  read(c, world, "world", "track_limit", s.track_limit);
+  read(c, world, "world", "off_track", s.off_track);
+  read(c, world, "world", "max_published_obstacles", s.max_published_obstacles);
+  if (s.max_published_obstacles < 0 || s.max_published_obstacles > 4096)
+    c.fail("world.max_published_obstacles", "must be 0..4096");
+  if (world && world["forest"]) {
+    const auto f = world["forest"];
+    check_keys(c, f, "world.forest",
+               {"spacing", "jitter", "radius", "radius_jitter", "x_range", "y_range", "clear_radius"});
+    s.forest.enabled = true;
+    read(c, f, "world.forest", "spacing", s.forest.spacing);
+    read(c, f, "world.forest", "jitter", s.forest.jitter);
+    read(c, f, "world.forest", "radius", s.forest.radius);
+    read(c, f, "world.forest", "radius_jitter", s.forest.radius_jitter);
+    read(c, f, "world.forest", "clear_radius", s.forest.clear_radius);
+    std::vector<double> r;
+    read(c, f, "world.forest", "x_range", r);
+    if (!r.empty()) {
+      if (r.size() != 2 || !(r[1] > r[0])) c.fail("world.forest.x_range", "expected [min, max]");
+      s.forest.x_min = r[0];
+      s.forest.x_max = r[1];
+    }
+    r.clear();
+    read(c, f, "world.forest", "y_range", r);
+    if (!r.empty()) {
+      if (r.size() != 2 || !(r[1] > r[0])) c.fail("world.forest.y_range", "expected [min, max]");
+      s.forest.y_min = r[0];
+      s.forest.y_max = r[1];
+    }
+    positive(c, s.forest.spacing, "world.forest.spacing");
+    positive(c, s.forest.radius, "world.forest.radius");
+  }
+  if (world && world["moving"]) {
+    const auto m = world["moving"];
+    check_keys(c, m, "world.moving", {"count", "speed", "radius"});
+    read(c, m, "world.moving", "count", s.moving.count);
+    read(c, m, "world.moving", "speed", s.moving.speed);
+    read(c, m, "world.moving", "radius", s.moving.radius);
+  }
+  if (world && world["obstacles"]) {
+    for (const auto& o : world["obstacles"]) {
+      std::vector<double> v;
+      try {
+        v = o.as<std::vector<double>>();
+      } catch (const YAML::Exception&) {
+        c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
+      }
+      if (v.size() != 3 && v.size() != 5) c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
+      Obstacle ob{v[0], v[1], v[2], 0.0, 0.0};
+      if (v.size() == 5) {
+        ob.vx = v[3];
+        ob.vy = v[4];
+      }
+      s.fixed_obstacles.push_back(ob);
+    }
+  }
+
+  const auto ref = root["reference"];
+  check_keys(c, ref, "reference", {"kind", "center", "radius", "speed", "yaw"});
+  read(c, ref, "reference", "kind", s.reference.kind);
+  read_vec3(c, ref, "reference", "center", s.reference.center);
+  read(c, ref, "reference", "radius", s.reference.radius);
+  read(c, ref, "reference", "speed", s.reference.speed);
+  read(c, ref, "reference", "yaw", s.reference.yaw);
+  {
+    const auto& k = s.reference.kind;
+    if (k != "none" && k != "hold" && k != "waypoint" && k != "circle" && k != "figure_eight")
+      c.fail("reference.kind", "one of none, hold, waypoint, circle, figure_eight");
+  }
+
+  const auto wind = root["wind"];
+  check_keys(c, wind, "wind", {"mean", "gust_std", "gust_tau"});
+  read_vec3(c, wind, "wind", "mean", s.wind.mean);
+  read(c, wind, "wind", "gust_std", s.wind.gust_std);
+  read(c, wind, "wind", "gust_tau", s.wind.gust_tau);
+  positive(c, s.wind.gust_tau, "wind.gust_tau");
+
+  const auto noise = root["noise"];
+  check_keys(c, noise, "noise", {"position", "velocity", "attitude", "rate", "other"});
+  read(c, noise, "noise", "position", s.noise.position);
+  read(c, noise, "noise", "velocity", s.noise.velocity);
+  read(c, noise, "noise", "attitude", s.noise.attitude);
+  read(c, noise, "noise", "rate", s.noise.rate);
+  read(c, noise, "noise", "other", s.noise.other);
+
+  generate_obstacles(s);
+  return s;
+}
+
+void generate_obstacles(Scenario& s) {
+  s.obstacles = s.fixed_obstacles;
+  const auto clear_of_ends = [&s](double x, double y, double r) {
+    for (int v = 0; v < s.vehicles; ++v) {
+      for (const Vec3& p : {s.start_of(v), s.goal_of(v)}) {
+        if (std::hypot(x - p[0], y - p[1]) < s.forest.clear_radius + r) return false;
+      }
+    }
+    return true;
+  };
+  if (s.forest.enabled) {
+    // Jittered hexagonal lattice: neighbours are `spacing` apart before the jitter, so the
+    // mean spacing is the scenario's; a seed fixes the jitter, i.e. names the forest.
+    Rng rng(s.seed, 1);
+    const double sp = s.forest.spacing;
+    const double row = sp * std::sqrt(3.0) / 2.0;
+    const auto& f = s.forest;
+    int j = 0;
+    for (double y = f.y_min; y <= f.y_max + 1e-9; y += row, ++j) {
+      const double x0 = f.x_min + ((j % 2) != 0 ? 0.5 * sp : 0.0);
+      for (double x = x0; x <= f.x_max + 1e-9; x += sp) {
+        const double px = x + rng.uniform(-0.5, 0.5) * f.jitter * sp;
+        const double py = y + rng.uniform(-0.5, 0.5) * f.jitter * sp;
+        const double r = f.radius + rng.uniform(-1.0, 1.0) * f.radius_jitter;
+        if (r <= 0.05 || !clear_of_ends(px, py, r)) continue;
+        bool overlaps = false;
+        for (const auto& o : s.obstacles) overlaps = overlaps || std::hypot(px - o.x, py - o.y) < o.radius + r + 0.5;
+        if (!overlaps) s.obstacles.push_back({px, py, r, 0.0, 0.0});
+      }
+    }
+  }
+  if (s.moving.count > 0) {
+    Rng rng(s.seed, 2);
+    const double x_lo = s.forest.x_min, x_hi = s.forest.x_max;
+    const double y_lo = s.forest.y_min, y_hi = s.forest.y_max;
+    for (int i = 0; i < s.moving.count; ++i) {
+      for (int attempt = 0; attempt < 1000; ++attempt) {
+        const double px = rng.uniform(x_lo, x_hi), py = rng.uniform(y_lo, y_hi);
+        const double a = rng.uniform(0.0, 6.283185307179586);
+        if (!clear_of_ends(px, py, s.moving.radius)) continue;
+        s.obstacles.push_back({px, py, s.moving.radius, s.moving.speed * std::cos(a), s.moving.speed * std::sin(a)});
+        break;
+      }
+    }
+  }
+}
+
+}  // namespace sim

@@ -1,0 +1,581 @@
+#include "sim/simulator.hpp"
+
+#include <lcm/lcm-cpp.hpp>
+#include <mppi_lcm/command_t.hpp>
+#include <mppi_lcm/obstacles_t.hpp>
+#include <mppi_lcm/reference_t.hpp>
+#include <mppi_lcm/sim_clock_t.hpp>
+#include <mppi_lcm/vehicle_state_t.hpp>
+#include <sys/select.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <deque>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <vector>
+
+#include "sim/plant.hpp"
+#include "sim/rng.hpp"
+
+namespace sim {
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t wall_utime() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+std::int64_t to_us(double s) { return static_cast<std::int64_t>(std::llround(s * 1e6)); }
+
+// A JSON file written line by line (no library: numbers and a few strings only).
+class JsonWriter {
+ public:
+  explicit JsonWriter(const std::string& path) : f_(std::fopen(path.c_str(), "w")) {
+    if (f_ == nullptr) throw std::runtime_error("cannot write " + path);
+  }
+  ~JsonWriter() {
+    if (f_ != nullptr) std::fclose(f_);
+  }
+  JsonWriter(const JsonWriter&) = delete;
+  JsonWriter& operator=(const JsonWriter&) = delete;
+  std::FILE* get() { return f_; }
+
+ private:
+  std::FILE* f_;
+};
+
+void put_num(std::FILE* f, double v) {
+  if (std::isfinite(v))
+    std::fprintf(f, "%.9g", v);
+  else
+    std::fputs("null", f);
+}
+template <class T>
+void put_array(std::FILE* f, const T* v, std::size_t n) {
+  std::fputc('[', f);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i != 0) std::fputc(',', f);
+    put_num(f, static_cast<double>(v[i]));
+  }
+  std::fputc(']', f);
+}
+
+struct PendingCommand {
+  double apply_time;
+  std::vector<float> u;
+  std::int8_t mode;
+  std::int64_t seq, state_seq;
+};
+
+class Simulation {
+ public:
+  Simulation(const Scenario& s, const RunOptions& o)
+      : s_(s), o_(o), plant_(make_plant(s)), lcm_(o.lcm_url), wind_rng_(s.seed, 3), noise_rng_(s.seed, 4) {
+    if (!lcm_.good()) throw std::runtime_error("LCM init failed for url '" + o.lcm_url + "'");
+    lcm_.subscribe(o.channels.command, &Simulation::on_command, this);
+    nu_total_ = plant_->nu() * plant_->vehicles();
+    u_applied_ = plant_->hover();
+    obstacles_ = s.obstacles;
+    for (const auto& ob : obstacles_) any_moving_ = any_moving_ || ob.vx != 0.0 || ob.vy != 0.0;
+    arena_[0] = s.forest.x_min;
+    arena_[1] = s.forest.x_max;
+    arena_[2] = s.forest.y_min;
+    arena_[3] = s.forest.y_max;
+  }
+
+  int run();
+
+ private:
+  void on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* msg);
+  void publish_state(std::int64_t seq, double t, bool republish);
+  void publish_world(double t);
+  bool wait_for_command(std::int64_t seq, double t);
+  void pump_until(Clock::time_point deadline);
+  void advance_obstacles(double h);
+  void check_collisions(double t);
+  bool at_goal() const;
+  void write_world();
+  void write_tick(std::int64_t seq, double t);
+  void write_summary(Outcome outcome, double t_end);
+  std::int64_t stamp(double t) const { return o_.lockstep ? to_us(t) : wall_utime(); }
+
+  const Scenario& s_;
+  const RunOptions& o_;
+  std::unique_ptr<Plant> plant_;
+  lcm::LCM lcm_;
+  Rng wind_rng_, noise_rng_;
+  int nu_total_ = 0;
+  std::vector<float> u_applied_;
+  std::int8_t applied_mode_ = -1;
+  std::int64_t applied_seq_ = -1;
+  std::deque<PendingCommand> pending_;
+  std::vector<float> published_state_;
+  std::vector<Obstacle> obstacles_;
+  bool any_moving_ = false;
+  double arena_[4] = {0, 0, 0, 0};
+  double wind_[3] = {0, 0, 0};
+  double gust_[3] = {0, 0, 0};
+
+  // Lock-step bookkeeping.
+  double now_ = 0.0;  // simulated time, s
+  std::int64_t waiting_for_ = -1;
+  bool answered_ = false;
+  Clock::time_point published_at_;
+  double last_latency_ms_ = std::numeric_limits<double>::quiet_NaN();
+  Clock::time_point run_start_;
+
+  // Truth.
+  std::unique_ptr<JsonWriter> truth_;
+  std::int64_t commands_ = 0, ignored_commands_ = 0, rejected_commands_ = 0;
+  std::int64_t states_ = 0, obstacle_msgs_ = 0;
+  double min_clearance_ = std::numeric_limits<double>::infinity();
+  double min_separation_ = std::numeric_limits<double>::infinity();
+  double clearance_now_ = std::numeric_limits<double>::infinity();
+  struct Collision {
+    double t;
+    int vehicle;
+    std::string with;
+  };
+  std::vector<Collision> collisions_;
+  std::int64_t ref_t0_ = 0;
+  double time_to_goal_ = std::numeric_limits<double>::quiet_NaN();
+};
+
+void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* msg) {
+  ++commands_;
+  if (o_.lockstep && msg->state_seq != waiting_for_) {
+    ++ignored_commands_;  // an answer to an older state (e.g. a republished one)
+    return;
+  }
+  if (msg->n != nu_total_ || static_cast<int>(msg->u.size()) != nu_total_ ||
+      (msg->kind != plant_->command_kind() && msg->kind != mppi_lcm::command_t::KIND_GENERIC)) {
+    ++rejected_commands_;
+    if (!o_.quiet)
+      std::fprintf(stderr, "mppid-sim: command rejected (n=%d kind=%d, expected n=%d kind=%d)\n", msg->n,
+                   msg->kind, nu_total_, plant_->command_kind());
+    return;
+  }
+  std::vector<float> u = msg->u;
+  if (!plant_->saturate(u.data())) {
+    ++rejected_commands_;
+    return;
+  }
+  if (o_.lockstep) {
+    answered_ = true;
+    last_latency_ms_ = 1e3 * std::chrono::duration<double>(Clock::now() - published_at_).count();
+  }
+  pending_.push_back({now_ + s_.actuation_delay, std::move(u), msg->mode, msg->seq, msg->state_seq});
+}
+
+void Simulation::publish_state(std::int64_t seq, double t, bool republish) {
+  mppi_lcm::vehicle_state_t m;
+  m.utime = stamp(t);
+  m.seq = seq;
+  m.sample_utime = m.utime;
+  m.model = plant_->model_id();
+  m.vehicle_count = static_cast<std::int16_t>(plant_->vehicles());
+  m.nx = static_cast<std::int16_t>(plant_->nx());
+  m.n = m.nx * m.vehicle_count;
+  if (!republish || published_state_.empty()) {
+    // The noise is drawn once per state, so a republished state is the same message.
+    published_state_ = plant_->state();
+    for (std::size_t i = 0; i < published_state_.size(); ++i) {
+      double sd = 0.0;
+      switch (plant_->group(static_cast<int>(i))) {
+        case StateGroup::kPosition: sd = s_.noise.position; break;
+        case StateGroup::kVelocity: sd = s_.noise.velocity; break;
+        case StateGroup::kAttitude: sd = s_.noise.attitude; break;
+        case StateGroup::kRate: sd = s_.noise.rate; break;
+        case StateGroup::kOther: sd = s_.noise.other; break;
+      }
+      if (sd > 0.0) published_state_[i] += static_cast<float>(sd * noise_rng_.normal());
+    }
+    plant_->fix_published(published_state_.data());
+  }
+  m.x = published_state_;
+  published_at_ = Clock::now();
+  lcm_.publish(o_.channels.state, &m);
+  ++states_;
+  // The tick goes after the state: a lock-step controller runs its cycle on the tick and
+  // must find this state already in its inbox.
+  if (o_.lockstep) {
+    mppi_lcm::sim_clock_t clk;
+    clk.utime = wall_utime();
+    clk.seq = seq;
+    clk.sim_utime = to_us(t);
+    clk.step = seq;
+    lcm_.publish(o_.channels.clock, &clk);
+  }
+}
+
+void Simulation::publish_world(double t) {
+  const std::int64_t us = stamp(t);
+  if (plant_->flies() && !obstacles_.empty()) {
+    // The nearest obstacles to any vehicle, at most max_published_obstacles.
+    std::vector<std::pair<double, std::size_t>> order;
+    for (std::size_t i = 0; i < obstacles_.size(); ++i) {
+      double best = std::numeric_limits<double>::infinity();
+      for (int v = 0; v < plant_->vehicles(); ++v) {
+        double p[3];
+        plant_->position(v, p);
+        best = std::min(best, std::hypot(p[0] - obstacles_[i].x, p[1] - obstacles_[i].y) - obstacles_[i].radius);
+      }
+      order.emplace_back(best, i);
+    }
+    std::stable_sort(order.begin(), order.end());
+    const std::size_t n = std::min(order.size(), static_cast<std::size_t>(s_.max_published_obstacles));
+    std::sort(order.begin(), order.begin() + static_cast<std::ptrdiff_t>(n),
+              [](const auto& a, const auto& b) { return a.second < b.second; });  // stable ids order
+    mppi_lcm::obstacles_t m;
+    m.utime = us;
+    m.seq = obstacle_msgs_++;
+    m.n = static_cast<std::int32_t>(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      const Obstacle& ob = obstacles_[order[k].second];
+      mppi_lcm::cylinder_t c;
+      c.x = static_cast<float>(ob.x);
+      c.y = static_cast<float>(ob.y);
+      c.radius = static_cast<float>(ob.radius);
+      c.vx = static_cast<float>(ob.vx);
+      c.vy = static_cast<float>(ob.vy);
+      m.cylinders.push_back(c);
+    }
+    lcm_.publish(o_.channels.obstacles, &m);
+  }
+  const auto& r = s_.reference;
+  if (r.kind != "none") {
+    mppi_lcm::reference_t m;
+    m.utime = us;
+    m.seq = obstacle_msgs_;
+    m.kind = r.kind == "hold"     ? mppi_lcm::reference_t::KIND_HOLD
+             : r.kind == "circle" ? mppi_lcm::reference_t::KIND_CIRCLE
+             : r.kind == "figure_eight" ? mppi_lcm::reference_t::KIND_FIGURE_EIGHT
+                                        : mppi_lcm::reference_t::KIND_WAYPOINT;
+    for (int i = 0; i < 3; ++i) m.center[i] = static_cast<float>(r.center[static_cast<std::size_t>(i)]);
+    m.radius = static_cast<float>(r.radius);
+    m.speed = static_cast<float>(r.speed);
+    m.yaw = static_cast<float>(r.yaw);
+    m.t0_utime = ref_t0_;
+    m.vehicle_count = static_cast<std::int16_t>(plant_->vehicles());
+    m.goals.assign(static_cast<std::size_t>(plant_->vehicles()), std::vector<float>(3, 0.0f));
+    for (int v = 0; v < plant_->vehicles(); ++v) {
+      const Vec3 g = s_.goal_of(v);
+      for (int i = 0; i < 3; ++i) m.goals[static_cast<std::size_t>(v)][i] = static_cast<float>(g[static_cast<std::size_t>(i)]);
+    }
+    lcm_.publish(o_.channels.reference, &m);
+  }
+}
+
+// Handles LCM traffic until `deadline` (wall clock).
+void Simulation::pump_until(Clock::time_point deadline) {
+  const int fd = lcm_.getFileno();
+  for (;;) {
+    const auto left = deadline - Clock::now();
+    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(left).count();
+    if (us <= 0 || g_stop) return;
+    fd_set fds;
+    FD_ZERO(&fds);
+    FD_SET(fd, &fds);
+    timeval tv{static_cast<time_t>(us / 1000000), static_cast<suseconds_t>(us % 1000000)};
+    const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
+    if (r > 0) lcm_.handle();
+    if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+  }
+}
+
+bool Simulation::wait_for_command(std::int64_t seq, double t) {
+  waiting_for_ = seq;
+  answered_ = false;
+  const double timeout = seq == 0 ? std::max(s_.startup_timeout, s_.lockstep_timeout) : s_.lockstep_timeout;
+  const auto give_up = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout));
+  const int fd = lcm_.getFileno();
+  auto republish = Clock::now() + std::chrono::milliseconds(500);
+  while (!answered_) {
+    if (g_stop) return false;
+    const auto now = Clock::now();
+    if (now >= give_up) return false;
+    if (now >= republish) {
+      // Nobody may have been listening yet (start-up): the same state, same seq, again.
+      // The controller drops a seq it has already seen; an answer to it is ignored here.
+      publish_world(t);
+      publish_state(seq, t, true);
+      republish = now + std::chrono::milliseconds(500);
+    }
+    const auto until = std::min(give_up, republish);
+    const auto us = std::max<std::int64_t>(1, std::chrono::duration_cast<std::chrono::microseconds>(until - now).count());
+    fd_set fds;
+    FD_ZERO(&fds);
+    FD_SET(fd, &fds);
+    timeval tv{static_cast<time_t>(us / 1000000), static_cast<suseconds_t>(us % 1000000)};
+    const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
+    if (r > 0) lcm_.handle();
+    if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+  }
+  return true;
+}
+
+void Simulation::advance_obstacles(double h) {
+  if (!any_moving_) return;
+  for (auto& ob : obstacles_) {
+    if (ob.vx == 0.0 && ob.vy == 0.0) continue;
+    ob.x += ob.vx * h;
+    ob.y += ob.vy * h;
+    // Moving obstacles bounce off the forest corridor's walls, so they stay in the way.
+    if ((ob.x < arena_[0] && ob.vx < 0) || (ob.x > arena_[1] && ob.vx > 0)) ob.vx = -ob.vx;
+    if ((ob.y < arena_[2] && ob.vy < 0) || (ob.y > arena_[3] && ob.vy > 0)) ob.vy = -ob.vy;
+  }
+}
+
+void Simulation::check_collisions(double t) {
+  const int m = plant_->vehicles();
+  const auto hit = [&](int v, const char* with) {
+    if ((plant_->frozen >> v) & 1u) return;
+    collisions_.push_back({t, v, with});
+    plant_->frozen |= 1u << v;
+    if (truth_) {
+      std::fprintf(truth_->get(), "{\"event\":\"collision\",\"t\":%.6f,\"vehicle\":%d,\"with\":\"%s\"}\n", t, v, with);
+    }
+  };
+  clearance_now_ = std::numeric_limits<double>::infinity();
+  if (plant_->flies()) {
+    std::vector<std::array<double, 3>> pos(static_cast<std::size_t>(m));
+    for (int v = 0; v < m; ++v) plant_->position(v, pos[static_cast<std::size_t>(v)].data());
+    for (int v = 0; v < m; ++v) {
+      const auto& p = pos[static_cast<std::size_t>(v)];
+      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+        hit(v, "diverged");
+        continue;
+      }
+      if (p[2] < s_.ground_z) hit(v, "ground");
+      for (const auto& ob : obstacles_) {
+        const double c = std::hypot(p[0] - ob.x, p[1] - ob.y) - ob.radius - s_.vehicle_radius;
+        clearance_now_ = std::min(clearance_now_, c);
+        if (c < 0.0) hit(v, "obstacle");
+      }
+      for (int w = v + 1; w < m; ++w) {
+        const auto& q = pos[static_cast<std::size_t>(w)];
+        const double d = std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) + (p[2] - q[2]) * (p[2] - q[2]));
+        min_separation_ = std::min(min_separation_, d);
+        if (d < 2.0 * s_.vehicle_radius) {
+          hit(v, "vehicle");
+          hit(w, "vehicle");
+        }
+      }
+    }
+    min_clearance_ = std::min(min_clearance_, clearance_now_);
+  } else if (s_.model == "cartpole") {
+    const double x = plant_->state()[0];
+    if (!std::isfinite(x) || (s_.track_limit > 0.0 && std::fabs(x) > s_.track_limit)) hit(0, "track_limit");
+  } else if (s_.model == "racecar") {
+    const auto& x = plant_->state();
+    const double d = std::pow(x[0] / 13.0, 2) + std::pow(x[1] / 6.0, 2) - 1.0;
+    if (!std::isfinite(d) || (s_.off_track > 0.0 && std::fabs(d) > s_.off_track)) hit(0, "off_track");
+  }
+}
+
+bool Simulation::at_goal() const {
+  if (!plant_->flies() || !s_.stop_at_goal) return false;
+  if (s_.reference.kind != "waypoint" && s_.reference.kind != "hold") return false;
+  for (int v = 0; v < plant_->vehicles(); ++v) {
+    double p[3];
+    plant_->position(v, p);
+    const Vec3 g = s_.goal_of(v);
+    if (std::sqrt((p[0] - g[0]) * (p[0] - g[0]) + (p[1] - g[1]) * (p[1] - g[1]) + (p[2] - g[2]) * (p[2] - g[2])) >
+        s_.goal_radius)
+      return false;
+  }
+  return true;
+}
+
+void Simulation::write_world() {
+  JsonWriter w(o_.out_dir + "/world.json");
+  std::FILE* f = w.get();
+  std::fprintf(f, "{\"scenario\":\"%s\",\"task\":\"%s\",\"model\":\"%s\",\"seed\":%llu,", s_.name.c_str(),
+               s_.task.c_str(), s_.model.c_str(), static_cast<unsigned long long>(s_.seed));
+  std::fprintf(f, "\"vehicles\":%d,\"nx\":%d,\"nu\":%d,\"lockstep\":%s,", plant_->vehicles(), plant_->nx(),
+               plant_->nu(), o_.lockstep ? "true" : "false");
+  std::fprintf(f, "\"physics_hz\":%g,\"state_hz\":%g,\"actuation_delay\":%g,\"duration\":%g,", s_.physics_hz,
+               s_.state_hz, s_.actuation_delay, s_.duration);
+  std::fprintf(f, "\"ground_z\":%g,\"vehicle_radius\":%g,\"goal_radius\":%g,", s_.ground_z, s_.vehicle_radius,
+               s_.goal_radius);
+  std::fputs("\"starts\":[", f);
+  for (int v = 0; v < plant_->vehicles(); ++v) {
+    if (v != 0) std::fputc(',', f);
+    put_array(f, s_.start_of(v).data(), 3);
+  }
+  std::fputs("],\"goals\":[", f);
+  for (int v = 0; v < plant_->vehicles(); ++v) {
+    if (v != 0) std::fputc(',', f);
+    put_array(f, s_.goal_of(v).data(), 3);
+  }
+  std::fputs("],\"obstacles\":[", f);
+  for (std::size_t i = 0; i < obstacles_.size(); ++i) {
+    const auto& ob = obstacles_[i];
+    const double v[5] = {ob.x, ob.y, ob.radius, ob.vx, ob.vy};
+    if (i != 0) std::fputc(',', f);
+    put_array(f, v, 5);
+  }
+  const auto& r = s_.reference;
+  std::fprintf(f, "],\"reference\":{\"kind\":\"%s\",\"center\":", r.kind.c_str());
+  put_array(f, r.center.data(), 3);
+  std::fprintf(f, ",\"radius\":%g,\"speed\":%g,\"yaw\":%g}}\n", r.radius, r.speed, r.yaw);
+}
+
+void Simulation::write_tick(std::int64_t seq, double t) {
+  if (!truth_) return;
+  std::FILE* f = truth_->get();
+  std::fprintf(f, "{\"t\":%.6f,\"seq\":%lld,\"x\":", t, static_cast<long long>(seq));
+  put_array(f, plant_->state().data(), plant_->state().size());
+  std::fputs(",\"u\":", f);
+  put_array(f, u_applied_.data(), u_applied_.size());
+  std::fprintf(f, ",\"mode\":%d,\"cmd_seq\":%lld,\"lat_ms\":", applied_mode_, static_cast<long long>(applied_seq_));
+  put_num(f, last_latency_ms_);
+  std::fputs(",\"clear\":", f);
+  put_num(f, clearance_now_);
+  std::fputs(",\"wind\":", f);
+  put_array(f, wind_, 3);
+  if (any_moving_) {
+    std::fputs(",\"obs\":[", f);
+    bool first = true;
+    for (const auto& ob : obstacles_) {
+      if (ob.vx == 0.0 && ob.vy == 0.0) continue;
+      if (!first) std::fputc(',', f);
+      first = false;
+      const double p[2] = {ob.x, ob.y};
+      put_array(f, p, 2);
+    }
+    std::fputc(']', f);
+  }
+  std::fputs("}\n", f);
+}
+
+void Simulation::write_summary(Outcome outcome, double t_end) {
+  JsonWriter w(o_.out_dir + "/sim_summary.json");
+  std::FILE* f = w.get();
+  std::fprintf(f, "{\"outcome\":\"%s\",\"t_end\":%.6f,\"time_to_goal\":", to_string(outcome), t_end);
+  put_num(f, time_to_goal_);
+  std::fputs(",\"min_clearance\":", f);
+  put_num(f, min_clearance_);
+  std::fputs(",\"min_separation\":", f);
+  put_num(f, min_separation_);
+  std::fprintf(f, ",\"states\":%lld,\"commands\":%lld,\"ignored_commands\":%lld,\"rejected_commands\":%lld,",
+               static_cast<long long>(states_), static_cast<long long>(commands_),
+               static_cast<long long>(ignored_commands_), static_cast<long long>(rejected_commands_));
+  std::fprintf(f, "\"wall_s\":%.3f,\"lockstep\":%s,\"collisions\":[", seconds_since(run_start_),
+               o_.lockstep ? "true" : "false");
+  for (std::size_t i = 0; i < collisions_.size(); ++i) {
+    if (i != 0) std::fputc(',', f);
+    std::fprintf(f, "{\"t\":%.6f,\"vehicle\":%d,\"with\":\"%s\"}", collisions_[i].t, collisions_[i].vehicle,
+                 collisions_[i].with.c_str());
+  }
+  std::fputs("]}\n", f);
+}
+
+int Simulation::run() {
+  run_start_ = Clock::now();
+  write_world();
+  truth_ = std::make_unique<JsonWriter>(o_.out_dir + "/truth.jsonl");
+  ref_t0_ = o_.lockstep ? 0 : wall_utime();
+
+  const double h = 1.0 / s_.physics_hz;
+  const auto per_state = static_cast<std::int64_t>(std::llround(s_.physics_hz / s_.state_hz));
+  const auto per_world = std::max<std::int64_t>(1, std::llround(s_.state_hz / s_.obstacles_hz)) * per_state;
+  const auto total = static_cast<std::int64_t>(std::llround(s_.duration * s_.physics_hz));
+  // Wind: mean plus an Ornstein-Uhlenbeck gust per axis, exact discretisation.
+  const double a = std::exp(-h / s_.wind.gust_tau);
+  const double b = s_.wind.gust_std * std::sqrt(1.0 - a * a);
+  for (int i = 0; i < 3; ++i) wind_[i] = s_.wind.mean[static_cast<std::size_t>(i)];
+
+  Outcome outcome = Outcome::kDuration;
+  std::int64_t step = 0;
+  check_collisions(0.0);
+  for (;; ++step) {
+    now_ = static_cast<double>(step) * h;
+    if (g_stop) {
+      outcome = Outcome::kInterrupted;
+      break;
+    }
+    if (step % per_state == 0) {
+      const std::int64_t seq = step / per_state;
+      if (step % per_world == 0 || any_moving_) publish_world(now_);
+      publish_state(seq, now_, false);
+      if (o_.lockstep && !wait_for_command(seq, now_)) {
+        outcome = g_stop ? Outcome::kInterrupted : Outcome::kControllerTimeout;
+        write_tick(seq, now_);
+        break;
+      }
+    }
+    if (!o_.lockstep) {
+      // Real time: the physics follows the wall clock; commands arrive meanwhile.
+      pump_until(run_start_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(now_)));
+    }
+    while (!pending_.empty() && pending_.front().apply_time <= now_ + 0.5 * h) {
+      u_applied_ = std::move(pending_.front().u);
+      applied_mode_ = pending_.front().mode;
+      applied_seq_ = pending_.front().seq;
+      pending_.pop_front();
+    }
+    if (step % per_state == 0) write_tick(step / per_state, now_);
+    if (!collisions_.empty() && s_.stop_on_collision) {
+      outcome = Outcome::kCollision;
+      break;
+    }
+    if (at_goal()) {
+      time_to_goal_ = now_;
+      outcome = Outcome::kGoal;
+      break;
+    }
+    if (step >= total) break;
+    plant_->step(u_applied_.data(), wind_, h);
+    advance_obstacles(h);
+    for (int i = 0; i < 3; ++i) {
+      gust_[i] = a * gust_[i] + b * wind_rng_.normal();
+      wind_[i] = s_.wind.mean[static_cast<std::size_t>(i)] + gust_[i];
+    }
+    check_collisions(static_cast<double>(step + 1) * h);
+  }
+  std::fflush(truth_->get());
+  write_summary(outcome, now_);
+  if (!o_.quiet)
+    std::fprintf(stderr, "mppid-sim: %s at t=%.2f s (%lld states, %lld commands, %.2f s wall)\n", to_string(outcome),
+                 now_, static_cast<long long>(states_), static_cast<long long>(commands_), seconds_since(run_start_));
+  if (outcome == Outcome::kControllerTimeout) return 3;
+  if (outcome == Outcome::kInterrupted) return 4;
+  return 0;
+}
+
+}  // namespace
+
+const char* to_string(Outcome o) {
+  switch (o) {
+    case Outcome::kGoal: return "goal";
+    case Outcome::kDuration: return "duration";
+    case Outcome::kCollision: return "collision";
+    case Outcome::kControllerTimeout: return "controller_timeout";
+    case Outcome::kInterrupted: return "interrupted";
+    case Outcome::kError: return "error";
+  }
+  return "error";
+}
+
+void request_stop() { g_stop = true; }
+
+int run_simulation(const Scenario& scenario, const RunOptions& options) {
+  Simulation sim(scenario, options);
+  return sim.run();
+}
+
+}  // namespace sim

@@ -1,0 +1,2 @@
+"""SITL harness of mppid: runs scenarios (simulator + mppid + lcm-logger in a private
+network namespace), scores them, plots them, and runs campaigns of many seeds."""

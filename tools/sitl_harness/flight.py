@@ -1,0 +1,270 @@
+"""One flight: simulator, controller and lcm-logger inside a private network namespace,
+flown to the end, then stopped cleanly whatever happens.
+
+Isolation: `unshare -n` makes a namespace holding only a loopback interface, with the
+multicast range routed to it, and a tiny `sleep` holding it open; every process of the
+flight joins it with `nsenter -n`, so parallel flights each have their own LCM bus and no
+datagram can leave the machine. Every process of the flight is in one process group (the
+holder's), so a single killpg reaches all of them: SIGTERM first, SIGKILL after a grace
+period. Children also get PR_SET_PDEATHSIG, so even a SIGKILLed harness leaves no orphan.
+"""
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from . import paths
+
+LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
+_NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
+
+
+class FlightError(RuntimeError):
+    pass
+
+
+def _pdeathsig():
+    # Dies with the harness (SIGKILL included). Only safe when the spawning thread lives
+    # as long as the flight: flights are spawned from their process's main thread.
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+@dataclass
+class FlightSpec:
+    scenario: str
+    seed: int = 1
+    out: Path = Path("results/run")
+    backend: str = "cpu"
+    realtime: bool = False
+    controller: str = "mppid"        # mppid | standin
+    wall_timeout: float = 0.0        # 0: from the scenario's duration
+    sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
+    kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
+
+
+class Flight:
+    def __init__(self, spec: FlightSpec):
+        self.spec = spec
+        self.out = Path(spec.out).resolve()
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.holder: subprocess.Popen | None = None
+        self.events: list[str] = []
+        self.logs = {}
+
+    # ---- processes ---------------------------------------------------------------------
+    def _start_namespace(self):
+        if os.geteuid() != 0:
+            # Unprivileged: a user namespace grants the capabilities to set up lo.
+            cmd = ["unshare", "-r", "-n", "--", "sh", "-c", _NETNS_SETUP]
+        else:
+            cmd = ["unshare", "-n", "--", "sh", "-c", _NETNS_SETUP]
+        main = threading.current_thread() is threading.main_thread()
+        self.holder = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, process_group=0,
+                                       preexec_fn=_pdeathsig if main else None)
+        line = self.holder.stdout.readline().decode().strip()
+        if line != "ready":
+            err = self.holder.stderr.read().decode() if self.holder.poll() is not None else ""
+            raise FlightError(f"network namespace set-up failed: {line} {err}".strip())
+        self.pgid = self.holder.pid
+
+    def _spawn(self, name: str, cmd: list[str]):
+        log = open(self.out / f"{name}.log", "wb")
+        self.logs[name] = log
+        ns = ["nsenter", "-t", str(self.holder.pid), "-n"]
+        if os.geteuid() != 0:
+            ns = ["nsenter", "-t", str(self.holder.pid), "-U", "-n", "--preserve-credentials"]
+        main = threading.current_thread() is threading.main_thread()
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(str(d) for d in (paths.ROOT / "tools", paths.lcm_python_dir()) if d)
+        p = subprocess.Popen(ns + ["--"] + cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                             process_group=self.pgid, cwd=paths.ROOT, env=env,
+                             preexec_fn=_pdeathsig if main else None)
+        self.procs[name] = p
+        return p
+
+    def _terminate(self, name: str, grace: float):
+        p = self.procs.get(name)
+        if p is None or p.poll() is not None:
+            return
+        try:
+            p.send_signal(signal.SIGTERM)
+            p.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(timeout=5)
+        except ProcessLookupError:
+            pass
+
+    def cleanup(self):
+        """Stops everything: the controller and the simulator, then the logger (so it has
+        recorded their last messages), then the holder; then SIGKILL to whatever is left of
+        the process group. Safe to call twice."""
+        for name in ("sim", "controller"):
+            self._terminate(name, 3.0)
+        if "logger" in self.procs and self.procs["logger"].poll() is None:
+            time.sleep(0.3)  # the logger drains what is still in its socket
+        self._terminate("logger", 3.0)
+        if self.holder is not None:
+            try:
+                os.killpg(self.pgid, signal.SIGTERM)
+            except ProcessLookupError:
+                pass
+            deadline = time.monotonic() + 2.0
+            while time.monotonic() < deadline and _group_alive(self.pgid):
+                time.sleep(0.05)
+            if _group_alive(self.pgid):
+                try:
+                    os.killpg(self.pgid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            for p in list(self.procs.values()) + [self.holder]:
+                try:
+                    p.wait(timeout=5)
+                except subprocess.TimeoutExpired:
+                    pass
+        for f in self.logs.values():
+            f.close()
+        self.logs = {}
+
+    # ---- the flight ----------------------------------------------------------------------
+    def run(self) -> dict:
+        spec = self.spec
+        self.out.mkdir(parents=True, exist_ok=True)
+        scen_path = paths.scenario_path(spec.scenario)
+        scen = yaml.safe_load(scen_path.read_text())
+        task = scen["task"]
+        sim_bin = paths.find_binary("mppid-sim")
+        if sim_bin is None:
+            raise FlightError("mppid-sim not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
+        duration = float(scen.get("timing", {}).get("duration", 30.0))
+        wall_timeout = spec.wall_timeout or (duration * 4 + 60 if not spec.realtime else duration + 30)
+        lockstep = not spec.realtime
+
+        if spec.controller == "mppid":
+            mppid = paths.find_binary("mppid")
+            if mppid is None:
+                raise FlightError("mppid not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
+            cfg = paths.TASKS / f"{task}.yaml"
+            if not cfg.is_file():
+                raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
+            ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
+            if lockstep:
+                ctrl_cmd.append("--lockstep")
+            ctrl_cmd += ["--set", f"backend={spec.backend}"]
+            for kv in spec.sets:
+                ctrl_cmd += ["--set", kv]
+        else:
+            ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
+        sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
+                   "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
+        logger_cmd = [str(paths.VENV_BIN / "lcm-logger"), "-q", "-f", f"--lcm-url={LCM_URL}", str(self.out / "flight.lcmlog")]
+
+        t0 = time.monotonic()
+        outcome = None
+        try:
+            self._start_namespace()
+            self._spawn("logger", logger_cmd)
+            self._spawn("controller", ctrl_cmd)
+            time.sleep(0.5)  # let both subscribe before the first state
+            for name in ("logger", "controller"):
+                if self.procs[name].poll() is not None:
+                    raise FlightError(f"{name} exited at start (rc={self.procs[name].returncode}); see {name}.log")
+            self._spawn("sim", sim_cmd)
+            (self.out / "pids.json").write_text(json.dumps(
+                {"pgid": self.pgid, "holder": self.holder.pid, **{k: p.pid for k, p in self.procs.items()}}))
+            killed = False
+            while True:
+                time.sleep(0.05)
+                now = time.monotonic() - t0
+                if self.procs["sim"].poll() is not None:
+                    break
+                if spec.kill_controller_after and not killed and now > spec.kill_controller_after:
+                    self.procs["controller"].kill()
+                    killed = True
+                    self.events.append(f"controller killed by the harness at {now:.2f} s (test)")
+                if self.procs["controller"].poll() is not None:
+                    outcome = "controller_died"
+                    self.events.append(f"controller exited rc={self.procs['controller'].returncode} at {now:.2f} s")
+                    break
+                if self.procs["logger"].poll() is not None:
+                    outcome = "logger_died"
+                    break
+                if now > wall_timeout:
+                    outcome = "wall_timeout"
+                    break
+        except KeyboardInterrupt:
+            outcome = "interrupted"
+            self.events.append("interrupted (Ctrl-C / SIGTERM)")
+            raise
+        finally:
+            self.cleanup()
+            info = {
+                "harness_outcome": outcome,
+                "wall_s": time.monotonic() - t0,
+                "returncodes": {k: p.returncode for k, p in self.procs.items()},
+                "events": self.events,
+                "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
+                "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
+                         "realtime": spec.realtime, "controller": spec.controller},
+            }
+            (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+        return info
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # Zombies count as alive for killpg; reap check through /proc.
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/stat") as f:
+                parts = f.read().rsplit(")", 1)[1].split()
+            if int(parts[2]) == pgid and parts[0] != "Z":
+                return True
+        except (OSError, IndexError, ValueError):
+            continue
+    return False
+
+
+def fly(spec: FlightSpec) -> dict:
+    """Runs one flight, scores it and plots it; returns the score (also in score.json)."""
+    from . import plots, score
+
+    # SIGTERM from outside is handled like Ctrl-C: clean up, then leave.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    flight = Flight(spec)
+    info = {}
+    try:
+        info = flight.run()
+    except FlightError as e:
+        info = {"harness_outcome": "error", "error": str(e)}
+        (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
+    result = score.score_flight(flight.out, spec, info)
+    (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+    try:
+        plots.plot_flight(flight.out)
+    except Exception as e:  # plots must never turn a flight into a crash
+        result.setdefault("warnings", []).append(f"plots failed: {e!r}")
+        (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+    return result

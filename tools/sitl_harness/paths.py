@@ -1,0 +1,61 @@
+"""Where things are: the repository, the build outputs, the scenarios."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIOS = ROOT / "config" / "scenarios"
+TASKS = ROOT / "config" / "tasks"
+VENV_BIN = ROOT / ".venv" / "bin"
+
+
+def build_dirs() -> list[Path]:
+    """Build folders searched for binaries, in order: $MPPID_BUILD_DIR, build, build-sim."""
+    dirs = []
+    env = os.environ.get("MPPID_BUILD_DIR")
+    if env:
+        dirs.append(Path(env).resolve())
+    dirs += [ROOT / "build", ROOT / "build-sim"]
+    return dirs
+
+
+def find_binary(name: str) -> Path | None:
+    for d in build_dirs():
+        p = d / "bin" / name
+        if p.is_file() and os.access(p, os.X_OK):
+            return p
+    return None
+
+
+def lcm_python_dir() -> Path | None:
+    for d in build_dirs():
+        if (d / "python" / "mppi_lcm" / "__init__.py").is_file():
+            return d / "python"
+    return None
+
+
+def add_lcm_types_to_path() -> None:
+    """Makes `import mppi_lcm` work (generated into <build>/python by the build)."""
+    d = lcm_python_dir()
+    if d is not None:
+        if str(d) not in sys.path:
+            sys.path.insert(0, str(d))
+        return
+    raise RuntimeError("mppi_lcm Python types not found: build the mppi_lcm_python target "
+                       "(searched %s)" % ", ".join(str(d) for d in build_dirs()))
+
+
+def scenario_path(name: str) -> Path:
+    p = Path(name)
+    if p.suffix in (".yaml", ".yml") and p.is_file():
+        return p.resolve()
+    p = SCENARIOS / f"{name}.yaml"
+    if not p.is_file():
+        raise FileNotFoundError(f"no scenario '{name}' in {SCENARIOS}")
+    return p
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in SCENARIOS.glob("*.yaml"))

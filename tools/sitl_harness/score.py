@@ -1,0 +1,183 @@
+"""The score of a flight, from the simulator's truth (not the controller's view) and the
+controller's own status messages.
+
+success: the scenario's criterion (success.type in the scenario file) and no collision and
+a controller that answered to the end:
+  goal      every vehicle reached its goal (sim outcome "goal")
+  tracking  full duration, position RMSE after `settle` s <= max_rmse
+  swingup   full duration, over the last `hold` s the pole within angle_tol of upright and
+            |theta_dot| < rate_tol
+  laps      full duration, >= min_laps laps of the ellipse, mean speed >= min_mean_speed
+tracking_rmse means, per type: the position error to the reference (tracking), the angle
+error to upright over the hold window (swingup), the ellipse residual d (laps); null for goal.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from . import logs, paths
+
+QUAD_MODELS = ("quadrotor", "quadrotor_rate")
+
+
+def reference_eval(ref: dict, t: np.ndarray):
+    """core's Reference::eval, vectorised: positions (len(t), 3)."""
+    c = np.asarray(ref.get("center", [0, 0, 2]), float)
+    pos = np.tile(c, (len(t), 1))
+    kind, r, v = ref.get("kind"), float(ref.get("radius", 0)), float(ref.get("speed", 0))
+    if kind not in ("circle", "figure_eight") or r <= 0:
+        return pos
+    a = v / r * t
+    if kind == "circle":
+        pos[:, 0] += r * np.cos(a)
+        pos[:, 1] += r * np.sin(a)
+    else:
+        pos[:, 0] += r * np.sin(a)
+        pos[:, 1] += 0.5 * r * np.sin(2 * a)
+    return pos
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _controller_stats(status):
+    """From the controller_status_t messages: misses, cycles, the worst window p99s."""
+    if not status:
+        return {}
+    msgs = [m for _, m in status]
+    last = msgs[-1]
+    def worst(field):
+        vals = [getattr(m, field) for m in msgs if math.isfinite(getattr(m, field)) and getattr(m, field) > 0]
+        return max(vals) if vals else None
+    return {
+        "backend": last.backend,
+        "rollouts": last.rollouts,
+        "horizon": last.horizon,
+        "cycles": int(max(m.cycles for m in msgs)),
+        "deadline_misses": int(max(m.misses for m in msgs)),
+        "compute_ms_p99": worst("compute_ms_p99"),
+        "compute_ms_max": worst("compute_ms_max"),
+        "compute_ms_mean": float(np.mean([m.compute_ms_mean for m in msgs if m.compute_ms_mean > 0])) if any(m.compute_ms_mean > 0 for m in msgs) else None,
+        "period_ms_p99": worst("period_ms_p99"),
+        "jitter_ms_p99": worst("jitter_ms_p99"),
+        "status_messages": len(msgs),
+        "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
+    }
+
+
+def score_flight(out: Path, spec, info: dict) -> dict:
+    out = Path(out)
+    scen = yaml.safe_load(paths.scenario_path(spec.scenario).read_text())
+    crit = scen.get("success", {"type": "goal"})
+    world = logs.read_json(out / "world.json") or {}
+    summary = logs.read_json(out / "sim_summary.json") or {}
+    ticks, events = logs.read_truth(out)
+    lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS"})
+    model = scen["plant"]["model"]
+    res = {
+        "scenario": scen.get("name", spec.scenario),
+        "seed": spec.seed,
+        "backend": spec.backend,
+        "clock": "realtime" if spec.realtime else "lockstep",
+        "controller": spec.controller,
+        "success": False,
+        "reason": None,
+        "sim_outcome": summary.get("outcome"),
+        "harness_outcome": info.get("harness_outcome"),
+        "time_to_goal": summary.get("time_to_goal"),
+        "sim_time": summary.get("t_end"),
+        "wall_s": info.get("wall_s"),
+        "min_clearance": summary.get("min_clearance"),
+        "min_separation": summary.get("min_separation"),
+        "collisions": summary.get("collisions", []),
+        "tracking_rmse": None,
+        "mean_speed": None,
+        "commands": len(lcm.get("MPPI_COMMAND", [])),
+    }
+    res.update(_controller_stats(lcm.get("MPPI_STATUS", [])))
+    lat = [tk["lat_ms"] for tk in ticks if tk.get("lat_ms") is not None]
+    if lat:
+        res["answer_ms_p99"] = float(np.percentile(lat, 99))  # state published -> command received (lock-step)
+    cmd_t = np.array([t for t, _ in lcm.get("MPPI_COMMAND", [])], float) / 1e6
+    if len(cmd_t) > 2:
+        res["command_period_ms_p99"] = float(np.percentile(np.diff(cmd_t) * 1e3, 99))
+    modes = [m.mode for _, m in lcm.get("MPPI_COMMAND", [])]
+    if modes:
+        res["commands_hold"] = int(sum(1 for m in modes if m == 1))
+        res["commands_failsafe"] = int(sum(1 for m in modes if m == 2))
+
+    if ticks:
+        t = np.array([tk["t"] for tk in ticks])
+        X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
+        nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
+        if model in QUAD_MODELS:
+            speeds = [np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)]
+            res["mean_speed"] = float(np.nanmean(speeds))
+        elif model == "cartpole":
+            res["mean_speed"] = float(np.nanmean(np.abs(X[:, 1])))
+        else:
+            res["mean_speed"] = float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
+
+    # Failures that are not the vehicle's.
+    ho = info.get("harness_outcome")
+    so = summary.get("outcome")
+    if info.get("error"):
+        res["reason"] = "harness error: " + info["error"]
+    elif ho is not None:
+        res["reason"] = ho
+    elif so is None:
+        res["reason"] = "no simulator summary"
+    elif so == "controller_timeout":
+        res["reason"] = "controller stopped answering (lock-step timeout)"
+    elif so in ("interrupted", "error"):
+        res["reason"] = "simulator " + so
+    elif res["collisions"]:
+        c = res["collisions"][0]
+        res["reason"] = f"collision with {c['with']} (vehicle {c['vehicle']}) at t={c['t']:.2f} s"
+    if res["reason"] is not None or not ticks:
+        res["reason"] = res["reason"] or "no truth log"
+        return res
+
+    kind = crit.get("type", "goal")
+    duration = float(world.get("duration", 0))
+    full = so == "duration" and abs(t[-1] - duration) < 0.05
+    if kind == "goal":
+        res["success"] = so == "goal"
+        res["reason"] = "goal reached" if res["success"] else f"goal not reached in {duration:g} s"
+    elif kind == "tracking":
+        ref = world.get("reference", {})
+        sel = t >= float(crit.get("settle", 0.0))
+        err = np.linalg.norm(X[sel, 0:3] - reference_eval(ref, t[sel]), axis=1)
+        res["tracking_rmse"] = float(np.sqrt(np.mean(err ** 2))) if err.size else None
+        ok = res["tracking_rmse"] is not None and res["tracking_rmse"] <= float(crit.get("max_rmse", 0.5))
+        res["success"] = bool(full and ok)
+        res["reason"] = "tracked" if res["success"] else f"tracking RMSE {res['tracking_rmse']:.3f} m > {crit.get('max_rmse', 0.5)}"
+    elif kind == "swingup":
+        th, w = X[:, 2], X[:, 3]
+        err = np.abs(_wrap(th - np.pi))
+        upright = (err < float(crit.get("angle_tol", 0.3))) & (np.abs(w) < float(crit.get("rate_tol", 2.0)))
+        hold = t >= t[-1] - float(crit.get("hold", 2.0))
+        res["tracking_rmse"] = float(np.sqrt(np.mean(err[hold] ** 2)))
+        # Time to goal: from when the pole stays upright to the end.
+        idx = np.where(~upright)[0]
+        first_stay = (idx[-1] + 1) if idx.size else 0
+        res["time_to_goal"] = float(t[first_stay]) if first_stay < len(t) else None
+        res["success"] = bool(full and upright[hold].all())
+        res["reason"] = "swung up and held" if res["success"] else "pole not held upright over the last %.1f s" % float(crit.get("hold", 2.0))
+    elif kind == "laps":
+        d = (X[:, 0] / 13.0) ** 2 + (X[:, 1] / 6.0) ** 2 - 1.0
+        ang = np.unwrap(np.arctan2(X[:, 1] / 6.0, X[:, 0] / 13.0))
+        laps = abs(ang[-1] - ang[0]) / (2 * np.pi)
+        res["laps"] = float(laps)
+        res["tracking_rmse"] = float(np.sqrt(np.mean(d ** 2)))
+        ok = laps >= float(crit.get("min_laps", 1)) and res["mean_speed"] >= float(crit.get("min_mean_speed", 0))
+        res["success"] = bool(full and ok)
+        res["reason"] = "lapped" if res["success"] else f"{laps:.2f} laps at {res['mean_speed']:.2f} m/s mean"
+    else:
+        res["reason"] = f"unknown success.type {kind}"
+    return res
