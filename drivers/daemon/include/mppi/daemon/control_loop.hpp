@@ -1,0 +1,147 @@
+// The runner: one fixed-rate (or lock-step) control cycle after another around a
+// type-erased mppi::Controller. Per cycle: apply what arrived between cycles (parameters,
+// reference, obstacles), take the newest valid state, run one MPPI iteration, gate and
+// publish the command, then the status (at its own rate) and the display plan.
+//
+// Every failure publishes something safe instead of something wrong: a missed deadline,
+// a non-finite optimizer output or an optimizer error publishes the shifted previous
+// plan (MODE_HOLD_PLAN); a stale state holds the plan, and a state older than the second
+// timeout publishes the failsafe command (MODE_FAILSAFE). Nothing that fails the command
+// gate (finite, inside limits) ever leaves the process.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mppi/controller.hpp"
+#include "mppi/rt/clock.hpp"
+#include "mppi/rt/command_gate.hpp"
+#include "mppi/rt/deadline_monitor.hpp"
+#include "mppi/rt/schedule.hpp"
+#include "mppi/transport/transport.hpp"
+
+namespace mppi::daemon {
+
+struct LoopSettings {
+  double rate_hz = 50.0;
+  std::int64_t state_timeout_ns = 100 * rt::kNsPerMs;
+  std::int64_t failsafe_timeout_ns = 500 * rt::kNsPerMs;
+  double status_hz = 1.0;
+  double plan_hz = 5.0;
+  bool lockstep = false;
+  std::int64_t lockstep_poll_ns = 10 * rt::kNsPerMs;  // how often a lock-step wait checks stop
+  int watchdog_max_consecutive_misses = 5;  // the loop stops feeding the watchdog past this
+  int watchdog_max_optimizer_errors = 5;    // ... or past this many consecutive bad updates
+  std::int8_t command_kind = 3;             // command_t::KIND_*
+  std::vector<float> failsafe_u;            // per control channel; empty = u_init
+};
+
+// Counters since start (the loop thread writes, others read).
+struct LoopCounters {
+  std::atomic<std::int64_t> commands_normal{0};
+  std::atomic<std::int64_t> commands_hold{0};
+  std::atomic<std::int64_t> commands_failsafe{0};
+  std::atomic<std::int64_t> commands_blocked{0};  // failed the gate with no safe substitute
+  std::atomic<std::int64_t> optimizer_nonfinite{0};
+  std::atomic<std::int64_t> optimizer_errors{0};  // exceptions
+  std::atomic<std::int64_t> gate_rejects{0};      // optimizer output outside limits
+  std::atomic<std::int64_t> late_holds{0};        // deadline missed: held plan published
+  std::atomic<std::int64_t> stale_cycles{0};      // state older than state_timeout
+  std::atomic<std::int64_t> params_applied{0};
+  std::atomic<std::int64_t> params_rejected{0};
+  std::atomic<std::int64_t> status_published{0};
+  std::atomic<std::int64_t> plans_published{0};
+  std::atomic<std::int64_t> failsafe_entries{0};
+};
+
+class ControlLoop {
+ public:
+  // clock: CLOCK_MONOTONIC in service, a fake in tests. In lock-step the schedule comes
+  // from the inbox's ticks and `clock` only measures compute time.
+  ControlLoop(Controller* controller, rt::Clock* clock, transport::Transport* transport,
+              transport::Inbox* inbox, LoopSettings settings);
+
+  // Runs until stop is set (or max_cycles cycles, if >= 0). Real-time or lock-step.
+  void run(const std::atomic<bool>& stop, std::int64_t max_cycles = -1);
+  // Fixes the first release (real time) at clock now; run() calls it if not done.
+  void start();
+  // One real-time cycle: sleeps until its release, then runs. False if stopped first.
+  bool step_realtime(const std::atomic<bool>& stop);
+  // One lock-step cycle per tick. False if no tick arrived before stop.
+  bool step_lockstep(const std::atomic<bool>& stop);
+  // The final status (healthy = 0), after the last cycle.
+  void publish_final_status();
+
+  const LoopCounters& counters() const { return counters_; }
+  rt::TimingSummary timing_total() const { return monitor_.total(); }
+  rt::TimingSummary timing_window() const { return monitor_.window(); }
+  std::int64_t skipped_periods() const { return schedule_.skipped_periods(); }
+  transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
+  // For the watchdog: monotonic time of the last completed cycle, and whether the loop
+  // itself is well (cycling, not stuck in misses or optimizer failures).
+  std::int64_t heartbeat_ns() const { return heartbeat_ns_.load(std::memory_order_relaxed); }
+  bool loop_healthy() const { return loop_healthy_.load(std::memory_order_relaxed); }
+  const LoopSettings& settings() const { return s_; }
+  // Parameter keys handled by the loop itself (the rest go to the controller).
+  static bool is_loop_param(const std::string& key);
+
+ private:
+  enum class Outcome { kFresh, kHeld, kFailsafe };
+  void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
+  void apply_between_cycles(std::int64_t now_state_ns);
+  std::string apply_param(const transport::ParamUpdate& p);
+  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
+  void select_obstacles(const transport::StateSample& x);
+  bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
+  bool publish_held(std::int64_t state_seq);
+  bool publish_failsafe(std::int64_t state_seq);
+  void maybe_status(bool force, std::int64_t now_ns);
+  void maybe_plan(std::int64_t state_seq);
+  void set_mode(transport::Mode m);
+
+  Controller* c_;
+  rt::Clock* clock_;
+  transport::Transport* tx_;
+  transport::Inbox* in_;
+  LoopSettings s_;
+  int nu_;
+  int horizon_;
+  std::int64_t period_ns_;
+  std::int64_t status_every_;
+  std::int64_t plan_every_;
+
+  rt::PeriodicSchedule schedule_;
+  rt::DeadlineMonitor monitor_;
+  rt::CommandGate gate_;
+  bool started_ = false;
+
+  TaskInputs inputs_;
+  transport::ObstacleInput obstacles_all_;  // last full set, nearest kept in inputs_
+  std::vector<int> obstacle_order_;
+  std::vector<float> distances_;
+  std::int64_t reference_t0_utime_ = 0;
+  bool have_reference_ = false;
+  bool have_obstacles_ = false;
+
+  std::vector<float> held_;     // the plan to fall back on: T x nu, step 0 = next command
+  std::vector<float> u_;        // this cycle's command
+  std::vector<float> failsafe_;
+  std::vector<float> u_init_;
+  transport::Command cmd_;
+  transport::StatusReport status_;
+  UpdateStats last_stats_;
+  std::int64_t last_state_seq_used_ = -1;
+  std::int64_t cycle_index_ = 0;
+  int consecutive_bad_updates_ = 0;
+  std::int64_t prev_tick_sim_ns_ = -1;
+
+  std::atomic<transport::Mode> mode_{transport::Mode::kFailsafe};
+  transport::Mode last_status_mode_ = transport::Mode::kFailsafe;
+  std::atomic<std::int64_t> heartbeat_ns_{0};
+  std::atomic<bool> loop_healthy_{true};
+  LoopCounters counters_;
+};
+
+}  // namespace mppi::daemon

@@ -1,0 +1,34 @@
+// The daemon's own section of the settings file (`daemon:`), validated with errors that
+// name the field ("daemon.rate_hz: must be in (0, 2000]").
+#pragma once
+
+#include <yaml-cpp/yaml.h>
+
+#include <string>
+
+#include "mppi/daemon/control_loop.hpp"
+#include "mppi/rt/realtime.hpp"
+#include "mppi/transport/lcm_transport.hpp"
+
+namespace mppi::daemon {
+
+struct DaemonSettings {
+  LoopSettings loop;
+  std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
+  transport::LcmChannels channels;
+  int receive_timeout_ms = 20;
+  std::string lockstep_trigger = "clock";  // clock | state
+  rt::RealtimeRequest realtime;
+  int warmup_iterations = 3;
+  std::int8_t expect_model = 0;  // vehicle_state_t::MODEL_*, from the task
+};
+
+// Reads `section` (may be null: all defaults) for a controller with nu controls of task
+// `task`. Throws mppi::app::ConfigError naming the field.
+DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::string& task, int nu);
+
+// command_t::KIND_* and vehicle_state_t::MODEL_* for a task name.
+std::int8_t command_kind_for(const std::string& task);
+std::int8_t state_model_for(const std::string& task);
+
+}  // namespace mppi::daemon

@@ -1,0 +1,379 @@
+#include "mppi/daemon/control_loop.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <exception>
+
+namespace mppi::daemon {
+
+using transport::Mode;
+
+namespace {
+std::int64_t every(double rate_hz, double sub_hz) {
+  if (sub_hz <= 0.0) return 0;
+  return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
+}
+}  // namespace
+
+ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Transport* transport,
+                         transport::Inbox* inbox, LoopSettings settings)
+    : c_(controller),
+      clock_(clock),
+      tx_(transport),
+      in_(inbox),
+      s_(std::move(settings)),
+      nu_(controller->nu()),
+      horizon_(controller->horizon()),
+      period_ns_(std::llround(1e9 / s_.rate_hz)),
+      status_every_(every(s_.rate_hz, s_.status_hz)),
+      plan_every_(every(s_.rate_hz, s_.plan_hz)),
+      schedule_(period_ns_),
+      monitor_(period_ns_),
+      gate_(controller->settings().u_min, controller->settings().u_max),
+      obstacle_order_(transport::kMaxObstaclesIn),
+      distances_(transport::kMaxObstaclesIn),
+      held_(controller->plan()),
+      u_(static_cast<std::size_t>(nu_)),
+      u_init_(controller->settings().u_init) {
+  failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
+  inputs_.vehicle_count = controller->vehicles();
+  status_.backend = c_->backend();
+  status_.task = c_->task().c_str();
+  status_.rollouts = c_->settings().rollouts;
+  status_.horizon = horizon_;
+}
+
+bool ControlLoop::is_loop_param(const std::string& key) { return key.rfind("daemon.", 0) == 0; }
+
+void ControlLoop::start() {
+  schedule_.start(clock_->now_ns());
+  heartbeat_ns_.store(clock_->now_ns(), std::memory_order_relaxed);
+  started_ = true;
+}
+
+void ControlLoop::run(const std::atomic<bool>& stop, std::int64_t max_cycles) {
+  if (!started_) start();
+  for (std::int64_t n = 0; (max_cycles < 0 || n < max_cycles) && !stop.load(std::memory_order_relaxed);) {
+    const bool ran = s_.lockstep ? step_lockstep(stop) : step_realtime(stop);
+    if (ran) ++n;
+  }
+}
+
+bool ControlLoop::step_realtime(const std::atomic<bool>& stop) {
+  if (!started_) start();
+  // Absolute-time sleep; an early return (a signal) re-checks stop and sleeps again.
+  std::int64_t now = clock_->now_ns();
+  while (now < schedule_.next_release_ns()) {
+    if (stop.load(std::memory_order_relaxed)) return false;
+    clock_->sleep_until(schedule_.next_release_ns());
+    now = clock_->now_ns();
+  }
+  if (stop.load(std::memory_order_relaxed)) return false;
+  schedule_.begin(now);
+  cycle(now, schedule_.deadline_ns(), now, false);
+  return true;
+}
+
+bool ControlLoop::step_lockstep(const std::atomic<bool>& stop) {
+  transport::ClockTick tick;
+  while (!in_->ticks.pop(&tick)) {
+    if (stop.load(std::memory_order_relaxed)) return false;
+    in_->wake.wait_for(s_.lockstep_poll_ns);
+  }
+  const std::int64_t sim_ns = tick.sim_utime * rt::kNsPerUs;
+  cycle(sim_ns, INT64_MAX, sim_ns, true);
+  return true;
+}
+
+void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
+  const std::int64_t t0 = lockstep ? clock_->now_ns() : start_ns;
+  apply_between_cycles(now_state_ns);
+
+  const bool have_state = in_->state.writes() > 0;
+  const transport::StateSample& x = in_->state.front();
+  // Staleness: receive time on our monotonic clock in real time; the simulator's sample
+  // time against its clock in lock-step (both in the sim's time base).
+  const std::int64_t age =
+      !have_state ? INT64_MAX : (lockstep ? now_state_ns - x.sample_utime * rt::kNsPerUs : now_state_ns - x.recv_ns);
+  const std::int64_t state_seq = have_state ? x.seq : -1;
+
+  Mode published = Mode::kFailsafe;
+  bool missed_deadline = false;
+  if (!have_state || age > s_.failsafe_timeout_ns) {
+    if (mode_.load(std::memory_order_relaxed) != Mode::kFailsafe) {
+      // The plan is too old to mean anything when the state comes back: start over.
+      c_->reset();
+      held_ = c_->plan();
+    }
+    publish_failsafe(state_seq);
+    published = Mode::kFailsafe;
+  } else if (age > s_.state_timeout_ns) {
+    counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
+    published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+    c_->fallback(u_.data());  // keep the warm start aligned with time
+  } else {
+    bool good = false;
+    try {
+      last_stats_ = c_->iterate(x.x, u_.data());
+      if (!last_stats_.finite) {
+        counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
+      } else if (!gate_.pass(u_.data(), nu_)) {
+        counters_.gate_rejects.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        good = true;
+      }
+    } catch (const std::exception& e) {
+      counters_.optimizer_errors.fetch_add(1, std::memory_order_relaxed);
+      spdlog::error("optimizer error: {}", e.what());
+    }
+    const std::int64_t done = clock_->now_ns();
+    missed_deadline = !lockstep && done > deadline_ns;
+    if (!good) {
+      // The optimizer's plan may hold NaN: restart it from u_init, fly the held plan.
+      c_->reset();
+      ++consecutive_bad_updates_;
+      published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+    } else if (missed_deadline) {
+      counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
+      consecutive_bad_updates_ = 0;
+      published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+      held_ = c_->plan();  // same size: copies, no allocation
+    } else {
+      consecutive_bad_updates_ = 0;
+      published = publish(Mode::kNormal, u_.data(), state_seq) ? Mode::kNormal : Mode::kFailsafe;
+      held_ = c_->plan();
+      if (!lockstep && state_seq != last_state_seq_used_)
+        monitor_.record_latency(clock_->now_ns() - x.recv_ns);
+    }
+    last_state_seq_used_ = state_seq;
+  }
+  set_mode(published);
+
+  const std::int64_t end = clock_->now_ns();
+  bool missed;
+  if (lockstep) {
+    missed = false;
+    monitor_.record(start_ns, start_ns + (end - t0), false);
+  } else {
+    missed = schedule_.finish(end);
+    monitor_.record(start_ns, end, missed);
+  }
+  (void)missed_deadline;
+  ++cycle_index_;
+
+  const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
+                       consecutive_bad_updates_ < s_.watchdog_max_optimizer_errors;
+  loop_healthy_.store(loop_ok, std::memory_order_relaxed);
+  heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
+
+  maybe_status(published != last_status_mode_, lockstep ? start_ns : end);
+  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(state_seq);
+}
+
+void ControlLoop::apply_between_cycles(std::int64_t now_state_ns) {
+  (void)now_state_ns;
+  transport::ParamUpdate p;
+  while (in_->params.pop(&p)) {
+    const std::string err = apply_param(p);
+    if (err.empty()) {
+      counters_.params_applied.fetch_add(1, std::memory_order_relaxed);
+      spdlog::info("parameter {} = {} applied (update seq {})", p.key, p.value, p.seq);
+    } else {
+      counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
+      spdlog::warn("parameter update seq {} rejected: {}", p.seq, err);
+    }
+  }
+  const bool new_state = in_->state.update();
+  const bool new_ref = in_->reference.update();
+  const bool new_obs = in_->obstacles.update();
+  if (new_state || new_ref || new_obs) update_inputs(in_->state.front(), new_ref, new_obs);
+}
+
+std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
+  const std::string key(p.key);
+  const double v = p.value;
+  if (!std::isfinite(v)) return key + ": must be finite";
+  if (is_loop_param(key)) {
+    if (key == "daemon.state_timeout_ms") {
+      if (v <= 0.0 || v * 1e6 >= static_cast<double>(s_.failsafe_timeout_ns))
+        return key + ": must be > 0 and below daemon.failsafe_timeout_ms";
+      s_.state_timeout_ns = std::llround(v * 1e6);
+      return {};
+    }
+    if (key == "daemon.failsafe_timeout_ms") {
+      if (v * 1e6 <= static_cast<double>(s_.state_timeout_ns) || v > 60000.0)
+        return key + ": must be above daemon.state_timeout_ms and <= 60000";
+      s_.failsafe_timeout_ns = std::llround(v * 1e6);
+      return {};
+    }
+    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms)";
+  }
+  if (key.rfind("mppi.", 0) == 0)
+    return key + ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*";
+  return c_->set_param(key, v);
+}
+
+void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed) {
+  if (reference_changed) {
+    const transport::ReferenceInput& r = in_->reference.front();
+    Reference& ref = inputs_.reference;
+    ref.kind = (r.kind == 1) ? Reference::kCircle : (r.kind == 2) ? Reference::kFigureEight : Reference::kHold;
+    std::copy_n(r.center, 3, ref.center);
+    ref.radius = r.radius;
+    ref.speed = r.speed;
+    ref.yaw = r.yaw;
+    reference_t0_utime_ = r.t0_utime;
+    have_reference_ = true;
+    const int n = std::min<int>(r.vehicle_count, inputs_.vehicle_count);
+    for (int v = 0; v < n; ++v) std::copy_n(r.goals[v], 3, inputs_.goals[v]);
+    // KIND_HOLD/KIND_WAYPOINT with no goals: hover at the centre.
+    if (n == 0)
+      for (int v = 0; v < inputs_.vehicle_count; ++v) std::copy_n(r.center, 3, inputs_.goals[v]);
+  }
+  if (obstacles_changed) {
+    const transport::ObstacleInput& o = in_->obstacles.front();
+    obstacles_all_.count = o.count;
+    obstacles_all_.seq = o.seq;
+    std::copy_n(o.items, o.count, obstacles_all_.items);
+    have_obstacles_ = true;
+  }
+  if (have_obstacles_) select_obstacles(x);
+  if (have_reference_ && in_->state.writes() > 0)
+    inputs_.reference_time = static_cast<float>(static_cast<double>(x.sample_utime - reference_t0_utime_) * 1e-6);
+  if (have_reference_ || have_obstacles_) c_->set_inputs(inputs_);
+}
+
+// Keep the kCapacity cylinders nearest to any vehicle (surface distance), in place.
+void ControlLoop::select_obstacles(const transport::StateSample& x) {
+  const int n = obstacles_all_.count;
+  ObstacleSet& out = inputs_.obstacles;
+  if (n <= ObstacleSet::kCapacity) {
+    out.count = n;
+    std::copy_n(obstacles_all_.items, n, out.items);
+    return;
+  }
+  const int vehicles = in_->state.writes() > 0 ? std::max<int>(1, x.vehicle_count) : 0;
+  for (int i = 0; i < n; ++i) {
+    const Cylinder& c = obstacles_all_.items[i];
+    float best = 0.0f;
+    for (int v = 0; v < vehicles; ++v) {
+      const float dx = c.x - x.x[v * x.nx + 0], dy = c.y - x.x[v * x.nx + 1];
+      const float d = std::sqrt(dx * dx + dy * dy) - c.radius;
+      best = v == 0 ? d : std::min(best, d);
+    }
+    distances_[static_cast<std::size_t>(i)] = best;
+    obstacle_order_[static_cast<std::size_t>(i)] = i;
+  }
+  auto first = obstacle_order_.begin();
+  std::nth_element(first, first + ObstacleSet::kCapacity - 1, first + n, [this](int a, int b) {
+    return distances_[static_cast<std::size_t>(a)] < distances_[static_cast<std::size_t>(b)];
+  });
+  out.count = ObstacleSet::kCapacity;
+  for (int i = 0; i < ObstacleSet::kCapacity; ++i) out.items[i] = obstacles_all_.items[obstacle_order_[static_cast<std::size_t>(i)]];
+}
+
+bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
+  if (!gate_.pass(u, nu_)) return false;
+  cmd_.utime = rt::wall_utime();
+  ++cmd_.seq;
+  cmd_.state_seq = state_seq;
+  cmd_.mode = mode;
+  cmd_.kind = s_.command_kind;
+  cmd_.n = nu_;
+  std::copy_n(u, nu_, cmd_.u);
+  tx_->publish_command(cmd_);
+  switch (mode) {
+    case Mode::kNormal: counters_.commands_normal.fetch_add(1, std::memory_order_relaxed); break;
+    case Mode::kHoldPlan: counters_.commands_hold.fetch_add(1, std::memory_order_relaxed); break;
+    case Mode::kFailsafe: counters_.commands_failsafe.fetch_add(1, std::memory_order_relaxed); break;
+  }
+  return true;
+}
+
+// The held plan's next step, then the held plan shifted (u_init appended).
+bool ControlLoop::publish_held(std::int64_t state_seq) {
+  std::copy_n(held_.data(), nu_, u_.data());
+  std::copy(held_.begin() + nu_, held_.end(), held_.begin());
+  std::copy_n(u_init_.data(), nu_, held_.end() - nu_);
+  if (publish(Mode::kHoldPlan, u_.data(), state_seq)) return true;
+  return publish_failsafe(state_seq);
+}
+
+bool ControlLoop::publish_failsafe(std::int64_t state_seq) {
+  if (publish(Mode::kFailsafe, failsafe_.data(), state_seq)) return true;
+  counters_.commands_blocked.fetch_add(1, std::memory_order_relaxed);
+  return false;
+}
+
+void ControlLoop::set_mode(Mode m) {
+  const Mode before = mode_.exchange(m, std::memory_order_relaxed);
+  if (before == m) return;
+  if (m == Mode::kFailsafe) {
+    counters_.failsafe_entries.fetch_add(1, std::memory_order_relaxed);
+    spdlog::warn("mode {} -> failsafe", transport::to_string(before));
+  } else if (m == Mode::kHoldPlan) {
+    spdlog::warn("mode {} -> hold_plan", transport::to_string(before));
+  } else {
+    spdlog::info("mode {} -> normal", transport::to_string(before));
+  }
+}
+
+void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
+  (void)now_ns;
+  if (!force && (status_every_ == 0 || cycle_index_ % status_every_ != 0)) return;
+  const rt::TimingSummary w = monitor_.window();
+  auto f = [](double v) { return static_cast<float>(v); };
+  status_.utime = rt::wall_utime();
+  ++status_.seq;
+  status_.mode = mode_.load(std::memory_order_relaxed);
+  status_.compute_ms_last = f(w.last_compute_ms);
+  status_.compute_ms_min = f(w.compute.min_ms);
+  status_.compute_ms_mean = f(w.compute.mean_ms);
+  status_.compute_ms_max = f(w.compute.max_ms);
+  status_.compute_ms_p99 = f(w.compute.p99_ms);
+  status_.period_ms_min = f(w.period.min_ms);
+  status_.period_ms_mean = f(w.period.mean_ms);
+  status_.period_ms_max = f(w.period.max_ms);
+  status_.period_ms_p99 = f(w.period.p99_ms);
+  status_.jitter_ms_p99 = f(w.jitter.p99_ms);
+  status_.cycles = w.cycles;
+  status_.misses = w.misses;
+  status_.consecutive_misses = w.consecutive_misses;
+  status_.ess = last_stats_.ess;
+  status_.min_cost = last_stats_.min_cost;
+  const auto& ic = in_->counters;
+  auto ld = [](const std::atomic<std::int64_t>& a) { return a.load(std::memory_order_relaxed); };
+  status_.rejected_nan = ld(ic.rejected_nan);
+  status_.rejected_stale = ld(counters_.stale_cycles);
+  status_.rejected_out_of_order = ld(ic.rejected_out_of_order) + ld(ic.rejected_duplicate);
+  status_.rejected_undecodable = ld(ic.rejected_undecodable) + ld(ic.rejected_shape) + ld(ic.rejected_inputs);
+  status_.rejected_params = ld(counters_.params_rejected) + ld(ic.params_dropped);
+  status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);
+  tx_->publish_status(status_);
+  counters_.status_published.fetch_add(1, std::memory_order_relaxed);
+  last_status_mode_ = status_.mode;
+  monitor_.reset_window();
+}
+
+void ControlLoop::publish_final_status() {
+  loop_healthy_.store(false, std::memory_order_relaxed);
+  maybe_status(true, clock_->now_ns());
+  // The forced status above reports the mode; mark the final one unhealthy explicitly.
+}
+
+void ControlLoop::maybe_plan(std::int64_t state_seq) {
+  transport::PlanView p;
+  p.utime = rt::wall_utime();
+  p.seq = counters_.plans_published.load(std::memory_order_relaxed) + 1;
+  p.state_seq = state_seq;
+  p.horizon = horizon_;
+  p.nu = nu_;
+  p.dt = c_->dt();
+  p.u = held_.data();
+  if (tx_->publish_plan(p)) counters_.plans_published.fetch_add(1, std::memory_order_relaxed);
+}
+
+}  // namespace mppi::daemon

@@ -1,0 +1,136 @@
+#include "mppi/daemon/daemon_settings.hpp"
+
+#include <cmath>
+#include <set>
+
+#include "mppi/app/config.hpp"
+
+namespace mppi::daemon {
+
+using app::ConfigError;
+
+namespace {
+[[noreturn]] void fail(const std::string& field, const std::string& why) {
+  throw ConfigError("daemon." + field + ": " + why);
+}
+
+template <class T>
+T scalar(const YAML::Node& n, const std::string& field) {
+  if (!n.IsScalar()) fail(field, "expected a scalar");
+  try {
+    return n.as<T>();
+  } catch (const YAML::Exception&) {
+    fail(field, "cannot read '" + n.Scalar() + "'");
+  }
+}
+
+std::string num(double v) {
+  std::string s = std::to_string(v);
+  s.erase(s.find_last_not_of('0') + 1);
+  if (!s.empty() && s.back() == '.') s.pop_back();
+  return s;
+}
+
+double number(const YAML::Node& parent, const std::string& field, double def, double lo, double hi,
+              const std::string& prefix = "") {
+  const YAML::Node n = parent[field];
+  if (!n) return def;
+  const double v = scalar<double>(n, prefix + field);
+  if (!std::isfinite(v) || v < lo || v > hi)
+    fail(prefix + field, "must be in [" + num(lo) + ", " + num(hi) + "], got " + n.Scalar());
+  return v;
+}
+
+std::string text(const YAML::Node& parent, const std::string& field, const std::string& def,
+                 const std::string& prefix = "") {
+  const YAML::Node n = parent[field];
+  if (!n) return def;
+  const auto v = scalar<std::string>(n, prefix + field);
+  if (v.empty()) fail(prefix + field, "must not be empty");
+  return v;
+}
+
+void check_known(const YAML::Node& map, const std::string& prefix, const std::set<std::string>& known) {
+  for (const auto& kv : map) {
+    const auto name = kv.first.as<std::string>();
+    if (!known.count(name)) fail(prefix + name, "unknown field");
+  }
+}
+}  // namespace
+
+std::int8_t command_kind_for(const std::string& task) {
+  if (task.rfind("quadrotor_rate", 0) == 0) return 2;                               // KIND_THRUST_RATES
+  if (task.rfind("quadrotor", 0) == 0 || task.rfind("team", 0) == 0) return 1;     // KIND_MOTOR_SPEEDS
+  return 3;                                                                         // KIND_GENERIC
+}
+
+std::int8_t state_model_for(const std::string& task) {
+  if (task.rfind("quadrotor_rate", 0) == 0) return 2;
+  if (task.rfind("quadrotor", 0) == 0 || task.rfind("team", 0) == 0) return 1;
+  if (task.rfind("cartpole", 0) == 0) return 3;
+  if (task.rfind("racecar", 0) == 0) return 4;
+  return 0;
+}
+
+DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::string& task, int nu) {
+  DaemonSettings d;
+  d.loop.command_kind = command_kind_for(task);
+  d.expect_model = state_model_for(task);
+  if (!section || section.IsNull()) return d;
+  if (!section.IsMap()) throw ConfigError("daemon: expected a map");
+  check_known(section, "",
+              {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
+               "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
+               "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u"});
+  LoopSettings& l = d.loop;
+  l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
+  const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
+  const double failsafe_ms = number(section, "failsafe_timeout_ms", std::max(500.0, 2.0 * state_ms), 1.0, 60000.0);
+  if (failsafe_ms <= state_ms) fail("failsafe_timeout_ms", "must be greater than daemon.state_timeout_ms");
+  l.state_timeout_ns = std::llround(state_ms * 1e6);
+  l.failsafe_timeout_ns = std::llround(failsafe_ms * 1e6);
+  l.status_hz = number(section, "status_hz", l.status_hz, 1.0, l.rate_hz);
+  l.plan_hz = number(section, "plan_hz", l.plan_hz, 0.0, l.rate_hz);
+  l.watchdog_max_consecutive_misses =
+      static_cast<int>(number(section, "watchdog_max_consecutive_misses", l.watchdog_max_consecutive_misses, 1, 1e6));
+  l.watchdog_max_optimizer_errors =
+      static_cast<int>(number(section, "watchdog_max_optimizer_errors", l.watchdog_max_optimizer_errors, 1, 1e6));
+  if (section["lockstep"]) l.lockstep = scalar<bool>(section["lockstep"], "lockstep");
+  d.lockstep_trigger = text(section, "lockstep_trigger", d.lockstep_trigger);
+  if (d.lockstep_trigger != "clock" && d.lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
+  d.lcm_url = text(section, "lcm_url", d.lcm_url);
+  d.receive_timeout_ms = static_cast<int>(number(section, "receive_timeout_ms", d.receive_timeout_ms, 1, 50));
+  d.warmup_iterations = static_cast<int>(number(section, "warmup_iterations", d.warmup_iterations, 0, 1000));
+  if (const YAML::Node f = section["failsafe_u"]) {
+    if (!f.IsSequence() || static_cast<int>(f.size()) != nu)
+      fail("failsafe_u", "expected a list of " + std::to_string(nu) + " numbers");
+    for (std::size_t i = 0; i < f.size(); ++i) {
+      const auto v = scalar<float>(f[i], "failsafe_u[" + std::to_string(i) + "]");
+      if (!std::isfinite(v)) fail("failsafe_u[" + std::to_string(i) + "]", "must be finite");
+      l.failsafe_u.push_back(v);
+    }
+  }
+  if (const YAML::Node c = section["channels"]) {
+    if (!c.IsMap()) fail("channels", "expected a map");
+    check_known(c, "channels.", {"state", "command", "status", "plan", "reference", "obstacles", "params", "clock"});
+    auto& ch = d.channels;
+    ch.state = text(c, "state", ch.state, "channels.");
+    ch.command = text(c, "command", ch.command, "channels.");
+    ch.status = text(c, "status", ch.status, "channels.");
+    ch.plan = text(c, "plan", ch.plan, "channels.");
+    ch.reference = text(c, "reference", ch.reference, "channels.");
+    ch.obstacles = text(c, "obstacles", ch.obstacles, "channels.");
+    ch.params = text(c, "params", ch.params, "channels.");
+    ch.clock = text(c, "clock", ch.clock, "channels.");
+  }
+  if (const YAML::Node r = section["realtime"]) {
+    if (!r.IsMap()) fail("realtime", "expected a map");
+    check_known(r, "realtime.", {"priority", "cpu", "lock_memory"});
+    d.realtime.fifo_priority = static_cast<int>(number(r, "priority", d.realtime.fifo_priority, 0, 99, "realtime."));
+    d.realtime.cpu = static_cast<int>(number(r, "cpu", d.realtime.cpu, -1, 1023, "realtime."));
+    if (r["lock_memory"]) d.realtime.lock_memory = scalar<bool>(r["lock_memory"], "realtime.lock_memory");
+  }
+  return d;
+}
+
+}  // namespace mppi::daemon

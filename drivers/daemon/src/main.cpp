@@ -1,0 +1,245 @@
+// mppid: settings -> controller -> transport self-test -> warm-up -> READY -> loop.
+// The main thread owns signals (blocked everywhere else, taken with sigtimedwait), the
+// systemd watchdog and STATUS= line; the loop thread owns the controller and publishes.
+#include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <iostream>
+#include <thread>
+
+#include "mppi/app/config.hpp"
+#include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/daemon_settings.hpp"
+#include "mppi/daemon/notifier.hpp"
+#include "mppi/daemon/stats_report.hpp"
+#include "mppi/rt/clock.hpp"
+#include "mppi/rt/realtime.hpp"
+#include "mppi/transport/lcm_transport.hpp"
+
+namespace {
+
+constexpr int kExitConfig = 2;
+constexpr int kExitRuntime = 1;
+
+std::string status_line(const mppi::daemon::ControlLoop& loop, double rate_hz) {
+  const auto t = loop.timing_window();
+  char buf[200];
+  std::snprintf(buf, sizeof(buf), "%s %.0f Hz, cycles %lld, misses %lld, mode %s", loop.settings().lockstep ? "lock-step" : "running",
+                rate_hz, static_cast<long long>(t.cycles), static_cast<long long>(t.misses),
+                mppi::transport::to_string(loop.mode()));
+  return buf;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mppid: deterministic fixed-rate MPPI controller daemon"};
+  std::string config_path, backend, lcm_url, log_level = "info";
+  std::vector<std::string> sets;
+  bool lockstep = false, realtime = false, require_realtime = false, stats = false;
+  double duration_s = 0.0;
+  app.add_option("--config", config_path, "Settings file (YAML)")->required();
+  app.add_option("--set", sets, "Override a setting: key.path=value (repeatable)");
+  app.add_option("--backend", backend, "cpu | cuda | auto");
+  app.add_option("--lcm-url", lcm_url, "LCM URL (overrides daemon.lcm_url)");
+  app.add_flag("--lockstep", lockstep, "Run one cycle per sim_clock_t tick instead of the wall clock");
+  app.add_flag("--realtime", realtime, "SCHED_FIFO, mlockall, CPU affinity (runs on if refused)");
+  app.add_flag("--require-realtime", require_realtime, "Like --realtime, but exit non-zero if refused");
+  app.add_flag("--stats", stats, "Print a timing and counter summary on exit");
+  app.add_option("--duration", duration_s, "Stop after this many seconds (0 = until a signal)")->check(CLI::NonNegativeNumber);
+  app.add_option("--log-level", log_level, "trace | debug | info | warn | error");
+  CLI11_PARSE(app, argc, argv);
+  realtime = realtime || require_realtime;
+
+  auto logger = spdlog::stderr_color_mt("mppid");
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(spdlog::level::from_str(log_level));
+  spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ mppid: %v");
+
+  // ---- settings -------------------------------------------------------------------
+  std::vector<std::string> overrides = sets;
+  if (!backend.empty()) overrides.push_back("backend=" + backend);
+  mppi::app::AppConfig cfg;
+  mppi::daemon::DaemonSettings ds;
+  try {
+    cfg = mppi::app::load_config(config_path, overrides);
+    ds = mppi::daemon::parse_daemon_settings(cfg.root["daemon"], cfg.task, static_cast<int>(cfg.mppi.u_init.size()));
+  } catch (const std::exception& e) {
+    spdlog::error("invalid settings: {}", e.what());
+    return kExitConfig;
+  }
+  if (!lcm_url.empty()) ds.lcm_url = lcm_url;
+  if (lockstep) ds.loop.lockstep = true;
+
+  // Signals go to the main thread only: block them before any thread exists.
+  sigset_t sigs;
+  sigemptyset(&sigs);
+  sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
+
+  mppi::rt::RealtimeResult rt_result;
+  if (realtime) mppi::rt::lock_memory(ds.realtime, &rt_result);
+
+  std::unique_ptr<mppi::Controller> controller;
+  try {
+    controller = mppi::app::make_controller(cfg);
+  } catch (const mppi::app::ConfigError& e) {
+    spdlog::error("invalid settings: {}", e.what());
+    return kExitConfig;
+  } catch (const std::exception& e) {
+    spdlog::error("cannot build the controller: {}", e.what());
+    return kExitRuntime;
+  }
+  const int nu = controller->nu();
+  if (!ds.loop.failsafe_u.empty() && static_cast<int>(ds.loop.failsafe_u.size()) != nu) {
+    spdlog::error("invalid settings: daemon.failsafe_u: expected {} numbers", nu);
+    return kExitConfig;
+  }
+  spdlog::info("task {} on {} backend: K={} T={} dt={} lambda={} nu={}, {} Hz{}", controller->task(),
+               controller->backend(), cfg.mppi.rollouts, cfg.mppi.horizon, cfg.mppi.dt, cfg.mppi.lambda, cfg.mppi.nu,
+               ds.loop.rate_hz, ds.loop.lockstep ? ", lock-step" : "");
+
+  // ---- transport --------------------------------------------------------------------
+  mppi::rt::MonotonicClock clock;
+  std::unique_ptr<mppi::transport::LcmTransport> tx;
+  try {
+    tx = std::make_unique<mppi::transport::LcmTransport>(ds.lcm_url, ds.channels, &clock,
+                                                         controller->horizon() * nu, ds.receive_timeout_ms);
+  } catch (const std::exception& e) {
+    spdlog::error("invalid settings: daemon.{}", e.what());
+    return kExitConfig;
+  }
+  if (const std::string why = tx->self_test(); !why.empty()) {
+    spdlog::error("transport self-test failed: {}", why);
+    return kExitRuntime;
+  }
+  spdlog::info("transport self-test passed on {}", ds.lcm_url);
+
+  mppi::transport::Inbox::Expect expect;
+  expect.vehicles = controller->vehicles();
+  expect.nx = controller->nx() / controller->vehicles();
+  expect.model = ds.expect_model;
+  expect.restart_after_ns = ds.loop.state_timeout_ns;
+  expect.tick_on_state = ds.loop.lockstep && ds.lockstep_trigger == "state";
+  auto inbox = std::make_unique<mppi::transport::Inbox>(expect);
+  mppi::daemon::ControlLoop loop(controller.get(), &clock, tx.get(), inbox.get(), ds.loop);
+
+  // ---- loop thread: real-time set-up, warm-up, then cycles --------------------------
+  std::atomic<bool> stop{false};
+  std::atomic<int> ready{0};  // 1 warmed up, -1 failed
+  std::string warmup_error;
+  std::thread loop_thread([&] {
+    mppi::rt::RealtimeRequest req = ds.realtime;
+    const int cpu = req.cpu;
+    req.cpu = -1;
+    if (realtime) mppi::rt::make_thread_realtime(req, &rt_result);
+    try {
+      // Warm-up: first-touch the backend's buffers and start its thread pool from this
+      // (real-time) thread, so the worker threads inherit its policy.
+      std::vector<float> x0(static_cast<std::size_t>(controller->nx()), 0.0f), u(static_cast<std::size_t>(nu));
+      for (int i = 0; i < ds.warmup_iterations; ++i) controller->iterate(x0.data(), u.data());
+      controller->reset();
+    } catch (const std::exception& e) {
+      warmup_error = e.what();
+      ready = -1;
+      return;
+    }
+    if (realtime && cpu >= 0) {
+      mppi::rt::RealtimeRequest pin;
+      pin.lock_memory = false;
+      pin.fifo_priority = 0;
+      pin.prefault_stack_bytes = 0;
+      pin.cpu = cpu;
+      mppi::rt::make_thread_realtime(pin, &rt_result);
+    }
+    ready = 1;
+    while (ready.load() == 1 && !stop.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    if (stop.load()) return;
+    loop.run(stop);
+    loop.publish_final_status();
+  });
+  while (ready.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (ready.load() < 0) {
+    loop_thread.join();
+    spdlog::error("backend warm-up failed: {}", warmup_error);
+    return kExitRuntime;
+  }
+  if (realtime) {
+    for (const auto& r : rt_result.refused) spdlog::warn("real-time refused: {}", r);
+    if (!rt_result.ok() && require_realtime) {
+      spdlog::error("--require-realtime: the OS refused real-time operation; exiting");
+      stop = true;
+      loop_thread.join();
+      return kExitRuntime;
+    }
+    if (rt_result.ok()) spdlog::info("real-time: mlockall, SCHED_FIFO {}{}", ds.realtime.fifo_priority,
+                                     ds.realtime.cpu >= 0 ? ", pinned to CPU " + std::to_string(ds.realtime.cpu) : "");
+    else spdlog::warn("running on without full real-time guarantees");
+  }
+
+  // ---- run ---------------------------------------------------------------------------
+  tx->start(inbox.get());
+  const long rss_start = mppi::rt::resident_kb();
+  const std::int64_t t_start = mppi::rt::monotonic_ns();
+  ready = 2;  // release the loop
+  mppi::daemon::Notifier notify;
+  notify.ready(status_line(loop, ds.loop.rate_hz));
+  spdlog::info("ready: {} Hz, state on {}, command on {}", ds.loop.rate_hz, ds.channels.state, ds.channels.command);
+
+  const std::int64_t watchdog_every = notify.watchdog_ns() > 0 ? notify.watchdog_ns() / 4 : 0;
+  const std::int64_t stale_heartbeat = std::max<std::int64_t>(
+      std::llround(3e9 / ds.loop.rate_hz), 500 * mppi::rt::kNsPerMs);
+  std::int64_t last_ping = 0, last_status = t_start;
+  int signal_number = 0;
+  while (true) {
+    const timespec wait{0, 20 * 1000 * 1000};
+    const int sig = sigtimedwait(&sigs, nullptr, &wait);
+    if (sig > 0) {
+      signal_number = sig;
+      break;
+    }
+    const std::int64_t now = mppi::rt::monotonic_ns();
+    if (duration_s > 0.0 && static_cast<double>(now - t_start) * 1e-9 >= duration_s) break;
+    // The watchdog is fed only while the loop itself is well: cycling (or, in lock-step,
+    // waiting on the simulator) and not stuck in misses or optimizer failures.
+    const bool alive = ds.loop.lockstep || now - loop.heartbeat_ns() < stale_heartbeat;
+    if (watchdog_every > 0 && now - last_ping >= watchdog_every && alive && loop.loop_healthy()) {
+      notify.watchdog();
+      last_ping = now;
+    }
+    if (now - last_status >= mppi::rt::kNsPerS) {
+      notify.status(status_line(loop, ds.loop.rate_hz));
+      last_status = now;
+    }
+  }
+
+  // ---- stop --------------------------------------------------------------------------
+  if (signal_number) spdlog::info("{}: stopping", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
+  notify.stopping();
+  stop = true;
+  loop_thread.join();  // publishes the final status
+  tx->stop();
+  const double seconds = static_cast<double>(mppi::rt::monotonic_ns() - t_start) * 1e-9;
+  const auto total = loop.timing_total();
+  spdlog::info("stopped after {} cycles, {} misses", total.cycles, total.misses);
+  if (stats) {
+    mppi::daemon::RunFacts f;
+    f.task = controller->task();
+    f.backend = controller->backend();
+    f.rollouts = cfg.mppi.rollouts;
+    f.horizon = cfg.mppi.horizon;
+    f.rate_hz = ds.loop.rate_hz;
+    f.seconds = seconds;
+    f.lockstep = ds.loop.lockstep;
+    f.realtime = realtime && rt_result.fifo;
+    f.rss_start_kb = rss_start;
+    f.rss_end_kb = mppi::rt::resident_kb();
+    std::cout << mppi::daemon::format_stats(f, loop, inbox->counters) << std::flush;
+  }
+  return 0;
+}

@@ -1,0 +1,67 @@
+#include "mppi/daemon/stats_report.hpp"
+
+#include <spdlog/fmt/fmt.h>
+
+namespace mppi::daemon {
+
+namespace {
+std::string line(const char* name, const rt::DurationSummary& d) {
+  return fmt::format("  {:<24} n={:<7} min={:.3f} mean={:.3f} p99={:.3f} max={:.3f} ms\n", name, d.count, d.min_ms,
+                     d.mean_ms, d.p99_ms, d.max_ms);
+}
+std::string json(const char* name, const rt::DurationSummary& d) {
+  return fmt::format("\"{}\":{{\"n\":{},\"min_ms\":{:.4f},\"mean_ms\":{:.4f},\"p99_ms\":{:.4f},\"max_ms\":{:.4f}}}", name,
+                     d.count, d.min_ms, d.mean_ms, d.p99_ms, d.max_ms);
+}
+}  // namespace
+
+std::string format_stats(const RunFacts& f, const ControlLoop& loop, const transport::InboxCounters& in) {
+  const rt::TimingSummary t = loop.timing_total();
+  const LoopCounters& c = loop.counters();
+  auto v = [](const std::atomic<std::int64_t>& a) { return a.load(); };
+  std::string out = fmt::format(
+      "mppid stats: task={} backend={} K={} T={} rate={} Hz {} {} run={:.1f} s\n", f.task, f.backend, f.rollouts,
+      f.horizon, f.rate_hz, f.lockstep ? "lock-step" : "real-time clock", f.realtime ? "SCHED_FIFO" : "SCHED_OTHER",
+      f.seconds);
+  out += fmt::format("  cycles={} misses={} max_consecutive_misses={} skipped_periods={}\n", t.cycles, t.misses,
+                     t.max_consecutive_misses, loop.skipped_periods());
+  out += line("compute", t.compute);
+  out += line("period", t.period);
+  out += line("jitter |period-nominal|", t.jitter);
+  out += line("state-in -> command-out", t.latency);
+  out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} (failsafe entries {})\n",
+                     v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
+                     v(c.failsafe_entries));
+  out += fmt::format("  optimizer nonfinite={} errors={} gate_rejects={} late_holds={} stale_cycles={}\n",
+                     v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.gate_rejects), v(c.late_holds),
+                     v(c.stale_cycles));
+  out += fmt::format(
+      "  states accepted={} rejected: nan={} duplicate={} out_of_order={} shape={} undecodable={} inputs={}\n",
+      v(in.states), v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
+      v(in.rejected_undecodable), v(in.rejected_inputs));
+  out += fmt::format("  params applied={} rejected={} dropped={}  status={} plans={}\n", v(c.params_applied),
+                     v(c.params_rejected), v(in.params_dropped), v(c.status_published), v(c.plans_published));
+  out += fmt::format("  rss start={} kB end={} kB\n", f.rss_start_kb, f.rss_end_kb);
+  out += "mppid-stats {";
+  out += fmt::format(
+      "\"task\":\"{}\",\"backend\":\"{}\",\"rollouts\":{},\"horizon\":{},\"rate_hz\":{},\"seconds\":{:.3f},"
+      "\"lockstep\":{},\"realtime\":{},\"cycles\":{},\"misses\":{},\"max_consecutive_misses\":{},"
+      "\"skipped_periods\":{},",
+      f.task, f.backend, f.rollouts, f.horizon, f.rate_hz, f.seconds, f.lockstep, f.realtime, t.cycles, t.misses,
+      t.max_consecutive_misses, loop.skipped_periods());
+  out += json("compute", t.compute) + "," + json("period", t.period) + "," + json("jitter", t.jitter) + "," +
+         json("latency", t.latency) + ",";
+  out += fmt::format(
+      "\"commands_normal\":{},\"commands_hold\":{},\"commands_failsafe\":{},\"commands_blocked\":{},"
+      "\"optimizer_nonfinite\":{},\"optimizer_errors\":{},\"late_holds\":{},\"stale_cycles\":{},"
+      "\"states\":{},\"rejected_nan\":{},\"rejected_duplicate\":{},\"rejected_out_of_order\":{},"
+      "\"rejected_shape\":{},\"rejected_undecodable\":{},\"params_applied\":{},\"params_rejected\":{},"
+      "\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
+      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
+      v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.late_holds), v(c.stale_cycles), v(in.states),
+      v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
+      v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected), f.rss_start_kb, f.rss_end_kb);
+  return out;
+}
+
+}  // namespace mppi::daemon

@@ -1,0 +1,89 @@
+// Transport over LCM: one receive thread running handleTimeout (so stop() returns on a
+// quiet bus), raw subscriptions decoded by hand (so garbage and wrong types are counted,
+// not printed and dropped), encoding into buffers sized once.
+#pragma once
+
+#include <lcm/lcm-cpp.hpp>
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "mppi/rt/clock.hpp"
+#include "mppi/transport/transport.hpp"
+#include "mppi_lcm/command_t.hpp"
+#include "mppi_lcm/controller_status_t.hpp"
+#include "mppi_lcm/obstacles_t.hpp"
+#include "mppi_lcm/param_update_t.hpp"
+#include "mppi_lcm/plan_t.hpp"
+#include "mppi_lcm/reference_t.hpp"
+#include "mppi_lcm/sim_clock_t.hpp"
+#include "mppi_lcm/vehicle_state_t.hpp"
+
+namespace mppi::transport {
+
+struct LcmChannels {
+  std::string state = "MPPI_STATE";
+  std::string command = "MPPI_COMMAND";
+  std::string status = "MPPI_STATUS";
+  std::string plan = "MPPI_PLAN";
+  std::string reference = "MPPI_REFERENCE";
+  std::string obstacles = "MPPI_OBSTACLES";
+  std::string params = "MPPI_PARAMS";
+  std::string clock = "MPPI_SIM_CLOCK";
+};
+
+class LcmTransport final : public Transport {
+ public:
+  // Throws std::runtime_error when the URL cannot be opened. recv_clock stamps arrivals
+  // (StateSample::recv_ns); max_plan_floats sizes the plan buffer once.
+  LcmTransport(const std::string& url, LcmChannels channels, rt::Clock* recv_clock, int max_plan_floats,
+               int receive_timeout_ms = 20);
+  ~LcmTransport() override;
+
+  std::string self_test() override;
+  void start(Inbox* inbox) override;
+  void stop() override;
+  bool publish_command(const Command& c) override;
+  bool publish_status(const StatusReport& s) override;
+  bool publish_plan(const PlanView& p) override;
+
+  lcm::LCM& lcm() { return lcm_; }
+
+ private:
+  void on_state(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  void on_reference(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  void on_obstacles(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  void on_param(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  void on_clock(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  template <class Msg>
+  bool decode(Msg* msg, const lcm::ReceiveBuffer* rb);
+  template <class Msg>
+  bool send(const std::string& channel, const Msg& msg);
+
+  lcm::LCM lcm_;
+  std::string url_;
+  LcmChannels ch_;
+  rt::Clock* recv_clock_;
+  int timeout_ms_;
+  Inbox* inbox_ = nullptr;
+  std::thread thread_;
+  std::atomic<bool> running_{false};
+
+  // Receive-thread scratch, reused (their vectors keep their capacity).
+  mppi_lcm::vehicle_state_t state_in_;
+  mppi_lcm::reference_t reference_in_;
+  mppi_lcm::obstacles_t obstacles_in_;
+  mppi_lcm::param_update_t param_in_;
+  mppi_lcm::sim_clock_t clock_in_;
+
+  // Loop-thread scratch.
+  mppi_lcm::command_t command_out_;
+  mppi_lcm::controller_status_t status_out_;
+  mppi_lcm::plan_t plan_out_;
+  std::vector<std::uint8_t> buf_;
+};
+
+}  // namespace mppi::transport

@@ -1,0 +1,101 @@
+// Plain, fixed-size messages between a transport and the control loop. The loop never
+// sees an LCM type; a transport decodes into these on its own thread and encodes from
+// them. Fixed capacities keep the hot path free of allocation.
+#pragma once
+
+#include <cstdint>
+
+#include "mppi/costs/obstacles.hpp"
+
+namespace mppi::transport {
+
+constexpr int kMaxStates = 16 * 32;   // 16 states x 32 vehicles
+constexpr int kMaxControls = 4 * 32;  // 4 controls x 32 vehicles
+constexpr int kMaxVehicles = 32;
+constexpr int kMaxObstaclesIn = 1024;  // accepted per message; the nearest 64 are kept
+
+// Command modes, equal to mppi_lcm::command_t::MODE_*.
+enum class Mode : std::int8_t { kNormal = 0, kHoldPlan = 1, kFailsafe = 2 };
+const char* to_string(Mode m);
+
+struct StateSample {
+  std::int64_t utime = 0;         // publisher's publish time, us
+  std::int64_t seq = -1;
+  std::int64_t sample_utime = 0;  // publisher's sample time, us
+  std::int64_t recv_ns = 0;       // our CLOCK_MONOTONIC at receipt
+  std::int8_t model = 0;
+  std::int16_t vehicle_count = 0;
+  std::int16_t nx = 0;
+  std::int32_t n = 0;
+  float x[kMaxStates] = {};
+};
+
+struct Command {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  std::int64_t state_seq = -1;
+  Mode mode = Mode::kFailsafe;
+  std::int8_t kind = 3;  // command_t::KIND_*
+  std::int32_t n = 0;
+  float u[kMaxControls] = {};
+};
+
+struct ReferenceInput {
+  std::int64_t seq = -1;
+  std::int8_t kind = 0;  // reference_t::KIND_*
+  float center[3] = {0.0f, 0.0f, 1.0f};
+  float radius = 0.0f, speed = 0.0f, yaw = 0.0f;
+  std::int64_t t0_utime = 0;
+  std::int16_t vehicle_count = 0;
+  float goals[kMaxVehicles][3] = {};
+};
+
+struct ObstacleInput {
+  std::int64_t seq = -1;
+  std::int64_t utime = 0;
+  std::int32_t count = 0;
+  Cylinder items[kMaxObstaclesIn];
+};
+
+struct ParamUpdate {
+  std::int64_t seq = 0;
+  char key[64] = {};
+  double value = 0.0;
+};
+
+struct ClockTick {
+  std::int64_t seq = 0;
+  std::int64_t sim_utime = 0;
+  std::int64_t step = 0;
+};
+
+// Mirrors mppi_lcm::controller_status_t.
+struct StatusReport {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  Mode mode = Mode::kFailsafe;
+  const char* backend = "";
+  const char* task = "";
+  std::int32_t rollouts = 0, horizon = 0;
+  float compute_ms_last = 0, compute_ms_min = 0, compute_ms_mean = 0, compute_ms_max = 0, compute_ms_p99 = 0;
+  float period_ms_min = 0, period_ms_mean = 0, period_ms_max = 0, period_ms_p99 = 0;
+  float jitter_ms_p99 = 0;
+  std::int64_t cycles = 0, misses = 0, consecutive_misses = 0;
+  float ess = 0, min_cost = 0;
+  std::int64_t rejected_nan = 0, rejected_stale = 0, rejected_out_of_order = 0, rejected_undecodable = 0,
+               rejected_params = 0;
+  bool healthy = false;
+};
+
+// A view of the plan for display; the pointed-to data lives in the loop.
+struct PlanView {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  std::int64_t state_seq = -1;
+  std::int32_t horizon = 0;
+  std::int32_t nu = 0;
+  float dt = 0;
+  const float* u = nullptr;  // horizon * nu, step-major
+};
+
+}  // namespace mppi::transport

@@ -1,0 +1,94 @@
+#include "mppi/transport/inbox.hpp"
+
+#include <cmath>
+
+namespace mppi::transport {
+
+const char* to_string(Mode m) {
+  switch (m) {
+    case Mode::kNormal: return "normal";
+    case Mode::kHoldPlan: return "hold_plan";
+    case Mode::kFailsafe: return "failsafe";
+  }
+  return "?";
+}
+
+const char* to_string(Reject r) {
+  switch (r) {
+    case Reject::kNone: return "accepted";
+    case Reject::kNan: return "non-finite value";
+    case Reject::kDuplicate: return "duplicate seq";
+    case Reject::kOutOfOrder: return "out-of-order seq";
+    case Reject::kShape: return "wrong shape or model";
+    case Reject::kUndecodable: return "undecodable";
+  }
+  return "?";
+}
+
+Reject Inbox::offer_state() {
+  const StateSample& s = state.back();
+  auto reject = [this](std::atomic<std::int64_t>& c, Reject r) {
+    c.fetch_add(1, std::memory_order_relaxed);
+    return r;
+  };
+  if (s.nx != expect_.nx || s.vehicle_count != expect_.vehicles || s.n != s.nx * s.vehicle_count ||
+      s.n > kMaxStates || (expect_.model != 0 && s.model != expect_.model))
+    return reject(counters.rejected_shape, Reject::kShape);
+  for (int i = 0; i < s.n; ++i)
+    if (!std::isfinite(s.x[i])) return reject(counters.rejected_nan, Reject::kNan);
+  if (have_last_) {
+    if (s.seq == last_seq_) return reject(counters.rejected_duplicate, Reject::kDuplicate);
+    if (s.seq < last_seq_ && s.recv_ns - last_recv_ns_ < expect_.restart_after_ns)
+      return reject(counters.rejected_out_of_order, Reject::kOutOfOrder);
+  }
+  have_last_ = true;
+  last_seq_ = s.seq;
+  last_recv_ns_ = s.recv_ns;
+  state.publish();
+  counters.states.fetch_add(1, std::memory_order_relaxed);
+  if (expect_.tick_on_state) {
+    ClockTick t;
+    t.seq = s.seq;
+    t.sim_utime = s.sample_utime;
+    offer_tick(t);
+  }
+  return Reject::kNone;
+}
+
+void Inbox::offer_reference() {
+  const ReferenceInput& r = reference.back();
+  bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && std::isfinite(r.radius) &&
+            std::isfinite(r.speed) && std::isfinite(r.yaw);
+  for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.center[d]);
+  for (int v = 0; ok && v < r.vehicle_count; ++v)
+    for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.goals[v][d]);
+  if (!ok) return count_bad_input();
+  reference.publish();
+}
+
+void Inbox::offer_obstacles() {
+  const ObstacleInput& o = obstacles.back();
+  bool ok = o.count >= 0 && o.count <= kMaxObstaclesIn;
+  for (int i = 0; ok && i < o.count; ++i) {
+    const Cylinder& c = o.items[i];
+    ok = std::isfinite(c.x) && std::isfinite(c.y) && std::isfinite(c.radius) && c.radius >= 0.0f &&
+         std::isfinite(c.vx) && std::isfinite(c.vy);
+  }
+  if (!ok) return count_bad_input();
+  obstacles.publish();
+}
+
+void Inbox::offer_param(const ParamUpdate& p) {
+  if (!params.push(p)) counters.params_dropped.fetch_add(1, std::memory_order_relaxed);
+}
+
+void Inbox::offer_tick(const ClockTick& t) {
+  if (!ticks.push(t)) {
+    counters.ticks_dropped.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  counters.ticks.fetch_add(1, std::memory_order_relaxed);
+  wake.post();
+}
+
+}  // namespace mppi::transport

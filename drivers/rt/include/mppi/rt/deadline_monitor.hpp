@@ -1,0 +1,56 @@
+// Timing of the control loop: compute time, period between cycle starts, jitter
+// (|period - nominal|), state-to-command latency, deadline misses and the current run of
+// consecutive misses. Two views: a window, reset each time the status is published, and
+// totals since start for the --stats summary. Nothing allocates after construction.
+#pragma once
+
+#include <cstdint>
+
+#include "mppi/rt/histogram.hpp"
+
+namespace mppi::rt {
+
+struct TimingSummary {
+  DurationSummary compute, period, jitter, latency;
+  std::int64_t cycles = 0;
+  std::int64_t misses = 0;
+  std::int64_t consecutive_misses = 0;
+  std::int64_t max_consecutive_misses = 0;
+  double last_compute_ms = 0.0;
+};
+
+class DeadlineMonitor {
+ public:
+  // Bins cover four periods at period/2000 resolution (10 us at 50 Hz).
+  explicit DeadlineMonitor(std::int64_t period_ns);
+
+  // One cycle: it started at start_ns, its work ended at end_ns; missed says whether it
+  // ended after its deadline. The first cycle has no period.
+  void record(std::int64_t start_ns, std::int64_t end_ns, bool missed);
+  // Time from the state's arrival to the command leaving, when a fresh command went out.
+  void record_latency(std::int64_t ns);
+
+  TimingSummary window() const { return summarise(w_); }
+  TimingSummary total() const { return summarise(t_); }
+  void reset_window();
+
+  std::int64_t period_ns() const { return period_; }
+  std::int64_t consecutive_misses() const { return consecutive_; }
+  std::int64_t misses() const { return misses_; }
+  std::int64_t cycles() const { return cycles_; }
+
+ private:
+  struct Set {
+    Set(std::int64_t bin, int bins) : compute(bin, bins), period(bin, bins), jitter(bin, bins), latency(bin, bins) {}
+    Histogram compute, period, jitter, latency;
+  };
+  TimingSummary summarise(const Set& s) const;
+
+  std::int64_t period_;
+  Set w_, t_;
+  std::int64_t last_start_ = -1;
+  std::int64_t last_compute_ = 0;
+  std::int64_t cycles_ = 0, misses_ = 0, consecutive_ = 0, max_consecutive_ = 0;
+};
+
+}  // namespace mppi::rt
