@@ -1,0 +1,48 @@
+"""Nothing is left running when a flight goes wrong."""
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+
+from conftest import ROOT, SITL, group_members, pid_alive, sitl
+
+
+def _assert_all_gone(out):
+    pids = json.loads((out / "pids.json").read_text())
+    for name, pid in pids.items():
+        if name != "pgid":
+            assert not pid_alive(pid), f"{name} (pid {pid}) still running"
+    assert group_members(pids["pgid"]) == []
+
+
+def test_controller_killed_mid_flight(controller, tmp_path):
+    out = tmp_path / "killed"
+    t0 = time.monotonic()
+    # The stand-in answers at once, so its lock-step flight would end before the kill.
+    clock = ["--realtime"] if controller == "standin" else []
+    p = sitl("run", "--scenario", "forest_4m", "--controller", controller, "--out", out,
+             "--kill-controller-after", 2.0, "--timeout", 120, *clock, timeout=180)
+    assert p.returncode == 1, p.stderr
+    score = json.loads((out / "score.json").read_text())
+    assert score["success"] is False
+    assert "controller" in score["reason"]
+    _assert_all_gone(out)
+    assert time.monotonic() - t0 < 60  # noticed at once, not at a timeout
+
+
+def test_harness_sigterm_mid_flight(controller, tmp_path):
+    """SIGTERM (or Ctrl-C) to the harness: the flight is stopped and cleaned up."""
+    out = tmp_path / "term"
+    p = subprocess.Popen([str(SITL), "run", "--scenario", "forest_4m", "--controller", controller, "--out", str(out),
+                          "--realtime"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 30
+    while not (out / "pids.json").is_file() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert (out / "pids.json").is_file()
+    time.sleep(1.0)
+    p.send_signal(signal.SIGTERM)
+    p.wait(timeout=30)
+    assert p.returncode != 0
+    _assert_all_gone(out)
