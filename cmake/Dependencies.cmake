@@ -27,7 +27,16 @@ endif()
 message(STATUS "mppid: CUDA backend ${MPPID_WITH_CUDA}")
 
 if(MPPID_TESTS)
-  find_package(GTest REQUIRED)
+  # MPPID_GTEST_SOURCE: build GoogleTest from a source tree (a copy of Debian's
+  # /usr/src/googletest) on machines without the installed package, e.g. the GPU machine.
+  set(MPPID_GTEST_SOURCE "" CACHE PATH "GoogleTest source tree to build instead of find_package(GTest)")
+  if(MPPID_GTEST_SOURCE)
+    set(INSTALL_GTEST OFF CACHE BOOL "" FORCE)
+    set(BUILD_GMOCK OFF CACHE BOOL "" FORCE)
+    add_subdirectory(${MPPID_GTEST_SOURCE} ${CMAKE_BINARY_DIR}/_deps/googletest EXCLUDE_FROM_ALL SYSTEM)
+  else()
+    find_package(GTest REQUIRED)
+  endif()
   include(GoogleTest)
 endif()
 if(MPPID_BENCH)

@@ -1,0 +1,292 @@
+// CudaBackend<T>: device buffers and pinned staging allocated once, one stream, the whole
+// cycle (copy in, roll out, weigh, update, copy out) captured in one CUDA graph, and one
+// synchronisation per update. Included by the per-task instantiation units.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "cuda_check.cuh"
+#include "kernels.cuh"
+#include "mppi/gpu/cuda_backend.hpp"
+
+namespace mppi::cuda_detail {
+
+struct StreamDeleter {
+  void operator()(cudaStream_t s) const { cudaStreamDestroy(s); }
+};
+struct GraphDeleter {
+  void operator()(cudaGraph_t g) const { cudaGraphDestroy(g); }
+};
+struct GraphExecDeleter {
+  void operator()(cudaGraphExec_t g) const { cudaGraphExecDestroy(g); }
+};
+
+inline int current_device_checked(std::string* name) {
+  std::string why;
+  if (!cuda_device_available(&why)) throw std::runtime_error("cuda backend: no usable CUDA device (" + why + ")");
+  int dev = 0;
+  check(cudaGetDevice(&dev), "cudaGetDevice");
+  cudaDeviceProp prop{};
+  check(cudaGetDeviceProperties(&prop, dev), "cudaGetDeviceProperties");
+  *name = prop.name;
+  return dev;
+}
+
+template <class T>
+class CudaBackend final : public RolloutBackend<T> {
+ public:
+  using Base = RolloutBackend<T>;
+  using typename Base::Params;
+  static constexpr int kNu = T::kNu;
+  static constexpr int kNx = T::kNx;
+  static constexpr bool kTeam = T::kVehicles > 1;
+
+  explicit CudaBackend(const MppiSettings& s)
+      : k_(s.rollouts), t_(s.horizon), dt_(s.dt), substeps_(s.substeps), seed_(s.seed) {
+    // Settings first: the sampler constants index every per-channel vector.
+    const std::string err = validate(s, kNu);
+    if (!err.empty()) throw std::runtime_error("cuda backend: invalid settings: " + err);
+    device_ = current_device_checked(&device_name_);
+    cudaDeviceProp prop{};
+    check(cudaGetDeviceProperties(&prop, device_), "cudaGetDeviceProperties");
+    c_ = make_sampler_constants<kNu>(s);
+    inv_lambda_ = 1.0f / s.lambda;
+    trajectory_ = s.weighting == Weighting::kTrajectory;
+    plan_floats_ = static_cast<std::size_t>(t_) * kNu;
+
+    // Launch shapes.
+    const int sms = prop.multiProcessorCount;
+    if constexpr (kTeam) {
+      constexpr int per_warp = team_rollouts_per_warp<T>();
+      warps_per_block_ = 2;
+      rollout_block_ = 32 * warps_per_block_;
+      rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
+      rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
+    } else {
+      // Small blocks while that spreads the rollouts over more multiprocessors: each
+      // thread runs the whole horizon, so the latency of one rollout sets the time.
+      rollout_block_ = 128;
+      while (rollout_block_ > 32 && (static_cast<long long>(k_) + rollout_block_ - 1) / rollout_block_ < 4LL * sms)
+        rollout_block_ /= 2;
+      rollout_grid_ = (static_cast<long long>(k_) + rollout_block_ - 1) / rollout_block_;
+      rollout_smem_ = align16(sizeof(Params));
+    }
+    // Chunks of rollouts per block of the weighting kernels: enough blocks to fill the
+    // device, at most 65535 chunks (grid.y).
+    chunk_ = kReduceBlock * (k_ <= 65536 ? 4 : 16);
+    while ((static_cast<long long>(k_) + chunk_ - 1) / chunk_ > 65535) chunk_ *= 2;
+    chunks_ = static_cast<int>((static_cast<long long>(k_) + chunk_ - 1) / chunk_);
+    check_launch_size(prop);
+
+    // Buffers, the big one first so an absurd K fails on it with a clear message.
+    const std::size_t kt = static_cast<std::size_t>(k_) * static_cast<std::size_t>(t_);
+    d_cost_ = DeviceBuffer(kt * sizeof(float), "the cost-to-go S~ (K x T = " + std::to_string(k_) + " x " +
+                                                   std::to_string(t_) + " floats)");
+    d_crashed_ = DeviceBuffer(static_cast<std::size_t>(k_), "the crash flags (K bytes)");
+    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * sizeof(float), "the per-chunk minima");
+    d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * (kNu + 1) * sizeof(float), "the per-chunk sums");
+    d_stats_part_ = DeviceBuffer(static_cast<std::size_t>(chunks_) * sizeof(StatsPart), "the per-chunk statistics");
+    in_bytes_ = align16(sizeof(Input<T>)) + plan_floats_ * sizeof(float);
+    out_bytes_ = align16(plan_floats_ * sizeof(float)) + sizeof(DeviceStats);
+    d_in_ = DeviceBuffer(in_bytes_, "the per-cycle input");
+    d_out_ = DeviceBuffer(out_bytes_, "the per-cycle output");
+    h_in_ = PinnedBuffer(in_bytes_, "the per-cycle input staging");
+    h_out_ = PinnedBuffer(out_bytes_, "the per-cycle output staging");
+    std::memset(h_in_.as<void>(), 0, in_bytes_);
+
+    cudaStream_t stream = nullptr;
+    check(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), "cudaStreamCreateWithFlags");
+    stream_.reset(stream);
+    if (rollout_smem_ > 48 * 1024) {
+      const std::string what = "cudaFuncSetAttribute (dynamic shared memory " + std::to_string(rollout_smem_) + " bytes)";
+      if constexpr (kTeam) {
+        check(cudaFuncSetAttribute(rollout_team<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                   static_cast<int>(rollout_smem_)), what);
+      } else {
+        check(cudaFuncSetAttribute(rollout_single<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                   static_cast<int>(rollout_smem_)), what);
+      }
+    }
+
+    const char* env = std::getenv("MPPID_CUDA_GRAPH");
+    use_graph_ = env == nullptr || std::string(env) != "0";
+    if (use_graph_) {
+      check(cudaStreamBeginCapture(stream_.get(), cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+      try {
+        enqueue();
+      } catch (...) {
+        cudaGraph_t g = nullptr;
+        cudaStreamEndCapture(stream_.get(), &g);
+        if (g != nullptr) cudaGraphDestroy(g);
+        throw;
+      }
+      cudaGraph_t graph = nullptr;
+      check(cudaStreamEndCapture(stream_.get(), &graph), "cudaStreamEndCapture (capturing the update graph)");
+      graph_.reset(graph);
+      cudaGraphExec_t exec = nullptr;
+      check(cudaGraphInstantiate(&exec, graph_.get(), 0), "cudaGraphInstantiate (the update graph)");
+      exec_.reset(exec);
+      check(cudaGraphUpload(exec_.get(), stream_.get()), "cudaGraphUpload");
+      check(cudaStreamSynchronize(stream_.get()), "cudaStreamSynchronize after the graph upload");
+    }
+  }
+
+  const char* name() const override { return "cuda"; }
+
+  void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan, UpdateStats* stats) override {
+    auto* in = h_in_.as<Input<T>>();
+    in->key = NoiseKey{seed_, cycle};
+    std::memcpy(in->x0, x0, sizeof(in->x0));
+    std::memcpy(static_cast<void*>(&in->params), &params, sizeof(Params));
+    std::memcpy(h_in_.as<unsigned char>() + align16(sizeof(Input<T>)), plan, plan_floats_ * sizeof(float));
+    // Messages are built only on failure: update() allocates nothing.
+    if (use_graph_) {
+      const cudaError_t e = cudaGraphLaunch(exec_.get(), stream_.get());
+      if (e != cudaSuccess) fail(e, what("cudaGraphLaunch of the update graph"));
+    } else {
+      enqueue();
+    }
+    const cudaError_t e = cudaStreamSynchronize(stream_.get());
+    if (e != cudaSuccess) fail(e, what("the update (copy in, rollouts, weights, plan update, copy out)"));
+    std::memcpy(plan, h_out_.as<float>(), plan_floats_ * sizeof(float));
+    if (stats != nullptr) summarise(stats, plan);
+  }
+
+  std::vector<float> rollout_costs() const override {
+    std::vector<float> out(static_cast<std::size_t>(k_));
+    check(cudaMemcpy(out.data(), d_cost_.as<float>(), out.size() * sizeof(float), cudaMemcpyDeviceToHost),
+          what("cudaMemcpy of the rollout costs"));
+    return out;
+  }
+
+  std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
+  std::size_t device_bytes() const override {
+    return d_cost_.bytes() + d_crashed_.bytes() + d_pmin_.bytes() + d_part_.bytes() + d_stats_part_.bytes() +
+           d_in_.bytes() + d_out_.bytes();
+  }
+
+ private:
+  static constexpr int kReduceBlock = 256;
+  static constexpr int kFinalBlock = 128;
+
+  template <class F>
+  static void lazy_check(cudaError_t e, F&& message) {
+    if (e != cudaSuccess) fail(e, message());
+  }
+
+  std::string what(const std::string& action) const {
+    return action + " [task " + T::Vehicle::kName + " x" + std::to_string(T::kVehicles) + ", K=" +
+           std::to_string(k_) + ", T=" + std::to_string(t_) + ", device " + device_name_ + "]";
+  }
+
+  void check_launch_size(const cudaDeviceProp& prop) const {
+    auto bad = [&](const std::string& why) {
+      throw std::runtime_error("cuda backend: invalid launch size: " + why + " [K=" + std::to_string(k_) +
+                               ", T=" + std::to_string(t_) + "]");
+    };
+    if (k_ < 1) bad("rollouts must be >= 1");
+    if (t_ < 2) bad("horizon must be >= 2");
+    if (rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
+                                                std::to_string(prop.maxGridSize[0]));
+    if (t_ > prop.maxGridSize[0] || chunks_ > prop.maxGridSize[1]) bad("weighting grid exceeds the device limits");
+    if (rollout_smem_ > prop.sharedMemPerBlockOptin)
+      bad("rollout kernel needs " + std::to_string(rollout_smem_) + " bytes of shared memory, the device allows " +
+          std::to_string(prop.sharedMemPerBlockOptin));
+  }
+
+  // The work of one cycle on the stream (captured once into the graph).
+  void enqueue() {
+    cudaStream_t st = stream_.get();
+    const auto* d_in = d_in_.as<Input<T>>();
+    const float* d_plan = reinterpret_cast<const float*>(d_in_.as<unsigned char>() + align16(sizeof(Input<T>)));
+    float* d_plan_out = d_out_.as<float>();
+    auto* d_stats = reinterpret_cast<DeviceStats*>(d_out_.as<unsigned char>() + align16(plan_floats_ * sizeof(float)));
+    lazy_check(cudaMemcpyAsync(d_in_.as<void>(), h_in_.as<void>(), in_bytes_, cudaMemcpyHostToDevice, st),
+               [&] { return what("cudaMemcpyAsync of the input"); });
+    const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
+    if constexpr (kTeam) {
+      rollout_team<T><<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, d_cost_.as<float>(),
+                                                                     d_crashed_.as<unsigned char>(), k_, t_, dt_,
+                                                                     substeps_, c_);
+    } else {
+      rollout_single<T><<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, d_cost_.as<float>(),
+                                                                       d_crashed_.as<unsigned char>(), k_, t_, dt_,
+                                                                       substeps_, c_);
+    }
+    lazy_check(cudaGetLastError(), [&] {
+      return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
+                  std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
+    });
+    partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0,
+                  st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
+    lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+    weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
+        d_in, d_plan, d_cost_.as<float>(), d_pmin_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_,
+        inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
+    lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
+    finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
+                                                                     d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+                                                                     chunks_, d_plan_out, d_stats, c_);
+    lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
+    lazy_check(cudaMemcpyAsync(h_out_.as<void>(), d_out_.as<void>(), out_bytes_, cudaMemcpyDeviceToHost, st),
+               [&] { return what("cudaMemcpyAsync of the output"); });
+  }
+
+  void summarise(UpdateStats* stats, const float* plan) const {
+    const auto& d = *reinterpret_cast<const DeviceStats*>(h_out_.as<unsigned char>() +
+                                                          align16(plan_floats_ * sizeof(float)));
+    stats->min_cost = d.min_cost;
+    stats->mean_cost = d.finite > 0 ? d.sum_cost / static_cast<float>(d.finite) : kCostCeiling;
+    // 1 / sum (w / sum w)^2 = (sum w)^2 / sum w^2
+    stats->ess = d.sum_w2 > 0.0f ? d.sum_w * d.sum_w / d.sum_w2 : 0.0f;
+    stats->crashed = d.crashed;
+    bool ok = ffinite(stats->ess);
+    for (std::size_t n = 0; n < plan_floats_; ++n) ok = ok && ffinite(plan[n]);
+    stats->finite = ok;
+  }
+
+  int k_, t_;
+  float dt_;
+  int substeps_;
+  std::uint64_t seed_;
+  float inv_lambda_ = 1.0f;
+  bool trajectory_ = false;
+  SamplerConstants<kNu> c_{};
+  std::size_t plan_floats_ = 0;
+  int device_ = 0;
+  std::string device_name_;
+
+  int rollout_block_ = 0;
+  long long rollout_grid_ = 0;
+  std::size_t rollout_smem_ = 0;
+  int warps_per_block_ = 0;
+  int chunk_ = 0, chunks_ = 0;
+
+  std::size_t in_bytes_ = 0, out_bytes_ = 0;
+  DeviceBuffer d_cost_, d_crashed_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
+  PinnedBuffer h_in_, h_out_;
+  std::unique_ptr<CUstream_st, StreamDeleter> stream_;
+  std::unique_ptr<CUgraph_st, GraphDeleter> graph_;
+  std::unique_ptr<CUgraphExec_st, GraphExecDeleter> exec_;
+  bool use_graph_ = true;
+};
+
+}  // namespace mppi::cuda_detail
+
+namespace mppi {
+template <class T>
+std::unique_ptr<RolloutBackend<T>> make_cuda_backend(const MppiSettings& s) {
+  return std::make_unique<cuda_detail::CudaBackend<T>>(s);
+}
+}  // namespace mppi
+
+#define MPPI_CUDA_INSTANTIATE(T) \
+  template std::unique_ptr<mppi::RolloutBackend<mppi::T>> mppi::make_cuda_backend<mppi::T>(const mppi::MppiSettings&);

@@ -1,0 +1,336 @@
+// The kernels of one MPPI update (Sec. V.A of the notes), templated on the task. They call
+// the same HD model, cost and sampler functions as CpuBackend; only the parallel layout
+// differs. Every reduction has a fixed shape (no float atomics), so a run is bit-for-bit
+// repeatable.
+//
+//   rollout_single  one thread per rollout, state in registers (single vehicles)
+//   rollout_team    M consecutive lanes of a warp per rollout, vehicle j on lane j
+//   partial_min     min over a chunk of rollouts of S~(tau_i,k), per step i
+//   weigh           per (step i, chunk): w = exp(-(S - min)/lambda), sum w and w du, with
+//                   du regenerated from the same counter-based noise (no K x T x NU buffer)
+//   finalize        per step i: sum the chunks, u_i = clamp(u_i + sum w du / sum w); stats
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "mppi/backend.hpp"
+#include "mppi/rng.hpp"
+#include "mppi/sampling.hpp"
+
+namespace mppi::cuda_detail {
+
+// What the host sends each cycle (one copy): noise key, state, task parameters. The plan
+// (T x NU floats) follows at plan_offset<T>().
+template <class T>
+struct Input {
+  NoiseKey key;
+  float x0[T::kNx];
+  typename T::Params params;
+};
+
+// Statistics of the step-0 weights, per chunk of rollouts and in total.
+struct StatsPart {
+  float sum_w2;
+  float sum_cost;  // S~(tau_0,k) over finite rollouts
+  int finite;
+  int crashed;
+};
+struct DeviceStats {
+  float min_cost;
+  float sum_w;
+  float sum_w2;
+  float sum_cost;
+  int finite;
+  int crashed;
+};
+
+constexpr unsigned kFullMask = 0xffffffffu;
+
+__host__ __device__ constexpr std::size_t align16(std::size_t n) { return (n + 15) / 16 * 16; }
+
+// Copies the task parameters into shared memory (read by every thread at every step).
+template <class Params>
+__device__ const Params* stage_params(const Params& src, unsigned char* smem) {
+  static_assert(sizeof(Params) % 4 == 0, "parameters are copied as 32-bit words");
+  const auto* from = reinterpret_cast<const std::uint32_t*>(&src);
+  auto* to = reinterpret_cast<std::uint32_t*>(smem);
+  for (unsigned w = threadIdx.x; w < sizeof(Params) / 4; w += blockDim.x) to[w] = from[w];
+  __syncthreads();
+  return reinterpret_cast<const Params*>(smem);
+}
+
+// Sum of N values over the block (blockDim.x a multiple of 32); the result is in thread 0.
+// Butterfly shuffles in a warp, then warp 0 over the warps' sums: a fixed order.
+template <int N, class V>
+__device__ void block_sum(V (&v)[N]) {
+  __shared__ V sh[32][N];
+  for (int n = 0; n < N; ++n)
+    for (int off = 16; off > 0; off >>= 1) v[n] += __shfl_xor_sync(kFullMask, v[n], off);
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, warps = blockDim.x >> 5;
+  __syncthreads();
+  if (lane == 0)
+    for (int n = 0; n < N; ++n) sh[warp][n] = v[n];
+  __syncthreads();
+  if (warp == 0) {
+    for (int n = 0; n < N; ++n) {
+      v[n] = lane < warps ? sh[lane][n] : V(0);
+      for (int off = 16; off > 0; off >>= 1) v[n] += __shfl_xor_sync(kFullMask, v[n], off);
+    }
+  }
+}
+
+// Minimum over the block; the result is in every thread (min is exact in any order).
+__device__ inline float block_min(float v) {
+  __shared__ float sh[32];
+  for (int off = 16; off > 0; off >>= 1) v = fmin_(v, __shfl_xor_sync(kFullMask, v, off));
+  const int lane = threadIdx.x & 31, warp = threadIdx.x >> 5, warps = blockDim.x >> 5;
+  __syncthreads();
+  if (lane == 0) sh[warp] = v;
+  __syncthreads();
+  v = kCostCeiling;
+  for (int w = 0; w < warps; ++w) v = fmin_(v, sh[w]);
+  return v;
+}
+
+// S~ of one rollout: q was written per step (row-major over steps, S[i * K + k]); turn it
+// into the cost-to-go in place, summed from the end as CpuBackend does.
+__device__ inline void suffix_sums(float* S, int K, int horizon, int k, float last) {
+  float acc = last;
+  for (int i = horizon - 2; i >= 0; --i) {
+    float* s = S + static_cast<std::size_t>(i) * K + k;
+    acc = sanitize_cost(*s + acc);
+    *s = acc;
+  }
+}
+
+// ---- single vehicle: one thread per rollout, the state in registers -------------------
+template <class T>
+__global__ void rollout_single(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out, int K,
+                               int horizon, float dt, int substeps, SamplerConstants<T::kNu> c) {
+  constexpr int NX = T::kNx, NU = T::kNu;
+  extern __shared__ __align__(16) unsigned char smem[];
+  const typename T::Params& p = *stage_params(in->params, smem);
+  const int k = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  if (k >= K) return;
+  const NoiseKey key = in->key;
+  float x[NX], u[NU], du[NU];
+  for (int n = 0; n < NX; ++n) x[n] = in->x0[n];
+  std::uint32_t crashed = 0;
+  float q = 0.0f;
+  for (int i = 0; i < horizon; ++i) {
+    const float* pu = plan + i * NU;
+    perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+    T::advance(p, x, u, dt, substeps, crashed);
+    const float t = static_cast<float>(i + 1) * dt;
+    q = sanitize_cost(T::running(p, x, t, &crashed) + control_cost<NU>(c, pu, du));
+    if (i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q;
+  }
+  q = sanitize_cost(q + T::terminal(p, x));
+  S[static_cast<std::size_t>(horizon - 1) * K + k] = q;
+  suffix_sums(S, K, horizon, k, q);
+  crashed_out[k] = crashed != 0u;
+}
+
+// ---- teams: M lanes per rollout, vehicle j on lane j ----------------------------------
+// Shared state of one rollout: the perturbed controls of M steps (lane j draws step i0 + j
+// with perturb<NU>, so the noise is exactly CpuBackend's and drawn once), every vehicle's
+// state for the pair terms (double-buffered by step), per-lane cost and the crash mask.
+template <class T>
+struct TeamRollout {
+  float u[T::kVehicles][T::kNu];
+  float control_cost[T::kVehicles];
+  float x[2][T::kVehicles][T::kVehicleNx];
+  float q[2][T::kVehicles];
+  unsigned mask;
+};
+
+template <class T>
+__host__ __device__ constexpr int team_rollouts_per_warp() { return 32 / T::kVehicles; }
+
+template <class T>
+__global__ void rollout_team(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out, int K,
+                             int horizon, float dt, int substeps, SamplerConstants<T::kNu> c) {
+  constexpr int M = T::kVehicles, VNX = T::kVehicleNx, VNU = T::kVehicleNu, NU = T::kNu;
+  constexpr int G = team_rollouts_per_warp<T>();
+  using Vehicle = typename T::Vehicle;
+  using Cost = typename T::Cost;
+  extern __shared__ __align__(16) unsigned char smem[];
+  const typename T::Params& p = *stage_params(in->params, smem);
+  auto* teams = reinterpret_cast<TeamRollout<T>*>(smem + align16(sizeof(typename T::Params)));
+
+  const int lane = static_cast<int>(threadIdx.x & 31), warp = static_cast<int>(threadIdx.x >> 5);
+  const int warps = static_cast<int>(blockDim.x >> 5);
+  const int k0 = (static_cast<int>(blockIdx.x) * warps + warp) * G;
+  if (k0 >= K) return;  // the whole warp
+  const int g = lane / M, j = lane % M;
+  const int k = k0 + g;
+  const bool active = g < G && k < K;  // the other lanes only keep the warp's barriers
+  TeamRollout<T>& r = teams[warp * G + (g < G ? g : 0)];
+  const NoiseKey key = in->key;
+  const float h = dt / static_cast<float>(substeps);
+
+  float x[VNX];
+  for (int n = 0; n < VNX; ++n) x[n] = in->x0[j * VNX + n];
+  if (active && j == 0) r.mask = 0u;
+  std::uint32_t mask = 0u;
+  float q_last = 0.0f;
+  int buf = 0;
+  for (int i0 = 0; i0 < horizon; i0 += M) {
+    const int steps = horizon - i0 < M ? horizon - i0 : M;
+    if (active && j < steps) {
+      const int i = i0 + j;
+      const float* pu = plan + i * NU;
+      float u[NU], du[NU];
+      perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+      for (int n = 0; n < NU; ++n) r.u[j][n] = u[n];
+      r.control_cost[j] = control_cost<NU>(c, pu, du);
+    }
+    __syncwarp();
+    for (int s = 0; s < steps; ++s) {
+      const int i = i0 + s;
+      float q = 0.0f;
+      std::uint32_t bits = 0u;
+      if (active) {
+        if (((mask >> j) & 1u) == 0u)
+          for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, &r.u[s][j * VNU], h);
+        for (int n = 0; n < VNX; ++n) r.x[buf][j][n] = x[n];
+        bool hit = false;
+        q = Cost::vehicle(p.cost, j, x, static_cast<float>(i + 1) * dt, &hit);
+        if (hit) bits |= 1u << j;
+      }
+      __syncwarp();
+      if (active) {
+        // Pair (a, b), numbered in CpuBackend's order, goes to lane (number mod M).
+        int owner = 0;
+        for (int a = 0; a < M; ++a) {
+          for (int b = a + 1; b < M; ++b) {
+            if (owner == j) {
+              bool hit = false;
+              q += Cost::pair(p.cost, r.x[buf][a], r.x[buf][b], &hit);
+              if (hit) bits |= (1u << a) | (1u << b);
+            }
+            owner = owner + 1 == M ? 0 : owner + 1;
+          }
+        }
+        r.q[buf][j] = q;
+        if (bits != 0u) atomicOr(&r.mask, bits);
+      }
+      __syncwarp();
+      if (active) {
+        mask = r.mask;
+        if (j == 0) {
+          float run = 0.0f;
+          for (int v = 0; v < M; ++v) run += r.q[buf][v];
+          q_last = sanitize_cost(run + r.control_cost[s]);
+          if (i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q_last;
+        }
+      }
+      buf ^= 1;
+    }
+    __syncwarp();  // every lane is done with this chunk's controls
+  }
+  if (active) r.q[buf][j] = Cost::terminal(p.cost, j, x);
+  __syncwarp();
+  if (active && j == 0) {
+    float phi = 0.0f;
+    for (int v = 0; v < M; ++v) phi += r.q[buf][v];
+    q_last = sanitize_cost(q_last + phi);
+    S[static_cast<std::size_t>(horizon - 1) * K + k] = q_last;
+    suffix_sums(S, K, horizon, k, q_last);
+    crashed_out[k] = mask != 0u;
+  }
+}
+
+// ---- weights and the update ------------------------------------------------------------
+// Block (i, c): minimum of S~(tau_i,k) over chunk c of the rollouts. (A template only so
+// that every instantiation unit may hold it.)
+template <class T>
+__global__ void partial_min(const float* S, int K, int chunk, float* pmin) {
+  const int i = static_cast<int>(blockIdx.x), c = static_cast<int>(blockIdx.y);
+  const int begin = c * chunk, end = begin + chunk < K ? begin + chunk : K;
+  const float* row = S + static_cast<std::size_t>(i) * K;
+  float m = kCostCeiling;
+  for (int k = begin + static_cast<int>(threadIdx.x); k < end; k += static_cast<int>(blockDim.x)) m = fmin_(m, row[k]);
+  m = block_min(m);
+  if (threadIdx.x == 0) pmin[static_cast<std::size_t>(i) * gridDim.y + c] = m;
+}
+
+// Block (i, c): sum w and w du over chunk c at step i, w from S~(tau_i,k) (cost-to-go) or
+// S~(tau_0,k) (trajectory). Block (0, c) also sums the step-0 statistics.
+template <class T>
+__global__ void weigh(const Input<T>* in, const float* plan, const float* S, const float* pmin,
+                      const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory, float* part,
+                      StatsPart* stats_part, SamplerConstants<T::kNu> c) {
+  constexpr int NU = T::kNu;
+  const int i = static_cast<int>(blockIdx.x), ci = static_cast<int>(blockIdx.y), chunks = static_cast<int>(gridDim.y);
+  const int wi = trajectory ? 0 : i;
+  float m = kCostCeiling;
+  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x))
+    m = fmin_(m, pmin[static_cast<std::size_t>(wi) * chunks + n]);
+  m = block_min(m);
+
+  const NoiseKey key = in->key;
+  const float* pu = plan + i * NU;
+  const float* row = S + static_cast<std::size_t>(wi) * K;
+  const int begin = ci * chunk, end = begin + chunk < K ? begin + chunk : K;
+  float acc[NU + 1] = {};
+  float st[2] = {};
+  int cnt[2] = {};
+  float u[NU], du[NU];
+  for (int k = begin + static_cast<int>(threadIdx.x); k < end; k += static_cast<int>(blockDim.x)) {
+    const float s = row[k];
+    const float w = unnormalised_weight(s - m, inv_lambda);
+    perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+    acc[0] += w;
+    for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
+    if (i == 0) {
+      st[0] += w * w;
+      if (s < kCostCeiling) {
+        st[1] += s;
+        ++cnt[0];
+      }
+      cnt[1] += crashed[k];
+    }
+  }
+  block_sum(acc);
+  if (threadIdx.x == 0)
+    for (int n = 0; n <= NU; ++n) part[(static_cast<std::size_t>(i) * chunks + ci) * (NU + 1) + n] = acc[n];
+  if (i == 0) {
+    block_sum(st);
+    block_sum(cnt);
+    if (threadIdx.x == 0) stats_part[ci] = StatsPart{st[0], st[1], cnt[0], cnt[1]};
+  }
+}
+
+// Block i: u_i = clamp(u_i + sum w du / sum w); block 0 also writes the statistics.
+template <int NU>
+__global__ void finalize(const float* plan, const float* part, const StatsPart* stats_part, const float* pmin,
+                         int chunks, float* plan_out, DeviceStats* stats, SamplerConstants<NU> c) {
+  const int i = static_cast<int>(blockIdx.x);
+  float acc[NU + 1] = {};
+  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x))
+    for (int j = 0; j <= NU; ++j) acc[j] += part[(static_cast<std::size_t>(i) * chunks + n) * (NU + 1) + j];
+  block_sum(acc);
+  if (threadIdx.x == 0)
+    for (int j = 0; j < NU; ++j)
+      plan_out[i * NU + j] = fclamp(plan[i * NU + j] + acc[1 + j] / acc[0], c.u_min[j], c.u_max[j]);
+  if (i != 0) return;
+  float st[2] = {};
+  int cnt[2] = {};
+  float m = kCostCeiling;
+  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x)) {
+    st[0] += stats_part[n].sum_w2;
+    st[1] += stats_part[n].sum_cost;
+    cnt[0] += stats_part[n].finite;
+    cnt[1] += stats_part[n].crashed;
+    m = fmin_(m, pmin[n]);
+  }
+  m = block_min(m);
+  block_sum(st);
+  block_sum(cnt);
+  if (threadIdx.x == 0) *stats = DeviceStats{m, acc[0], st[0], st[1], cnt[0], cnt[1]};
+}
+
+}  // namespace mppi::cuda_detail

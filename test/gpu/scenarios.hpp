@@ -1,0 +1,220 @@
+// Realistic settings, parameters and states for every task, shared by the CPU-GPU parity
+// tests and the timing tool: the quadrotor near hover with a forest of 32 obstacles and
+// the goal ahead, the cart-pole at rest, the race car at 5 m/s on the ellipse, the teams
+// spread apart.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "mppi/settings.hpp"
+#include "mppi/tasks.hpp"
+
+namespace mppi::gpu_test {
+
+template <class T>
+struct Scenario {
+  MppiSettings settings;
+  typename T::Params params{};
+  std::vector<float> x0;
+};
+
+// A fixed pseudo-random forest: n cylinders in x in [3, 30] m, |y| <= 8 m, radius 0.3 to
+// 0.5 m: the nearest starts 2.5 m ahead of a vehicle starting at x = 0.
+inline ObstacleSet forest(int n, std::uint32_t seed = 7u) {
+  ObstacleSet set;
+  std::uint32_t s = seed;
+  auto next = [&s] {
+    s = s * 1664525u + 1013904223u;
+    return static_cast<float>(s >> 8) / 16777216.0f;
+  };
+  while (set.count < n && set.count < ObstacleSet::kCapacity) {
+    Cylinder c;
+    c.x = 3.0f + 27.0f * next();
+    c.y = -8.0f + 16.0f * next();
+    c.radius = 0.3f + 0.2f * next();
+    set.items[set.count++] = c;
+  }
+  return set;
+}
+
+inline void quad_mppi(MppiSettings& s, int vehicles, float hover) {
+  const int nu = 4 * vehicles;
+  s.lambda = 50.0f;
+  s.nu = 2.0f;
+  s.sigma.assign(nu, 150.0f);
+  s.u_min.assign(nu, 0.0f);
+  s.u_max.assign(nu, 6000.0f);
+  s.u_init.assign(nu, hover);
+  s.u_nominal.assign(nu, hover);
+}
+
+template <class T>
+Scenario<T> make_scenario(int k, int t);
+
+template <>
+inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
+  Scenario<QuadrotorForest> sc;
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  quad_mppi(sc.settings, 1, hover);
+  sc.params.cost.goal[0][0] = 20.0f;
+  sc.params.cost.goal[0][2] = 2.0f;
+  sc.params.cost.obstacles = forest(32);
+  sc.x0.assign(Quadrotor::kNx, 0.0f);
+  sc.x0[Quadrotor::PZ] = 2.0f;
+  sc.x0[Quadrotor::VX] = 1.0f;
+  for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
+  return sc;
+}
+
+template <>
+inline Scenario<QuadrotorTrack> make_scenario<QuadrotorTrack>(int k, int t) {
+  Scenario<QuadrotorTrack> sc;
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  quad_mppi(sc.settings, 1, hover);
+  sc.params.cost.reference.kind = Reference::kCircle;
+  sc.params.cost.reference.center[2] = 2.0f;
+  sc.params.cost.reference.radius = 2.0f;
+  sc.params.cost.reference.speed = 2.0f;
+  sc.x0.assign(Quadrotor::kNx, 0.0f);
+  sc.x0[Quadrotor::PX] = 2.0f;
+  sc.x0[Quadrotor::PZ] = 2.0f;
+  for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
+  return sc;
+}
+
+inline void rate_mppi(MppiSettings& s) {
+  const float hover = QuadrotorRate::hover_thrust(QuadrotorRate::Params{});
+  s.lambda = 20.0f;
+  s.nu = 2.0f;
+  s.sigma = {2.0f, 1.0f, 1.0f, 1.0f};
+  s.u_min = {0.0f, -6.0f, -6.0f, -3.0f};
+  s.u_max = {25.0f, 6.0f, 6.0f, 3.0f};
+  s.u_init = {hover, 0.0f, 0.0f, 0.0f};
+  s.u_nominal = s.u_init;
+}
+
+inline std::vector<float> rate_hover(float x, float z) {
+  std::vector<float> s(QuadrotorRate::kNx, 0.0f);
+  s[QuadrotorRate::PX] = x;
+  s[QuadrotorRate::PZ] = z;
+  s[QuadrotorRate::VX] = 1.0f;
+  s[QuadrotorRate::QW] = 1.0f;
+  return s;
+}
+
+template <>
+inline Scenario<RateQuadrotorForest> make_scenario<RateQuadrotorForest>(int k, int t) {
+  Scenario<RateQuadrotorForest> sc;
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  rate_mppi(sc.settings);
+  sc.params.cost.goal[0][0] = 20.0f;
+  sc.params.cost.goal[0][2] = 2.0f;
+  sc.params.cost.obstacles = forest(32);
+  sc.x0 = rate_hover(0.0f, 2.0f);
+  return sc;
+}
+
+template <>
+inline Scenario<RateQuadrotorTrack> make_scenario<RateQuadrotorTrack>(int k, int t) {
+  Scenario<RateQuadrotorTrack> sc;
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  rate_mppi(sc.settings);
+  sc.params.cost.reference.kind = Reference::kFigureEight;
+  sc.params.cost.reference.center[2] = 2.0f;
+  sc.params.cost.reference.radius = 3.0f;
+  sc.params.cost.reference.speed = 2.0f;
+  sc.x0 = rate_hover(0.0f, 2.0f);
+  return sc;
+}
+
+template <>
+inline Scenario<CartpoleSwingup> make_scenario<CartpoleSwingup>(int k, int t) {
+  Scenario<CartpoleSwingup> sc;
+  auto& s = sc.settings;
+  s.rollouts = k;
+  s.horizon = t;
+  s.dt = 0.01f;  // 1 s horizon at T = 100
+  s.lambda = 10.0f;
+  s.nu = 10.0f;
+  s.sigma = {5.0f};
+  s.u_min = {-30.0f};
+  s.u_max = {30.0f};
+  s.u_init = {0.0f};
+  sc.x0.assign(Cartpole::kNx, 0.0f);  // at rest, pole down
+  return sc;
+}
+
+template <>
+inline Scenario<RacecarEllipse> make_scenario<RacecarEllipse>(int k, int t) {
+  Scenario<RacecarEllipse> sc;
+  auto& s = sc.settings;
+  s.rollouts = k;
+  s.horizon = t;
+  s.lambda = 10.0f;
+  s.nu = 2.0f;
+  s.sigma = {0.1f, 10.0f};
+  s.u_min = {-0.5f, -40.0f};
+  s.u_max = {0.5f, 40.0f};
+  s.u_init = {0.0f, 0.0f};
+  // On the ellipse at (13, 0), heading along it (+y, counter-clockwise), 5 m/s.
+  sc.x0.assign(Racecar::kNx, 0.0f);
+  sc.x0[Racecar::X] = 13.0f;
+  sc.x0[Racecar::PSI] = 1.5707963f;
+  sc.x0[Racecar::VX] = 5.0f;
+  return sc;
+}
+
+template <class T>
+Scenario<T> team_scenario(int k, int t) {
+  constexpr int m = T::kVehicles;
+  Scenario<T> sc;
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  quad_mppi(sc.settings, m, hover);
+  sc.params.cost.obstacles = forest(32);
+  sc.x0.assign(T::kNx, 0.0f);
+  // Spread apart on a grid of 3 m in y and 1 m in z.
+  for (int j = 0; j < m; ++j) {
+    const float y = 3.0f * static_cast<float>(j % 3 - 1);
+    const float z = 1.5f + static_cast<float>(j / 3);
+    float* x = sc.x0.data() + j * Quadrotor::kNx;
+    x[Quadrotor::PY] = y;
+    x[Quadrotor::PZ] = z;
+    x[Quadrotor::VX] = 1.0f;
+    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = hover;
+    sc.params.cost.goal[j][0] = 20.0f;
+    sc.params.cost.goal[j][1] = y;
+    sc.params.cost.goal[j][2] = z;
+  }
+  return sc;
+}
+
+template <>
+inline Scenario<Team3Forest> make_scenario<Team3Forest>(int k, int t) { return team_scenario<Team3Forest>(k, t); }
+template <>
+inline Scenario<Team9Forest> make_scenario<Team9Forest>(int k, int t) { return team_scenario<Team9Forest>(k, t); }
+
+// The plan every test starts from: u_init with a smooth, deterministic wiggle inside the
+// limits (so the update has something to correct and every step differs).
+inline std::vector<float> initial_plan(const MppiSettings& s) {
+  const int nu = static_cast<int>(s.u_init.size());
+  std::vector<float> plan(static_cast<std::size_t>(s.horizon) * nu);
+  for (int i = 0; i < s.horizon; ++i)
+    for (int j = 0; j < nu; ++j) {
+      const float span = s.u_max[j] - s.u_min[j];
+      const float v = s.u_init[j] + 0.02f * span * std::sin(0.1f * static_cast<float>(i) + static_cast<float>(j));
+      plan[static_cast<std::size_t>(i) * nu + j] = std::fmin(std::fmax(v, s.u_min[j]), s.u_max[j]);
+    }
+  return plan;
+}
+
+}  // namespace mppi::gpu_test

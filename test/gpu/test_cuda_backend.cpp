@@ -1,0 +1,209 @@
+// CUDA backend against the CPU reference (cpu_backend.hpp): per-rollout costs and the
+// updated plan for every task, bit-for-bit determinism, and clear errors. Every test skips
+// when no CUDA device is present (CI builds these with nvcc but has no GPU).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mppi/cpu_backend.hpp"
+#include "mppi/gpu/cuda_backend.hpp"
+#include "mppi/optimizer.hpp"
+#include "scenarios.hpp"
+
+namespace mppi {
+namespace {
+
+#define SKIP_WITHOUT_CUDA()                                           \
+  do {                                                                \
+    std::string why_;                                                 \
+    if (!cuda_device_available(&why_)) GTEST_SKIP() << "no CUDA device: " << why_; \
+  } while (0)
+
+constexpr float kCostTolerance = 1e-5f;  // relative, per rollout
+constexpr float kPlanTolerance = 1e-4f;  // relative to max(1, |u|)
+
+template <class T>
+int parity_rollouts() {
+  if constexpr (T::kVehicles == 9) return 1024;
+  else if constexpr (T::kVehicles == 3) return 1200;
+  else return 4096;
+}
+
+struct Errors {
+  double cost = 0.0;
+  double plan = 0.0;
+  int worst_rollout = -1;
+};
+
+template <class T>
+Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cpu, RolloutBackend<T>& gpu,
+                          std::uint32_t cycle, std::vector<float>* plan) {
+  std::vector<float> pc = *plan, pg = *plan;
+  UpdateStats sc_stats, sg_stats;
+  cpu.update(sc.x0.data(), sc.params, cycle, pc.data(), &sc_stats);
+  gpu.update(sc.x0.data(), sc.params, cycle, pg.data(), &sg_stats);
+  Errors e;
+  const auto cc = cpu.rollout_costs(), gc = gpu.rollout_costs();
+  EXPECT_EQ(cc.size(), gc.size());
+  for (std::size_t k = 0; k < cc.size() && k < gc.size(); ++k) {
+    const double rel = std::fabs(static_cast<double>(gc[k]) - cc[k]) / std::max(1.0, std::fabs(static_cast<double>(cc[k])));
+    if (rel > e.cost) {
+      e.cost = rel;
+      e.worst_rollout = static_cast<int>(k);
+    }
+  }
+  for (std::size_t n = 0; n < pc.size(); ++n) {
+    const double err = std::fabs(static_cast<double>(pg[n]) - pc[n]) / std::max(1.0, std::fabs(static_cast<double>(pc[n])));
+    e.plan = std::max(e.plan, err);
+  }
+  EXPECT_TRUE(sg_stats.finite);
+  EXPECT_EQ(sc_stats.finite, sg_stats.finite);
+  EXPECT_NEAR(sg_stats.min_cost, sc_stats.min_cost, kCostTolerance * std::max(1.0f, std::fabs(sc_stats.min_cost)));
+  EXPECT_NEAR(sg_stats.mean_cost, sc_stats.mean_cost, 1e-4f * std::max(1.0f, std::fabs(sc_stats.mean_cost)));
+  EXPECT_NEAR(sg_stats.ess, sc_stats.ess, 1e-3f * std::max(1.0f, sc_stats.ess));
+  EXPECT_EQ(sg_stats.crashed, sc_stats.crashed);
+  *plan = pc;
+  return e;
+}
+
+template <class T>
+void check_parity(const char* name, Weighting weighting) {
+  auto sc = gpu_test::make_scenario<T>(parity_rollouts<T>(), 100);
+  sc.settings.weighting = weighting;
+  sc.settings.seed = 42;
+  CpuBackend<T> cpu(sc.settings);
+  auto gpu = make_cuda_backend<T>(sc.settings);
+  auto plan = gpu_test::initial_plan(sc.settings);
+  Errors worst;
+  for (std::uint32_t cycle = 0; cycle < 3; ++cycle) {
+    const Errors e = compare_one_update(sc, cpu, *gpu, cycle, &plan);
+    EXPECT_LE(e.cost, kCostTolerance) << name << " cycle " << cycle << ": rollout " << e.worst_rollout;
+    EXPECT_LE(e.plan, kPlanTolerance) << name << " cycle " << cycle;
+    worst.cost = std::max(worst.cost, e.cost);
+    worst.plan = std::max(worst.plan, e.plan);
+  }
+  std::printf("[parity] %-22s %-10s K=%d T=100: max rel cost err %.3g, max plan err %.3g (of max(1,|u|))\n", name,
+              to_string(weighting), sc.settings.rollouts, worst.cost, worst.plan);
+  ::testing::Test::RecordProperty("max_rel_cost_error", std::to_string(worst.cost));
+  ::testing::Test::RecordProperty("max_plan_error", std::to_string(worst.plan));
+}
+
+#define PARITY_TEST(T, name)                                                   \
+  TEST(CudaParity, T) {                                                        \
+    SKIP_WITHOUT_CUDA();                                                       \
+    check_parity<T>(name, Weighting::kCostToGo);                               \
+  }
+PARITY_TEST(CartpoleSwingup, "cartpole_swingup")
+PARITY_TEST(RacecarEllipse, "racecar_ellipse")
+PARITY_TEST(QuadrotorForest, "quadrotor_forest")
+PARITY_TEST(QuadrotorTrack, "quadrotor_track")
+PARITY_TEST(RateQuadrotorForest, "quadrotor_rate_forest")
+PARITY_TEST(RateQuadrotorTrack, "quadrotor_rate_track")
+PARITY_TEST(Team3Forest, "team3_forest")
+PARITY_TEST(Team9Forest, "team9_forest")
+
+TEST(CudaParity, QuadrotorForestTrajectoryWeighting) {
+  SKIP_WITHOUT_CUDA();
+  check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kTrajectory);
+}
+TEST(CudaParity, Team3ForestTrajectoryWeighting) {
+  SKIP_WITHOUT_CUDA();
+  check_parity<Team3Forest>("team3_forest", Weighting::kTrajectory);
+}
+
+// Several cycles through the optimizer (update, shift) on a fresh backend each run.
+template <class T>
+std::vector<float> run_cycles(int k, int cycles) {
+  auto sc = gpu_test::make_scenario<T>(k, 100);
+  Mppi<T> mppi(sc.settings, make_cuda_backend<T>(sc.settings));
+  std::vector<float> u(T::kNu);
+  for (int c = 0; c < cycles; ++c) mppi.iterate(sc.x0.data(), sc.params, u.data());
+  return mppi.plan();
+}
+
+TEST(CudaDeterminism, SameSeedSamePlanQuadrotor) {
+  SKIP_WITHOUT_CUDA();
+  const auto a = run_cycles<QuadrotorForest>(16384, 5), b = run_cycles<QuadrotorForest>(16384, 5);
+  EXPECT_EQ(a, b);
+}
+
+TEST(CudaDeterminism, SameSeedSamePlanTeam9) {
+  SKIP_WITHOUT_CUDA();
+  const auto a = run_cycles<Team9Forest>(6000, 3), b = run_cycles<Team9Forest>(6000, 3);
+  EXPECT_EQ(a, b);
+}
+
+TEST(CudaDeterminism, RepeatedUpdateOnOneBackendIsIdentical) {
+  SKIP_WITHOUT_CUDA();
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(100000, 100);
+  auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings);
+  const auto plan0 = gpu_test::initial_plan(sc.settings);
+  auto p1 = plan0, p2 = plan0;
+  gpu->update(sc.x0.data(), sc.params, 3, p1.data(), nullptr);
+  const auto c1 = gpu->rollout_costs();
+  gpu->update(sc.x0.data(), sc.params, 3, p2.data(), nullptr);
+  EXPECT_EQ(p1, p2);
+  EXPECT_EQ(c1, gpu->rollout_costs());
+}
+
+template <class F>
+std::string error_of(F&& f) {
+  try {
+    f();
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "(no std::runtime_error thrown)";
+}
+
+TEST(CudaErrors, ZeroRolloutsIsAClearError) {
+  SKIP_WITHOUT_CUDA();
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(0, 100);
+  const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings); });
+  std::printf("[error] K=0: %s\n", msg.c_str());
+  EXPECT_NE(msg.find("rollouts"), std::string::npos) << msg;
+}
+
+TEST(CudaErrors, AbsurdRolloutsFailAllocationClearly) {
+  SKIP_WITHOUT_CUDA();
+  // 2e9 x 100 floats = 800 GB of cost-to-go: no device has it.
+  auto sc = gpu_test::make_scenario<Team9Forest>(2000000000, 100);
+  const std::string msg = error_of([&] { make_cuda_backend<Team9Forest>(sc.settings); });
+  std::printf("[error] K=2e9: %s\n", msg.c_str());
+  EXPECT_NE(msg.find("cudaMalloc"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("cudaErrorMemoryAllocation"), std::string::npos) << msg;
+  // The device is still usable afterwards.
+  auto ok = gpu_test::make_scenario<QuadrotorForest>(1024, 100);
+  auto gpu = make_cuda_backend<QuadrotorForest>(ok.settings);
+  auto plan = gpu_test::initial_plan(ok.settings);
+  UpdateStats st;
+  gpu->update(ok.x0.data(), ok.params, 0, plan.data(), &st);
+  EXPECT_TRUE(st.finite);
+}
+
+TEST(CudaErrors, SettingsThatDoNotMatchTheTaskAreAClearError) {
+  SKIP_WITHOUT_CUDA();
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(1024, 100);
+  sc.settings.sigma.pop_back();
+  const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings); });
+  EXPECT_NE(msg.find("sigma"), std::string::npos) << msg;
+}
+
+TEST(CudaBackend, ReportsItsMemoryAndName) {
+  SKIP_WITHOUT_CUDA();
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(4096, 100);
+  auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings);
+  EXPECT_STREQ(gpu->name(), "cuda");
+  EXPECT_GE(gpu->device_bytes(), 4096u * 100u * sizeof(float));
+  EXPECT_GT(gpu->host_bytes(), 0u);
+  EXPECT_FALSE(cuda_device_name().empty());
+}
+
+}  // namespace
+}  // namespace mppi
