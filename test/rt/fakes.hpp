@@ -1,0 +1,150 @@
+// Test doubles for the loop: a clock that moves only when told (or when the loop sleeps),
+// a transport that records what was published, and a controller whose outputs, stalls
+// and failures are scripted.
+#pragma once
+
+#include <cmath>
+#include <functional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mppi/controller.hpp"
+#include "mppi/rt/clock.hpp"
+#include "mppi/transport/transport.hpp"
+
+namespace mppi::test {
+
+class FakeClock final : public rt::Clock {
+ public:
+  std::int64_t now_ns() override { return t_; }
+  void sleep_until(std::int64_t t) override {
+    sleeps.push_back(t);
+    if (t > t_) t_ = t;
+  }
+  void advance(std::int64_t ns) { t_ += ns; }
+  void set(std::int64_t t) { t_ = t; }
+  std::vector<std::int64_t> sleeps;
+
+ private:
+  std::int64_t t_ = 1'000'000'000;
+};
+
+class RecordingTransport final : public transport::Transport {
+ public:
+  std::string self_test() override { return {}; }
+  void start(transport::Inbox*) override {}
+  void stop() override {}
+  bool publish_command(const transport::Command& c) override {
+    commands.push_back(c);
+    return true;
+  }
+  bool publish_status(const transport::StatusReport& s) override {
+    statuses.push_back(s);
+    return true;
+  }
+  bool publish_plan(const transport::PlanView& p) override {
+    plans.push_back(p);
+    return true;
+  }
+  bool any_nonfinite() const {
+    for (const auto& c : commands)
+      for (int i = 0; i < c.n; ++i)
+        if (!std::isfinite(c.u[i])) return true;
+    return false;
+  }
+  std::vector<transport::Command> commands;
+  std::vector<transport::StatusReport> statuses;
+  std::vector<transport::PlanView> plans;
+};
+
+// nx = 16, nu = 4, plan of T steps. iterate() writes u = plan[0] where the plan's step i
+// is filled with (base + cycle + i) on every channel, then shifts; hooks script faults.
+class FakeController final : public Controller {
+ public:
+  explicit FakeController(FakeClock* clock, int horizon = 10) : clock_(clock) {
+    s_.rollouts = 8;
+    s_.horizon = horizon;
+    s_.dt = 0.02f;
+    s_.sigma = {1, 1, 1, 1};
+    s_.u_min = {0, 0, 0, 0};
+    s_.u_max = {6000, 6000, 6000, 6000};
+    s_.u_init = {3000, 3000, 3000, 3000};
+    plan_.assign(static_cast<std::size_t>(horizon) * 4, 3000.0f);
+  }
+  const std::string& task() const override { return name_; }
+  const char* backend() const override { return "fake"; }
+  int nx() const override { return 16; }
+  int nu() const override { return 4; }
+  int vehicles() const override { return 1; }
+  int horizon() const override { return s_.horizon; }
+  float dt() const override { return s_.dt; }
+  void set_inputs(const TaskInputs& in) override {
+    if (in_iterate_) mid_cycle_changes++;
+    inputs = in;
+    ++inputs_set;
+  }
+  std::string set_param(const std::string& key, double value) override {
+    if (in_iterate_) mid_cycle_changes++;
+    if (key == "cost.w_xy" && value >= 0.0 && value <= 1e6) {
+      params_set.emplace_back(key, value);
+      return {};
+    }
+    return key == "cost.w_xy" ? key + ": out of range [0, 1e6]" : key + ": unknown parameter";
+  }
+  const UpdateStats& iterate(const float* x0, float* u_out) override {
+    in_iterate_ = true;
+    ++iterations;
+    last_x0.assign(x0, x0 + 16);
+    if (compute_ns) clock_->advance(compute_ns(iterations));
+    stats_ = UpdateStats{};
+    stats_.ess = 5.0f;
+    const int T = s_.horizon;
+    for (int i = 0; i < T; ++i)
+      for (int j = 0; j < 4; ++j) plan_[static_cast<std::size_t>(i * 4 + j)] = 1000.0f + static_cast<float>(iterations * 10 + i);
+    if (fault && fault(iterations, &plan_, &stats_)) {
+      in_iterate_ = false;
+      throw std::runtime_error("injected optimizer error");
+    }
+    std::copy_n(plan_.data(), 4, u_out);
+    shift();
+    in_iterate_ = false;
+    return stats_;
+  }
+  void fallback(float* u_out) override {
+    std::copy_n(plan_.data(), 4, u_out);
+    shift();
+  }
+  void reset() override {
+    ++resets;
+    std::fill(plan_.begin(), plan_.end(), 3000.0f);
+  }
+  const std::vector<float>& plan() const override { return plan_; }
+  const MppiSettings& settings() const override { return s_; }
+  std::vector<float> rollout_costs() const override { return {}; }
+  std::size_t host_bytes() const override { return 0; }
+  std::size_t device_bytes() const override { return 0; }
+
+  // Returns compute time (ns) of iteration n (1-based); the fake clock advances by it.
+  std::function<std::int64_t(int)> compute_ns;
+  // Iteration n may corrupt the plan/stats; return true to throw instead.
+  std::function<bool(int, std::vector<float>*, UpdateStats*)> fault;
+  int iterations = 0, resets = 0, inputs_set = 0, mid_cycle_changes = 0;
+  std::vector<float> last_x0;
+  std::vector<std::pair<std::string, double>> params_set;
+  TaskInputs inputs;
+
+ private:
+  void shift() {
+    std::copy(plan_.begin() + 4, plan_.end(), plan_.begin());
+    std::fill(plan_.end() - 4, plan_.end(), 3000.0f);
+  }
+  FakeClock* clock_;
+  std::string name_ = "quadrotor_forest";
+  MppiSettings s_;
+  std::vector<float> plan_;
+  UpdateStats stats_;
+  bool in_iterate_ = false;
+};
+
+}  // namespace mppi::test

@@ -1,0 +1,369 @@
+// The control loop on a fake clock with a scripted controller and a recording transport:
+// schedule and monitor, and every fault path (each asserts what was published, what was
+// counted, and that no non-finite value was published).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "fakes.hpp"
+#include "mppi/daemon/control_loop.hpp"
+
+using namespace mppi;
+using mppi::test::FakeClock;
+using mppi::test::FakeController;
+using mppi::test::RecordingTransport;
+using transport::Mode;
+using transport::Reject;
+
+namespace {
+
+constexpr std::int64_t kMs = rt::kNsPerMs;
+
+transport::Inbox::Expect expect16() {
+  transport::Inbox::Expect e;
+  e.nx = 16;
+  e.vehicles = 1;
+  e.model = 1;
+  e.restart_after_ns = 100 * kMs;
+  return e;
+}
+
+struct Rig {
+  explicit Rig(daemon::LoopSettings s = {}, transport::Inbox::Expect e = expect16())
+      : inbox(e), loop(&ctl, &clock, &tx, &inbox, s) {}
+
+  Reject state(std::int64_t n, float fill = 1.0f, std::int64_t sample_us = -1) {
+    auto& s = inbox.state_buffer();
+    s.seq = n;
+    s.nx = 16;
+    s.vehicle_count = 1;
+    s.n = 16;
+    s.model = 1;
+    s.recv_ns = clock.now_ns();
+    s.sample_utime = sample_us >= 0 ? sample_us : clock.now_ns() / 1000;
+    for (int i = 0; i < 16; ++i) s.x[i] = fill;
+    return inbox.offer_state();
+  }
+  // One real-time cycle (the loop sleeps on the fake clock up to its release).
+  void cycle() { ASSERT_TRUE(loop.step_realtime(run)); }
+  // A fresh state, then a cycle.
+  void fresh_cycle() {
+    state(++seq);
+    cycle();
+  }
+  const transport::Command& last() const { return tx.commands.back(); }
+
+  FakeClock clock;
+  RecordingTransport tx;
+  FakeController ctl{&clock};
+  transport::Inbox inbox;
+  daemon::LoopSettings settings;
+  daemon::ControlLoop loop;
+  std::atomic<bool> run{false};
+  std::int64_t seq = 0;
+};
+
+}  // namespace
+
+TEST(ControlLoop, OnTimeCyclesSleepOnTheAbsoluteGrid) {
+  Rig r;
+  r.ctl.compute_ns = [](int) { return 2 * kMs; };
+  const std::int64_t t0 = r.clock.now_ns();
+  for (int k = 0; k < 10; ++k) r.fresh_cycle();
+  ASSERT_EQ(r.tx.commands.size(), 10u);
+  for (const auto& c : r.tx.commands) EXPECT_EQ(c.mode, Mode::kNormal);
+  // Each wake-up is an absolute time on the grid, not "now + period".
+  for (int k = 1; k < 10; ++k) EXPECT_EQ(r.clock.sleeps[static_cast<std::size_t>(k - 1)], t0 + k * 20 * kMs);
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(t.cycles, 10);
+  EXPECT_EQ(t.misses, 0);
+  EXPECT_DOUBLE_EQ(t.period.min_ms, 20.0);
+  EXPECT_DOUBLE_EQ(t.period.max_ms, 20.0);
+  EXPECT_DOUBLE_EQ(t.jitter.max_ms, 0.0);
+  EXPECT_NEAR(t.compute.mean_ms, 2.0, 1e-9);
+  EXPECT_EQ(r.last().state_seq, 10);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, MonitorStatisticsMatchTheScriptedComputeTimes) {
+  Rig r;
+  r.ctl.compute_ns = [](int n) { return ((n - 1) % 10 + 1) * kMs; };  // 1..10 ms
+  for (int k = 0; k < 100; ++k) r.fresh_cycle();
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(t.cycles, 100);
+  EXPECT_EQ(t.misses, 0);
+  EXPECT_NEAR(t.compute.min_ms, 1.0, 1e-9);
+  EXPECT_NEAR(t.compute.max_ms, 10.0, 1e-9);
+  EXPECT_NEAR(t.compute.mean_ms, 5.5, 1e-9);
+  EXPECT_NEAR(t.compute.p99_ms, 10.0, 0.011);  // one 10 us bin
+  EXPECT_DOUBLE_EQ(t.period.mean_ms, 20.0);
+  // Status at 1 Hz from a 50 Hz loop: 2 periodic + 1 on the first mode change.
+  EXPECT_EQ(r.tx.statuses.size(), 3u);
+  EXPECT_NEAR(r.tx.statuses.back().compute_ms_max, 10.0f, 1e-4f);
+  EXPECT_EQ(r.tx.statuses.back().cycles, 100);
+}
+
+TEST(ControlLoop, OptimizerStallPublishesHeldPlanSkipsAndReanchors) {
+  Rig r;
+  r.ctl.compute_ns = [](int n) { return n == 3 ? 55 * kMs : 2 * kMs; };
+  std::vector<std::int64_t> starts;
+  for (int k = 0; k < 6; ++k) {
+    r.state(++r.seq);
+    r.cycle();
+    starts.push_back(r.clock.now_ns());
+  }
+  ASSERT_EQ(r.tx.commands.size(), 6u);  // one command per cycle, no catch-up burst
+  EXPECT_EQ(r.tx.commands[2].mode, Mode::kHoldPlan);
+  // The held plan is cycle 2's plan shifted: its next step is 1000 + 2*10 + 1.
+  EXPECT_FLOAT_EQ(r.tx.commands[2].u[0], 1021.0f);
+  EXPECT_EQ(r.tx.commands[3].mode, Mode::kNormal);
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(t.misses, 1);
+  EXPECT_EQ(t.max_consecutive_misses, 1);
+  EXPECT_EQ(t.consecutive_misses, 0);
+  EXPECT_EQ(r.loop.skipped_periods(), 2);
+  EXPECT_EQ(r.loop.counters().late_holds.load(), 1);
+  // Cycle 4 began right where the late cycle 3 ended (re-anchored), cycle 5 one period later.
+  const std::int64_t end3 = starts[2];
+  EXPECT_EQ(r.clock.sleeps.back() - r.clock.sleeps[r.clock.sleeps.size() - 2], 20 * kMs);
+  EXPECT_EQ(starts[3] - end3, 2 * kMs);         // cycle 4 ran immediately, took 2 ms
+  EXPECT_EQ(starts[4] - starts[3], 20 * kMs);   // then back on a 20 ms grid
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, StateStreamStopsHoldsThenFailsafeThenRecovers) {
+  Rig r;
+  r.ctl.compute_ns = [](int) { return 1 * kMs; };
+  r.fresh_cycle();  // state received at cycle 0
+  for (int k = 1; k < 30; ++k) r.cycle();
+  // Age at cycle k is 20k ms: fresh up to 100 ms, held to 500 ms, failsafe after.
+  for (int k = 0; k < 30; ++k) {
+    const Mode want = k * 20 <= 100 ? Mode::kNormal : k * 20 <= 500 ? Mode::kHoldPlan : Mode::kFailsafe;
+    EXPECT_EQ(r.tx.commands[static_cast<std::size_t>(k)].mode, want) << "cycle " << k;
+  }
+  EXPECT_FLOAT_EQ(r.tx.commands[29].u[0], 3000.0f);  // the failsafe command: u_init
+  EXPECT_EQ(r.loop.counters().stale_cycles.load(), 20);
+  // Entering failsafe published a status at once, saying so and unhealthy.
+  bool failsafe_status = false;
+  for (const auto& s : r.tx.statuses)
+    if (s.mode == Mode::kFailsafe && !s.healthy && s.rejected_stale > 0) failsafe_status = true;
+  EXPECT_TRUE(failsafe_status);
+  // Fresh state again: back to normal, with a status saying so.
+  r.fresh_cycle();
+  EXPECT_EQ(r.last().mode, Mode::kNormal);
+  EXPECT_EQ(r.tx.statuses.back().mode, Mode::kNormal);
+  EXPECT_TRUE(r.tx.statuses.back().healthy);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, NoStateYetMeansFailsafe) {
+  Rig r;
+  r.cycle();
+  EXPECT_EQ(r.last().mode, Mode::kFailsafe);
+  EXPECT_EQ(r.last().state_seq, -1);
+  EXPECT_EQ(r.ctl.iterations, 0);
+}
+
+TEST(ControlLoop, NanAndInfStatesAreRejectedAndCounted) {
+  Rig r;
+  r.fresh_cycle();
+  EXPECT_EQ(r.state(++r.seq, std::numeric_limits<float>::quiet_NaN()), Reject::kNan);
+  EXPECT_EQ(r.state(++r.seq, std::numeric_limits<float>::infinity()), Reject::kNan);
+  r.cycle();
+  EXPECT_EQ(r.inbox.counters.rejected_nan.load(), 2);
+  EXPECT_EQ(r.last().state_seq, 1);  // still the last valid state
+  EXPECT_EQ(r.last().mode, Mode::kNormal);
+  for (float v : r.ctl.last_x0) EXPECT_TRUE(std::isfinite(v));
+  for (int k = 0; k < 50; ++k) r.cycle();  // status carries the count
+  EXPECT_EQ(r.tx.statuses.back().rejected_nan, 2);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, DuplicateAndOutOfOrderSeqAreRejectedAndCounted) {
+  Rig r;
+  EXPECT_EQ(r.state(5), Reject::kNone);
+  EXPECT_EQ(r.state(5), Reject::kDuplicate);
+  EXPECT_EQ(r.state(4), Reject::kOutOfOrder);
+  EXPECT_EQ(r.state(6), Reject::kNone);
+  r.cycle();
+  EXPECT_EQ(r.last().state_seq, 6);
+  EXPECT_EQ(r.inbox.counters.rejected_duplicate.load(), 1);
+  EXPECT_EQ(r.inbox.counters.rejected_out_of_order.load(), 1);
+  for (int k = 0; k < 50; ++k) r.cycle();
+  EXPECT_EQ(r.tx.statuses.back().rejected_out_of_order, 2);
+  // A step back after the stream was quiet longer than the restart window is a restart.
+  r.clock.advance(200 * kMs);
+  EXPECT_EQ(r.state(1), Reject::kNone);
+}
+
+TEST(ControlLoop, WrongShapeOrModelIsRejected) {
+  Rig r;
+  auto& s = r.inbox.state_buffer();
+  s.seq = 1;
+  s.nx = 13;
+  s.vehicle_count = 1;
+  s.n = 13;
+  s.model = 1;
+  EXPECT_EQ(r.inbox.offer_state(), Reject::kShape);
+  auto& s2 = r.inbox.state_buffer();
+  s2.nx = 16;
+  s2.n = 16;
+  s2.model = 2;  // quadrotor_rate state for a quadrotor task
+  EXPECT_EQ(r.inbox.offer_state(), Reject::kShape);
+  EXPECT_EQ(r.inbox.counters.rejected_shape.load(), 2);
+}
+
+TEST(ControlLoop, NonFiniteOptimizerOutputPublishesHeldPlan) {
+  Rig r;
+  r.ctl.fault = [](int n, std::vector<float>* plan, UpdateStats* st) {
+    if (n == 3) {
+      (*plan)[0] = std::numeric_limits<float>::quiet_NaN();
+      st->finite = false;
+    }
+    return false;
+  };
+  for (int k = 0; k < 5; ++k) r.fresh_cycle();
+  EXPECT_EQ(r.tx.commands[2].mode, Mode::kHoldPlan);
+  EXPECT_FLOAT_EQ(r.tx.commands[2].u[0], 1021.0f);
+  EXPECT_EQ(r.tx.commands[3].mode, Mode::kNormal);
+  EXPECT_EQ(r.loop.counters().optimizer_nonfinite.load(), 1);
+  EXPECT_EQ(r.ctl.resets, 1);  // the NaN plan is not kept as a warm start
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, GateCatchesNanTheOptimizerCalledFinite) {
+  Rig r;
+  r.ctl.fault = [](int n, std::vector<float>* plan, UpdateStats*) {
+    if (n == 2) (*plan)[1] = std::numeric_limits<float>::infinity();
+    if (n == 3) (*plan)[2] = 1e9f;  // outside u_max
+    return false;
+  };
+  for (int k = 0; k < 4; ++k) r.fresh_cycle();
+  EXPECT_EQ(r.tx.commands[1].mode, Mode::kHoldPlan);
+  EXPECT_EQ(r.tx.commands[2].mode, Mode::kHoldPlan);
+  EXPECT_EQ(r.loop.counters().gate_rejects.load(), 2);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+  for (const auto& c : r.tx.commands)
+    for (int i = 0; i < c.n; ++i) EXPECT_LE(c.u[i], 6000.0f);
+}
+
+TEST(ControlLoop, OptimizerErrorPublishesHeldPlan) {
+  Rig r;
+  r.ctl.fault = [](int n, std::vector<float>*, UpdateStats*) { return n == 2; };
+  for (int k = 0; k < 3; ++k) r.fresh_cycle();
+  EXPECT_EQ(r.tx.commands[1].mode, Mode::kHoldPlan);
+  EXPECT_FLOAT_EQ(r.tx.commands[1].u[0], 1011.0f);
+  EXPECT_EQ(r.tx.commands[2].mode, Mode::kNormal);
+  EXPECT_EQ(r.loop.counters().optimizer_errors.load(), 1);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, ParameterUpdatesApplyBetweenCyclesAndBadOnesAreReported) {
+  Rig r;
+  auto push = [&](const char* key, double v) {
+    transport::ParamUpdate p;
+    std::strncpy(p.key, key, sizeof(p.key) - 1);
+    p.value = v;
+    r.inbox.offer_param(p);
+  };
+  // An update arriving mid-cycle (during the optimizer) waits for the next cycle.
+  r.ctl.compute_ns = [&](int n) {
+    if (n == 2) push("cost.w_xy", 3.0);
+    return kMs;
+  };
+  r.fresh_cycle();
+  r.fresh_cycle();
+  EXPECT_TRUE(r.ctl.params_set.empty());
+  r.fresh_cycle();
+  ASSERT_EQ(r.ctl.params_set.size(), 1u);
+  EXPECT_EQ(r.ctl.params_set[0].second, 3.0);
+  push("cost.w_xy", -1.0);                                   // out of range
+  push("cost.nonexistent", 1.0);                             // unknown
+  push("mppi.lambda", 2.0);                                  // fixed for a run
+  push("cost.w_xy", std::numeric_limits<double>::quiet_NaN());  // not finite
+  push("daemon.state_timeout_ms", 50.0);                     // loop parameter: fine
+  push("daemon.failsafe_timeout_ms", 10.0);                  // below state timeout
+  r.fresh_cycle();
+  EXPECT_EQ(r.loop.counters().params_rejected.load(), 5);
+  EXPECT_EQ(r.loop.counters().params_applied.load(), 2);
+  EXPECT_EQ(r.loop.settings().state_timeout_ns, 50 * kMs);
+  EXPECT_EQ(r.ctl.mid_cycle_changes, 0);
+  for (int k = 0; k < 50; ++k) r.fresh_cycle();
+  EXPECT_EQ(r.tx.statuses.back().rejected_params, 5);
+}
+
+TEST(ControlLoop, LockstepAnswersEveryTickWithOneCommand) {
+  daemon::LoopSettings s;
+  s.lockstep = true;
+  Rig r(s);
+  r.ctl.compute_ns = [](int) { return 30 * kMs; };  // slower than real time: no misses in lock-step
+  for (int k = 1; k <= 20; ++k) {
+    r.state(k, 1.0f, k * 20000);  // sample time in sim microseconds
+    transport::ClockTick t;
+    t.seq = k;
+    t.sim_utime = k * 20000;
+    r.inbox.offer_tick(t);
+    ASSERT_TRUE(r.loop.step_lockstep(r.run));
+    ASSERT_EQ(r.tx.commands.size(), static_cast<std::size_t>(k));
+    EXPECT_EQ(r.last().state_seq, k);
+    EXPECT_EQ(r.last().mode, Mode::kNormal);
+  }
+  EXPECT_EQ(r.loop.timing_total().misses, 0);
+  EXPECT_DOUBLE_EQ(r.loop.timing_total().period.mean_ms, 20.0);  // sim time
+  // No tick, no command: a stop request ends the wait.
+  std::atomic<bool> stop{true};
+  EXPECT_FALSE(r.loop.step_lockstep(stop));
+  EXPECT_EQ(r.tx.commands.size(), 20u);
+  // Staleness in sim time: a tick 600 sim-ms after the last state is failsafe.
+  transport::ClockTick late;
+  late.seq = 21;
+  late.sim_utime = 20 * 20000 + 600000;
+  r.inbox.offer_tick(late);
+  ASSERT_TRUE(r.loop.step_lockstep(r.run));
+  EXPECT_EQ(r.last().mode, Mode::kFailsafe);
+}
+
+TEST(ControlLoop, KeepsTheNearest64Obstacles) {
+  Rig r;
+  auto& o = r.inbox.obstacles_buffer();
+  o.count = 200;
+  for (int i = 0; i < 200; ++i) o.items[i] = Cylinder{static_cast<float>(200 - i), 0.0f, 0.5f, 0.0f, 0.0f};
+  r.inbox.offer_obstacles();
+  r.state(1, 0.0f);  // vehicle at the origin
+  r.cycle();
+  const ObstacleSet& kept = r.ctl.inputs.obstacles;
+  ASSERT_EQ(kept.count, 64);
+  for (int i = 0; i < kept.count; ++i) EXPECT_LE(kept.items[i].x, 64.0f);
+}
+
+TEST(ControlLoop, ReferenceTimeIsStateTimeSinceReferenceEpoch) {
+  Rig r;
+  auto& ref = r.inbox.reference_buffer();
+  ref.kind = 1;
+  ref.radius = 2.0f;
+  ref.speed = 1.0f;
+  ref.t0_utime = 1'000'000;
+  ref.vehicle_count = 1;
+  ref.goals[0][0] = 4.0f;
+  r.inbox.offer_reference();
+  r.state(1, 0.0f, 3'500'000);
+  r.cycle();
+  EXPECT_FLOAT_EQ(r.ctl.inputs.reference_time, 2.5f);
+  EXPECT_EQ(r.ctl.inputs.reference.kind, Reference::kCircle);
+  EXPECT_FLOAT_EQ(r.ctl.inputs.goals[0][0], 4.0f);
+  // Non-finite reference is rejected and counted.
+  auto& bad = r.inbox.reference_buffer();
+  bad.radius = std::numeric_limits<float>::quiet_NaN();
+  r.inbox.offer_reference();
+  EXPECT_EQ(r.inbox.counters.rejected_inputs.load(), 1);
+}
+
+TEST(ControlLoop, FinalStatusIsUnhealthy) {
+  Rig r;
+  r.fresh_cycle();
+  r.loop.publish_final_status();
+  EXPECT_FALSE(r.tx.statuses.back().healthy);
+  EXPECT_EQ(r.tx.statuses.back().cycles, 1);
+}
