@@ -158,14 +158,17 @@ class Flight:
             mppid = paths.find_binary("mppid")
             if mppid is None:
                 raise FlightError("mppid not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
-            cfg = paths.TASKS / f"{task}.yaml"
+            # The scenario names its controller config (config/tasks/<task>.yaml), optionally
+            # another file (mppid.config) and overrides (mppid.set: ["mppi.lambda=10", ...]).
+            mp = scen.get("mppid") or {}
+            cfg = paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{task}.yaml"
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
             ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
             if lockstep:
                 ctrl_cmd.append("--lockstep")
-            ctrl_cmd += ["--set", f"backend={spec.backend}"]
-            for kv in spec.sets:
+            ctrl_cmd += ["--backend", spec.backend]
+            for kv in list(mp.get("set", [])) + list(spec.sets):
                 ctrl_cmd += ["--set", kv]
         else:
             ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
