@@ -1,0 +1,123 @@
+// Unit tests of the simulator's library: the RK4 integrator, the plants, the scenarios.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "mppi/models/quadrotor.hpp"
+#include "sim/plant.hpp"
+#include "sim/rk4.hpp"
+#include "sim/scenario.hpp"
+
+namespace {
+
+struct Decay {
+  static constexpr int kNx = 1;
+  static constexpr int kNu = 1;
+  struct Params {
+    float k = 1.0f;
+  };
+  static void derivative(const Params& p, const float* x, const float*, float* dx) { dx[0] = -p.k * x[0]; }
+};
+
+TEST(Rk4, FourthOrderOnExponentialDecay) {
+  // Halving the step must cut the error by about 2^4.
+  double err[2];
+  for (int k = 0; k < 2; ++k) {
+    const int n = 10 << k;
+    float x = 1.0f;
+    const float u = 0.0f;
+    for (int i = 0; i < n; ++i) sim::rk4_model<Decay>(Decay::Params{2.0f}, &x, &u, 1.0f / static_cast<float>(n));
+    err[k] = std::fabs(static_cast<double>(x) - std::exp(-2.0));
+  }
+  EXPECT_GT(err[0] / err[1], 10.0);
+  EXPECT_LT(err[1], 1e-5);
+}
+
+TEST(Rk4, FreeFallMatchesClosedForm) {
+  mppi::Quadrotor::Params p;
+  float x[mppi::Quadrotor::kNx] = {};
+  x[mppi::Quadrotor::PZ] = 10.0f;
+  const float u[4] = {0, 0, 0, 0};
+  for (int i = 0; i < 1000; ++i) sim::rk4_model<mppi::Quadrotor>(p, x, u, 1e-3f);
+  EXPECT_NEAR(x[mppi::Quadrotor::PZ], 10.0f - 0.5f * 9.81f, 1e-3f);
+  EXPECT_NEAR(x[mppi::Quadrotor::VZ], -9.81f, 1e-3f);
+}
+
+std::string scenario(const char* name) { return std::string(MPPID_SOURCE_DIR) + "/config/scenarios/" + name + ".yaml"; }
+
+TEST(Plant, QuadrotorHoversOnItsHoverCommand) {
+  const sim::Scenario s = sim::load_scenario(scenario("forest_4m"), 1);
+  auto plant = sim::make_plant(s);
+  const auto u = plant->hover();
+  const double wind[3] = {0, 0, 0};
+  for (int i = 0; i < 5000; ++i) plant->step(u.data(), wind, 1e-3);
+  double p[3];
+  plant->position(0, p);
+  EXPECT_NEAR(p[2], 2.0, 1e-3);
+  EXPECT_NEAR(plant->speed(0), 0.0, 1e-3);
+}
+
+TEST(Plant, HeavierPlantSinksOnTheControllersHover) {
+  sim::Scenario s = sim::load_scenario(scenario("forest_4m"), 1);
+  s.params["mass"] = 0.3;
+  auto plant = sim::make_plant(s);
+  std::vector<float> u(4, mppi::Quadrotor::hover_speed(mppi::Quadrotor::Params{}));
+  const double wind[3] = {0, 0, 0};
+  for (int i = 0; i < 1000; ++i) plant->step(u.data(), wind, 1e-3);
+  double p[3];
+  plant->position(0, p);
+  EXPECT_LT(p[2], 1.8);
+}
+
+TEST(Plant, SaturatesAndRejectsNonFinite) {
+  const sim::Scenario s = sim::load_scenario(scenario("forest_4m"), 1);
+  auto plant = sim::make_plant(s);
+  float u[4] = {-5.0f, 1e6f, 3000.0f, 3000.0f};
+  EXPECT_TRUE(plant->saturate(u));
+  EXPECT_EQ(u[0], 0.0f);
+  EXPECT_EQ(u[1], 8000.0f);
+  u[2] = std::nanf("");
+  EXPECT_FALSE(plant->saturate(u));
+}
+
+TEST(Plant, UnknownParameterIsAnError) {
+  sim::Scenario s = sim::load_scenario(scenario("forest_4m"), 1);
+  s.params["mas"] = 0.3;
+  EXPECT_THROW(sim::make_plant(s), std::runtime_error);
+}
+
+TEST(Scenario, EveryFileLoads) {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(std::string(MPPID_SOURCE_DIR) + "/config/scenarios")) {
+    if (e.path().extension() != ".yaml") continue;
+    EXPECT_NO_THROW({
+      const auto s = sim::load_scenario(e.path().string(), 1);
+      (void)sim::make_plant(s);
+    }) << e.path();
+    ++n;
+  }
+  EXPECT_GE(n, 10);
+}
+
+TEST(Scenario, SeedNamesTheForest) {
+  const auto a = sim::load_scenario(scenario("forest_3m"), 5).obstacles;
+  const auto b = sim::load_scenario(scenario("forest_3m"), 5).obstacles;
+  const auto c = sim::load_scenario(scenario("forest_3m"), 6).obstacles;
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(a[i].x, b[i].x);
+  EXPECT_TRUE(a.size() != c.size() || a[0].x != c[0].x);
+}
+
+TEST(Scenario, MovingObstaclesHaveTheirSpeed) {
+  const auto s = sim::load_scenario(scenario("team3_moving"), 2);
+  int moving = 0;
+  for (const auto& o : s.obstacles) {
+    if (o.vx == 0.0 && o.vy == 0.0) continue;
+    ++moving;
+    EXPECT_NEAR(std::hypot(o.vx, o.vy), 3.0, 1e-9);
+  }
+  EXPECT_EQ(moving, 8);
+}
+
+}  // namespace
