@@ -1,5 +1,7 @@
 #include "mppi/daemon/control_loop.hpp"
 
+#include "mppi/daemon/daemon_settings.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -39,6 +41,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       u_(static_cast<std::size_t>(nu_)),
       u_init_(controller->settings().u_init) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
+  if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();

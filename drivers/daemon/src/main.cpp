@@ -220,13 +220,16 @@ int main(int argc, char** argv) {
 
   // ---- stop --------------------------------------------------------------------------
   if (signal_number) spdlog::info("{}: stopping", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
+  const std::int64_t t_stop = mppi::rt::monotonic_ns();
   notify.stopping();
   stop = true;
   loop_thread.join();  // publishes the final status
   tx->stop();
   const double seconds = static_cast<double>(mppi::rt::monotonic_ns() - t_start) * 1e-9;
   const auto total = loop.timing_total();
-  spdlog::info("stopped after {} cycles, {} misses", total.cycles, total.misses);
+  spdlog::info("final status published (status #{}); stopped after {} cycles, {} misses, {:.1f} ms after the stop request",
+               loop.counters().status_published.load(), total.cycles, total.misses,
+               static_cast<double>(mppi::rt::monotonic_ns() - t_stop) * 1e-6);
   if (stats) {
     mppi::daemon::RunFacts f;
     f.task = controller->task();

@@ -34,7 +34,7 @@ struct LoopSettings {
   std::int64_t lockstep_poll_ns = 10 * rt::kNsPerMs;  // how often a lock-step wait checks stop
   int watchdog_max_consecutive_misses = 5;  // the loop stops feeding the watchdog past this
   int watchdog_max_optimizer_errors = 5;    // ... or past this many consecutive bad updates
-  std::int8_t command_kind = 3;             // command_t::KIND_*
+  std::int8_t command_kind = -1;            // command_t::KIND_*; -1 = from the task name
   std::vector<float> failsafe_u;            // per control channel; empty = u_init
 };
 

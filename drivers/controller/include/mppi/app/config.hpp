@@ -1,0 +1,47 @@
+// Settings files: one YAML file per controller (task, backend, MPPI settings, model and
+// cost parameters, and a free-form section per program). Everything is validated on load;
+// a bad or missing field is a ConfigError whose message names it ("mppi.rollouts: ...").
+#pragma once
+
+#include <yaml-cpp/yaml.h>
+
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "mppi/controller.hpp"
+#include "mppi/settings.hpp"
+
+namespace mppi::app {
+
+struct ConfigError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct AppConfig {
+  std::string path;                                  // file it came from ("" if none)
+  std::string task;                                  // a name of mppi::task_names()
+  std::string backend = "auto";                      // cpu | cuda | auto
+  MppiSettings mppi;
+  std::vector<std::pair<std::string, double>> params;  // "model.NAME" / "cost.NAME" overrides
+  YAML::Node root;                                   // the whole document (programs read their own section)
+};
+
+// Loads FILE and applies overrides "dotted.key=value" (YAML scalars or flow sequences, e.g.
+// "mppi.rollouts=512", "mppi.sigma=[100,100,100,100]") before validating.
+AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {});
+AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides = {});
+
+// The default settings file of a task, config/tasks/<task>.yaml in the source tree.
+std::string default_config_path(const std::string& task);
+
+// Builds the controller of the config's task on its backend. "auto" picks CUDA when built
+// with it and a device is present. Throws ConfigError for an unusable backend.
+std::unique_ptr<Controller> make_controller(const AppConfig& config);
+
+// Name of the backend "auto" resolves to here, and why CUDA is not available (if so).
+std::string resolve_backend(const std::string& requested, std::string* why_not_cuda = nullptr);
+
+}  // namespace mppi::app

@@ -1,0 +1,164 @@
+#include "mppi/app/config.hpp"
+
+#include <cmath>
+#include <set>
+
+#include "mppi/params.hpp"
+#include "mppi/tasks.hpp"
+
+namespace mppi::app {
+namespace {
+
+[[noreturn]] void fail(const std::string& field, const std::string& why) { throw ConfigError(field + ": " + why); }
+
+template <class T>
+T scalar(const YAML::Node& node, const std::string& field) {
+  if (!node.IsScalar()) fail(field, "expected a scalar");
+  try {
+    return node.as<T>();
+  } catch (const YAML::Exception&) {
+    fail(field, "cannot read '" + node.Scalar() + "' as a number");
+  }
+}
+
+std::vector<float> floats(const YAML::Node& node, const std::string& field) {
+  if (!node.IsSequence()) fail(field, "expected a list of numbers");
+  std::vector<float> out;
+  for (std::size_t i = 0; i < node.size(); ++i) {
+    const double v = scalar<double>(node[i], field + "[" + std::to_string(i) + "]");
+    if (!std::isfinite(v)) fail(field + "[" + std::to_string(i) + "]", "must be finite");
+    out.push_back(static_cast<float>(v));
+  }
+  return out;
+}
+
+// Applies "a.b.c=value" to the tree.
+void apply_override(YAML::Node root, const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0) fail(text, "override must look like key.path=value");
+  const std::string key = text.substr(0, eq);
+  YAML::Node value;
+  try {
+    value = YAML::Load(text.substr(eq + 1));
+  } catch (const YAML::Exception& e) {
+    fail(key, std::string("override value is not valid YAML: ") + e.what());
+  }
+  std::vector<YAML::Node> path{root};
+  std::size_t start = 0;
+  while (true) {
+    const auto dot = key.find('.', start);
+    const std::string part = key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    if (part.empty()) fail(key, "empty path element");
+    if (dot == std::string::npos) {
+      path.back()[part] = value;
+      return;
+    }
+    YAML::Node next = path.back()[part];
+    if (!next || next.IsNull()) {
+      path.back()[part] = YAML::Node(YAML::NodeType::Map);
+      next = path.back()[part];
+    }
+    if (!next.IsMap()) fail(key, "'" + part + "' is not a section");
+    path.push_back(next);
+    start = dot + 1;
+  }
+}
+
+void read_mppi(const YAML::Node& m, MppiSettings& s) {
+  if (!m || !m.IsMap()) fail("mppi", "missing section");
+  static const std::set<std::string> known = {
+      "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
+      "control_cost_scale", "weighting", "smoothing_window", "seed", "threads"};
+  for (const auto& kv : m) {
+    const auto name = kv.first.as<std::string>();
+    if (!known.count(name)) fail("mppi." + name, "unknown field");
+  }
+  for (const char* required : {"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"})
+    if (!m[required]) fail(std::string("mppi.") + required, "missing");
+  s.rollouts = scalar<int>(m["rollouts"], "mppi.rollouts");
+  s.horizon = scalar<int>(m["horizon"], "mppi.horizon");
+  s.dt = scalar<float>(m["dt"], "mppi.dt");
+  if (m["substeps"]) s.substeps = scalar<int>(m["substeps"], "mppi.substeps");
+  s.lambda = scalar<float>(m["lambda"], "mppi.lambda");
+  s.nu = scalar<float>(m["nu"], "mppi.nu");
+  s.sigma = floats(m["sigma"], "mppi.sigma");
+  s.u_min = floats(m["u_min"], "mppi.u_min");
+  s.u_max = floats(m["u_max"], "mppi.u_max");
+  s.u_init = floats(m["u_init"], "mppi.u_init");
+  if (m["u_nominal"]) s.u_nominal = floats(m["u_nominal"], "mppi.u_nominal");
+  if (m["control_cost_scale"]) s.control_cost_scale = scalar<float>(m["control_cost_scale"], "mppi.control_cost_scale");
+  if (m["weighting"] && !parse_weighting(scalar<std::string>(m["weighting"], "mppi.weighting"), &s.weighting))
+    fail("mppi.weighting", "must be cost_to_go or trajectory");
+  if (m["smoothing_window"]) s.smoothing_window = scalar<int>(m["smoothing_window"], "mppi.smoothing_window");
+  if (m["seed"]) s.seed = scalar<std::uint64_t>(m["seed"], "mppi.seed");
+  if (m["threads"]) s.threads = scalar<int>(m["threads"], "mppi.threads");
+}
+
+void read_params(const YAML::Node& root, const char* section, AppConfig& c) {
+  const YAML::Node node = root[section];
+  if (!node) return;
+  if (!node.IsMap()) fail(section, "expected a map of name: number");
+  for (const auto& kv : node) {
+    const std::string key = std::string(section) + "." + kv.first.as<std::string>();
+    c.params.emplace_back(key, scalar<double>(kv.second, key));
+  }
+}
+
+}  // namespace
+
+std::string default_config_path(const std::string& task) {
+  return std::string(MPPID_SOURCE_DIR) + "/config/tasks/" + task + ".yaml";
+}
+
+AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {
+  if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
+  for (const auto& o : overrides) apply_override(root, o);
+  static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
+                                                 "description"};
+  for (const auto& kv : root) {
+    const auto name = kv.first.as<std::string>();
+    if (!sections.count(name)) fail(name, "unknown section");
+  }
+  AppConfig c;
+  c.root = root;
+  if (!root["task"]) fail("task", "missing");
+  c.task = scalar<std::string>(root["task"], "task");
+  if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");
+  if (c.backend != "cpu" && c.backend != "cuda" && c.backend != "auto") fail("backend", "must be cpu, cuda or auto");
+  read_mppi(root["mppi"], c.mppi);
+  read_params(root, "model", c);
+  read_params(root, "cost", c);
+
+  int nu = -1;
+  std::string param_error;
+  const bool known = visit_task(c.task, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    nu = T::kNu;
+    typename T::Params p{};
+    for (const auto& [key, value] : c.params) {
+      const std::string err = set_task_param<T>(p, key, value);
+      if (!err.empty() && param_error.empty()) param_error = err;
+    }
+  });
+  if (!known) fail("task", "unknown task '" + c.task + "'");
+  if (!param_error.empty()) throw ConfigError(param_error);
+  const std::string err = validate(c.mppi, nu);
+  if (!err.empty()) throw ConfigError("mppi." + err);
+  return c;
+}
+
+AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(file);
+  } catch (const YAML::BadFile&) {
+    throw ConfigError(file + ": cannot open");
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(file + ": " + e.what());
+  }
+  AppConfig c = parse_config(root, overrides);
+  c.path = file;
+  return c;
+}
+
+}  // namespace mppi::app

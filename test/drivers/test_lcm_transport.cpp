@@ -1,0 +1,241 @@
+// The LCM transport in-process (memq://): raw decode with garbage and wrong types counted,
+// the loop publishing through it, parameter updates over the channel, a prompt stop on a
+// quiet bus, and the real controller behind it. Waits poll a condition with a deadline;
+// no sleep is an assertion.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <thread>
+
+#include "../rt/fakes.hpp"
+#include "mppi/app/config.hpp"
+#include "mppi/daemon/control_loop.hpp"
+#include "mppi/transport/lcm_transport.hpp"
+
+using namespace mppi;
+using mppi::test::FakeClock;
+using mppi::test::FakeController;
+using transport::Mode;
+
+namespace {
+
+bool wait_until(const std::function<bool()>& cond, int timeout_ms = 2000) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < end) {
+    if (cond()) return true;
+    std::this_thread::yield();
+  }
+  return cond();
+}
+
+// What left the process on the command and status channels, decoded as a peer would.
+struct Listener {
+  std::mutex mu;
+  std::vector<mppi_lcm::command_t> commands;
+  std::vector<mppi_lcm::controller_status_t> statuses;
+  void on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* m) {
+    std::lock_guard<std::mutex> l(mu);
+    commands.push_back(*m);
+  }
+  void on_status(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::controller_status_t* m) {
+    std::lock_guard<std::mutex> l(mu);
+    statuses.push_back(*m);
+  }
+  std::size_t n_commands() {
+    std::lock_guard<std::mutex> l(mu);
+    return commands.size();
+  }
+  bool any_nonfinite() {
+    std::lock_guard<std::mutex> l(mu);
+    for (const auto& c : commands)
+      for (float v : c.u)
+        if (!std::isfinite(v)) return true;
+    return false;
+  }
+};
+
+mppi_lcm::vehicle_state_t state_msg(std::int64_t seq, float fill = 0.0f) {
+  mppi_lcm::vehicle_state_t m{};
+  m.utime = m.sample_utime = 1;
+  m.seq = seq;
+  m.model = mppi_lcm::vehicle_state_t::MODEL_QUADROTOR;
+  m.vehicle_count = 1;
+  m.nx = 16;
+  m.n = 16;
+  m.x.assign(16, fill);
+  m.x[2] = 1.0f;
+  for (int i = 12; i < 16; ++i) m.x[static_cast<std::size_t>(i)] = 3168.4f;
+  return m;
+}
+
+struct LcmRig {
+  explicit LcmRig(Controller* c = nullptr)
+      : tx("memq://", {}, &clock, 4096), inbox(expect()) {
+    tx.lcm().subscribe("MPPI_COMMAND", &Listener::on_command, &listener);
+    tx.lcm().subscribe("MPPI_STATUS", &Listener::on_status, &listener);
+    EXPECT_EQ(tx.self_test(), "");
+    controller = c ? c : &fake;
+    loop = std::make_unique<daemon::ControlLoop>(controller, &clock, &tx, &inbox, daemon::LoopSettings{});
+    tx.start(&inbox);
+  }
+  ~LcmRig() { tx.stop(); }
+  static transport::Inbox::Expect expect() {
+    transport::Inbox::Expect e;
+    e.nx = 16;
+    e.model = 1;
+    return e;
+  }
+  template <class Msg>
+  void send(const std::string& channel, const Msg& m) {
+    tx.lcm().publish(channel, &m);
+  }
+  void send_state(std::int64_t seq, float fill = 0.0f) { send("MPPI_STATE", state_msg(seq, fill)); }
+  void cycle() { ASSERT_TRUE(loop->step_realtime(stop)); }
+
+  FakeClock clock;
+  FakeController fake{&clock};
+  Controller* controller = nullptr;
+  transport::LcmTransport tx;
+  transport::Inbox inbox;
+  Listener listener;
+  std::unique_ptr<daemon::ControlLoop> loop;
+  std::atomic<bool> stop{false};
+};
+
+}  // namespace
+
+TEST(LcmTransport, SelfTestLoopsBackOnMemq) {
+  FakeClock clock;
+  transport::LcmTransport tx("memq://", {}, &clock, 64);
+  EXPECT_EQ(tx.self_test(), "");
+}
+
+TEST(LcmTransport, BadUrlIsAnError) {
+  FakeClock clock;
+  EXPECT_THROW(transport::LcmTransport("nosuchprovider://x", {}, &clock, 64), std::runtime_error);
+}
+
+TEST(LcmTransport, GarbageAndWrongTypeOnTheStateChannelAreCounted) {
+  LcmRig r;
+  const char junk[] = "\x13\x37 definitely not an LCM message";
+  r.tx.lcm().publish("MPPI_STATE", junk, sizeof(junk));
+  mppi_lcm::command_t wrong{};  // a valid message of the wrong type
+  wrong.n = 0;
+  r.send("MPPI_STATE", wrong);
+  // A valid state, truncated by one byte.
+  auto m = state_msg(1);
+  std::vector<std::uint8_t> buf(static_cast<std::size_t>(m.getEncodedSize()));
+  m.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  r.tx.lcm().publish("MPPI_STATE", buf.data(), static_cast<unsigned>(buf.size() - 1));
+  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.rejected_undecodable.load() == 3; }));
+  EXPECT_EQ(r.inbox.counters.states.load(), 0);
+  r.cycle();
+  EXPECT_EQ(r.fake.iterations, 0);  // nothing valid arrived: failsafe, no optimizer run
+  // A good state after the garbage is accepted and answered.
+  r.send_state(2);
+  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  r.cycle();
+  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 2; }));
+  std::lock_guard<std::mutex> l(r.listener.mu);
+  EXPECT_EQ(r.listener.commands[0].mode, mppi_lcm::command_t::MODE_FAILSAFE);
+  EXPECT_EQ(r.listener.commands[1].mode, mppi_lcm::command_t::MODE_NORMAL);
+  EXPECT_EQ(r.listener.commands[1].state_seq, 2);
+  EXPECT_EQ(r.listener.commands[1].kind, mppi_lcm::command_t::KIND_MOTOR_SPEEDS);
+  ASSERT_FALSE(r.listener.statuses.empty());
+}
+
+TEST(LcmTransport, NanStateOverLcmIsRejectedAndNoNanLeaves) {
+  LcmRig r;
+  r.send_state(1);
+  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  r.send_state(2, std::numeric_limits<float>::quiet_NaN());
+  r.send_state(3, std::numeric_limits<float>::infinity());
+  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.rejected_nan.load() == 2; }));
+  for (int k = 0; k < 51; ++k) r.cycle();
+  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 51; }));
+  EXPECT_FALSE(r.listener.any_nonfinite());
+  std::lock_guard<std::mutex> l(r.listener.mu);
+  EXPECT_EQ(r.listener.commands[0].state_seq, 1);
+  EXPECT_EQ(r.listener.statuses.back().rejected_nan, 2);
+}
+
+TEST(LcmTransport, OutOfOrderAndDuplicateOverLcmAreCounted) {
+  LcmRig r;
+  for (std::int64_t s : {10, 10, 9, 11, 8, 11}) r.send_state(s);
+  ASSERT_TRUE(wait_until([&] {
+    return r.inbox.counters.states.load() + r.inbox.counters.rejected_duplicate.load() +
+               r.inbox.counters.rejected_out_of_order.load() == 6;
+  }));
+  EXPECT_EQ(r.inbox.counters.states.load(), 2);
+  EXPECT_EQ(r.inbox.counters.rejected_duplicate.load(), 2);
+  EXPECT_EQ(r.inbox.counters.rejected_out_of_order.load(), 2);
+  r.cycle();
+  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 1; }));
+  std::lock_guard<std::mutex> l(r.listener.mu);
+  EXPECT_EQ(r.listener.commands[0].state_seq, 11);
+}
+
+TEST(LcmTransport, InvalidParameterUpdateIsRejectedAndReported) {
+  LcmRig r;
+  mppi_lcm::param_update_t p{};
+  p.seq = 1;
+  p.key = "cost.w_xy";
+  p.value = -5.0;
+  r.send("MPPI_PARAMS", p);
+  p.seq = 2;
+  p.key = "cost.w_xy";
+  p.value = 7.0;
+  r.send("MPPI_PARAMS", p);
+  ASSERT_TRUE(wait_until([&] { return !r.inbox.params.empty(); }));
+  r.send_state(1);
+  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  for (int k = 0; k < 50; ++k) r.cycle();
+  EXPECT_EQ(r.loop->counters().params_rejected.load(), 1);
+  EXPECT_EQ(r.loop->counters().params_applied.load(), 1);
+  ASSERT_EQ(r.fake.params_set.size(), 1u);
+  EXPECT_EQ(r.fake.params_set[0].second, 7.0);
+  EXPECT_EQ(r.fake.mid_cycle_changes, 0);
+  ASSERT_TRUE(wait_until([&] {
+    std::lock_guard<std::mutex> l(r.listener.mu);
+    return !r.listener.statuses.empty() && r.listener.statuses.back().rejected_params == 1;
+  }));
+}
+
+TEST(LcmTransport, StopReturnsPromptlyOnAQuietBus) {
+  FakeClock clock;
+  transport::LcmTransport tx("memq://", {}, &clock, 64, 20);
+  transport::Inbox inbox(LcmRig::expect());
+  tx.start(&inbox);
+  const auto t0 = std::chrono::steady_clock::now();
+  tx.stop();
+  const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(ms, 100);
+}
+
+TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
+  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/mppid_quadrotor_forest.yaml",
+                                        {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"});
+  auto controller = app::make_controller(cfg);
+  LcmRig r(controller.get());
+  for (int k = 1; k <= 20; ++k) {
+    r.send_state(k);
+    ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == k; }));
+    r.cycle();
+  }
+  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 20; }));
+  EXPECT_FALSE(r.listener.any_nonfinite());
+  std::lock_guard<std::mutex> l(r.listener.mu);
+  for (const auto& c : r.listener.commands) {
+    EXPECT_EQ(c.mode, mppi_lcm::command_t::MODE_NORMAL);
+    ASSERT_EQ(c.n, 4);
+    for (float v : c.u) {
+      EXPECT_GE(v, 0.0f);
+      EXPECT_LE(v, 6000.0f);
+    }
+  }
+}
