@@ -29,7 +29,12 @@ class DeviceBuffer {
   DeviceBuffer() = default;
   DeviceBuffer(std::size_t bytes, const std::string& what) : bytes_(bytes) {
     if (bytes == 0) return;
-    check(cudaMalloc(&ptr_, bytes), "cudaMalloc of " + std::to_string(bytes) + " bytes for " + what);
+    const cudaError_t e = cudaMalloc(&ptr_, bytes);
+    if (e != cudaSuccess) {
+      ptr_ = nullptr;
+      cudaGetLastError();  // a failed allocation is not sticky: leave no error behind
+      fail(e, "cudaMalloc of " + std::to_string(bytes) + " bytes for " + what);
+    }
   }
   DeviceBuffer(const DeviceBuffer&) = delete;
   DeviceBuffer& operator=(const DeviceBuffer&) = delete;
@@ -57,7 +62,12 @@ class PinnedBuffer {
   PinnedBuffer() = default;
   PinnedBuffer(std::size_t bytes, const std::string& what) : bytes_(bytes) {
     if (bytes == 0) return;
-    check(cudaMallocHost(&ptr_, bytes), "cudaMallocHost of " + std::to_string(bytes) + " bytes for " + what);
+    const cudaError_t e = cudaMallocHost(&ptr_, bytes);
+    if (e != cudaSuccess) {
+      ptr_ = nullptr;
+      cudaGetLastError();
+      fail(e, "cudaMallocHost of " + std::to_string(bytes) + " bytes for " + what);
+    }
   }
   PinnedBuffer(const PinnedBuffer&) = delete;
   PinnedBuffer& operator=(const PinnedBuffer&) = delete;

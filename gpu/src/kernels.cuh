@@ -139,10 +139,11 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, float* S, 
 // state for the pair terms (double-buffered by step), per-lane cost and the crash mask.
 template <class T>
 struct TeamRollout {
+  static constexpr int kPairs = T::kVehicles * (T::kVehicles - 1) / 2;
   float u[T::kVehicles][T::kNu];
   float control_cost[T::kVehicles];
   float x[2][T::kVehicles][T::kVehicleNx];
-  float q[2][T::kVehicles];
+  float q[2][T::kVehicles + kPairs];  // vehicle terms, then pair terms in CpuBackend's order
   unsigned mask;
 };
 
@@ -190,39 +191,37 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, float* S, un
     __syncwarp();
     for (int s = 0; s < steps; ++s) {
       const int i = i0 + s;
-      float q = 0.0f;
       std::uint32_t bits = 0u;
       if (active) {
         if (((mask >> j) & 1u) == 0u)
           for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, &r.u[s][j * VNU], h);
         for (int n = 0; n < VNX; ++n) r.x[buf][j][n] = x[n];
         bool hit = false;
-        q = Cost::vehicle(p.cost, j, x, static_cast<float>(i + 1) * dt, &hit);
+        r.q[buf][j] = Cost::vehicle(p.cost, j, x, static_cast<float>(i + 1) * dt, &hit);
         if (hit) bits |= 1u << j;
       }
       __syncwarp();
       if (active) {
-        // Pair (a, b), numbered in CpuBackend's order, goes to lane (number mod M).
-        int owner = 0;
+        // Pair number n (CpuBackend's order) goes to lane n mod M.
+        int n = 0;
         for (int a = 0; a < M; ++a) {
-          for (int b = a + 1; b < M; ++b) {
-            if (owner == j) {
+          for (int b = a + 1; b < M; ++b, ++n) {
+            if (n % M == j) {
               bool hit = false;
-              q += Cost::pair(p.cost, r.x[buf][a], r.x[buf][b], &hit);
+              r.q[buf][M + n] = Cost::pair(p.cost, r.x[buf][a], r.x[buf][b], &hit);
               if (hit) bits |= (1u << a) | (1u << b);
             }
-            owner = owner + 1 == M ? 0 : owner + 1;
           }
         }
-        r.q[buf][j] = q;
         if (bits != 0u) atomicOr(&r.mask, bits);
       }
       __syncwarp();
       if (active) {
         mask = r.mask;
         if (j == 0) {
+          // Summed in Task::running's order (vehicles, then pairs), so the sum rounds alike.
           float run = 0.0f;
-          for (int v = 0; v < M; ++v) run += r.q[buf][v];
+          for (int v = 0; v < M + TeamRollout<T>::kPairs; ++v) run += r.q[buf][v];
           q_last = sanitize_cost(run + r.control_cost[s]);
           if (i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q_last;
         }

@@ -39,6 +39,9 @@ struct Errors {
   double cost = 0.0;
   double plan = 0.0;
   int worst_rollout = -1;
+  float worst_cpu = 0.0f, worst_gpu = 0.0f;
+  int identical = 0;       // rollouts whose cost is bit-identical to the CPU's
+  int over_tolerance = 0;  // rollouts outside kCostTolerance
 };
 
 template <class T>
@@ -53,9 +56,13 @@ Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cp
   EXPECT_EQ(cc.size(), gc.size());
   for (std::size_t k = 0; k < cc.size() && k < gc.size(); ++k) {
     const double rel = std::fabs(static_cast<double>(gc[k]) - cc[k]) / std::max(1.0, std::fabs(static_cast<double>(cc[k])));
+    if (gc[k] == cc[k]) ++e.identical;
+    if (rel > kCostTolerance) ++e.over_tolerance;
     if (rel > e.cost) {
       e.cost = rel;
       e.worst_rollout = static_cast<int>(k);
+      e.worst_cpu = cc[k];
+      e.worst_gpu = gc[k];
     }
   }
   for (std::size_t n = 0; n < pc.size(); ++n) {
@@ -83,7 +90,11 @@ void check_parity(const char* name, Weighting weighting) {
   Errors worst;
   for (std::uint32_t cycle = 0; cycle < 3; ++cycle) {
     const Errors e = compare_one_update(sc, cpu, *gpu, cycle, &plan);
-    EXPECT_LE(e.cost, kCostTolerance) << name << " cycle " << cycle << ": rollout " << e.worst_rollout;
+    EXPECT_LE(e.cost, kCostTolerance) << name << " cycle " << cycle << ": rollout " << e.worst_rollout << " cpu "
+                                      << e.worst_cpu << " gpu " << e.worst_gpu << "; " << e.over_tolerance
+                                      << " rollouts over tolerance, " << e.identical << " bit-identical";
+    std::printf("[parity] %s cycle %u: %d of %zu rollouts bit-identical, %d over tolerance\n", name, cycle, e.identical,
+                static_cast<std::size_t>(sc.settings.rollouts), e.over_tolerance);
     EXPECT_LE(e.plan, kPlanTolerance) << name << " cycle " << cycle;
     worst.cost = std::max(worst.cost, e.cost);
     worst.plan = std::max(worst.plan, e.plan);
