@@ -14,7 +14,8 @@ def _assert_all_gone(out):
     for name, pid in pids.items():
         if name != "pgid":
             assert not pid_alive(pid), f"{name} (pid {pid}) still running"
-    assert group_members(pids["pgid"]) == []
+    left = group_members(pids["pgid"])
+    assert left == [], [open(f"/proc/{p}/cmdline").read().replace("\0", " ") for p in left]
 
 
 def test_controller_killed_mid_flight(controller, tmp_path):

@@ -131,6 +131,9 @@ class Flight:
                     os.killpg(self.pgid, signal.SIGKILL)
                 except ProcessLookupError:
                     pass
+                deadline = time.monotonic() + 5.0
+                while time.monotonic() < deadline and _group_alive(self.pgid):
+                    time.sleep(0.05)
             for p in list(self.procs.values()) + [self.holder]:
                 try:
                     p.wait(timeout=5)
@@ -174,7 +177,7 @@ class Flight:
             ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
         sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
                    "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
-        logger_cmd = [str(paths.VENV_BIN / "lcm-logger"), "-q", "-f", f"--lcm-url={LCM_URL}", str(self.out / "flight.lcmlog")]
+        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}", str(self.out / "flight.lcmlog")]
 
         t0 = time.monotonic()
         outcome = None
@@ -226,6 +229,19 @@ class Flight:
             }
             (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
+
+
+def _lcm_logger() -> Path:
+    """The lcm-logger binary itself: the venv's entry point is a Python wrapper that would
+    run it as a grandchild (and leave it behind on SIGTERM)."""
+    try:
+        import lcm
+        p = Path(lcm.LCM_BIN_DIR) / "lcm-logger"
+        if p.is_file():
+            return p
+    except (ImportError, AttributeError):
+        pass
+    return paths.VENV_BIN / "lcm-logger"
 
 
 def _group_alive(pgid: int) -> bool:
