@@ -111,6 +111,12 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
     summary["jobs"] = jobs
     (out / "summary.json").write_text(json.dumps({"summary": summary, "runs": sorted(results, key=lambda r: (r.get("scenario", ""), r.get("seed", 0)))}, indent=2))
     (out / "summary.md").write_text(markdown(summary))
+    try:
+        sys.path.insert(0, str(paths.ROOT / "tools" / "plots"))
+        from sitl_campaign import plot_campaign
+        plot_campaign(out)
+    except Exception as e:  # the table is the result; the plot is a convenience
+        print(f"sitl: campaign plot failed: {e!r}", file=sys.stderr)
     return summary
 
 
