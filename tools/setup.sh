@@ -1,0 +1,122 @@
+#!/usr/bin/env bash
+# Sets up a Debian 12 machine for mppid and builds it. Idempotent: a re-run on a set-up
+# machine touches neither apt nor pip (no network) and only rebuilds what changed.
+#
+#   tools/setup.sh [--no-apt] [--no-venv] [--no-build] [-- <extra cmake configure args>]
+#
+#   --no-apt     skip the Debian packages (e.g. no root and no sudo; you installed them)
+#   --no-venv    skip the Python venv (.venv) and requirements.txt
+#   --no-build   skip configuring and building (build/)
+#
+# Environment:
+#   CI            when set (CI=true), warnings are errors (-DMPPID_WERROR=ON)
+#   MPPID_CUDA    passed to CMake as -DMPPID_CUDA (ON, OFF, AUTO; default: the CMake default)
+#   MPPID_BUILD_DIR  build folder (default: build)
+#   MPPID_JOBS    parallel build jobs (default: 2, the size of the project's machines)
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+
+do_apt=1 do_venv=1 do_build=1
+cmake_extra=()
+while (($#)); do
+  case "$1" in
+    --no-apt) do_apt=0 ;;
+    --no-venv) do_venv=0 ;;
+    --no-build) do_build=0 ;;
+    --) shift; cmake_extra=("$@"); break ;;
+    -h|--help) sed -n '2,17s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+
+log() { printf '[setup] %s\n' "$*"; }
+
+# ---- Debian packages ------------------------------------------------------------------
+# Everything the build, the tests and the tools need, nothing recommended on top.
+APT_PACKAGES=(
+  # toolchain and build
+  build-essential cmake ninja-build pkg-config git ca-certificates
+  # C++ libraries (OpenMP comes with gcc as libgomp)
+  libeigen3-dev librandom123-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libsystemd-dev libglib2.0-dev
+  # tests and benchmarks
+  googletest libgtest-dev libgmock-dev libbenchmark-dev
+  # Python venv (lcm wheel, tools, pytest)
+  python3 python3-venv python3-pip
+  # Java: javac builds the LCM type jar; the non-headless JRE has the AWT/X11 part that
+  # lcm-spy's Swing window needs, even under Xvfb
+  openjdk-17-jdk-headless openjdk-17-jre-headless openjdk-17-jre
+  # lcm-spy without a display (ps: tools/lcm-spy); network namespaces for multicast tests
+  xvfb xauth iproute2 util-linux procps
+)
+
+missing_packages() {
+  local pkg status
+  for pkg in "${APT_PACKAGES[@]}"; do
+    status="$(dpkg-query -W -f='${db:Status-Abbrev}' "$pkg" 2>/dev/null || true)"
+    [[ "$status" == ii* ]] || printf '%s\n' "$pkg"
+  done
+}
+
+if ((do_apt)); then
+  mapfile -t missing < <(missing_packages)
+  if ((${#missing[@]} == 0)); then
+    log "Debian packages: all ${#APT_PACKAGES[@]} installed"
+  else
+    log "Debian packages missing: ${missing[*]}"
+    SUDO=()
+    if ((EUID != 0)); then
+      command -v sudo >/dev/null || { echo "setup.sh: not root and no sudo; install: ${missing[*]}" >&2; exit 1; }
+      SUDO=(sudo)
+    fi
+    export DEBIAN_FRONTEND=noninteractive
+    # One index update per run, and only because something has to be installed.
+    "${SUDO[@]}" apt-get update -q
+    "${SUDO[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
+  fi
+fi
+
+# ---- Python venv ----------------------------------------------------------------------
+PY_BASE=/usr/bin/python3
+[[ -x "$PY_BASE" ]] || PY_BASE="$(command -v python3)"
+VENV="$ROOT/.venv"
+STAMP="$VENV/.mppid-requirements.sha256"
+
+if ((do_venv)); then
+  if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
+    log "creating $VENV with $PY_BASE"
+    rm -rf "$VENV"
+    "$PY_BASE" -m venv "$VENV"
+  fi
+  # The stamp covers the requirements and the interpreter, so a Python upgrade reinstalls.
+  want="$( { cat requirements.txt; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1)"
+  have="$(cat "$STAMP" 2>/dev/null || true)"
+  if [[ "$want" != "$have" ]]; then
+    log "pip install -r requirements.txt"
+    "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt
+    printf '%s\n' "$want" >"$STAMP"
+  else
+    log "venv: requirements unchanged"
+  fi
+fi
+
+# ---- configure and build --------------------------------------------------------------
+if ((do_build)); then
+  BUILD_DIR="${MPPID_BUILD_DIR:-build}"
+  args=(-S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release)
+  # A build folder keeps its generator; choose Ninja only for a new one.
+  [[ -f "$BUILD_DIR/CMakeCache.txt" ]] || args+=(-G Ninja)
+  if [[ -n "${CI:-}" ]]; then args+=(-DMPPID_WERROR=ON); else args+=(-DMPPID_WERROR=OFF); fi
+  # The venv now holds the lcm wheel: turn LCM on even in a folder first configured without
+  # it (override with: -- -DMPPID_LCM=OFF).
+  if [[ -x "$VENV/bin/python" ]]; then args+=(-DMPPID_LCM=ON); fi
+  [[ -n "${MPPID_CUDA:-}" ]] && args+=("-DMPPID_CUDA=$MPPID_CUDA")
+  log "cmake ${args[*]} ${cmake_extra[*]}"
+  cmake "${args[@]}" "${cmake_extra[@]}"
+  log "cmake --build $BUILD_DIR -j${MPPID_JOBS:-2}"
+  cmake --build "$BUILD_DIR" -j"${MPPID_JOBS:-2}"
+fi
+log "done"
