@@ -3,6 +3,7 @@
 // and failures are scripted.
 #pragma once
 
+#include <atomic>
 #include <cmath>
 #include <functional>
 #include <stdexcept>
@@ -17,17 +18,17 @@ namespace mppi::test {
 
 class FakeClock final : public rt::Clock {
  public:
-  std::int64_t now_ns() override { return t_; }
+  std::int64_t now_ns() override { return t_.load(); }
   void sleep_until(std::int64_t t) override {
     sleeps.push_back(t);
-    if (t > t_) t_ = t;
+    if (t > t_.load()) t_.store(t);
   }
   void advance(std::int64_t ns) { t_ += ns; }
   void set(std::int64_t t) { t_ = t; }
-  std::vector<std::int64_t> sleeps;
+  std::vector<std::int64_t> sleeps;  // loop thread only
 
  private:
-  std::int64_t t_ = 1'000'000'000;
+  std::atomic<std::int64_t> t_{1'000'000'000};  // read by receive threads too
 };
 
 class RecordingTransport final : public transport::Transport {

@@ -104,17 +104,21 @@ TEST(LatestValue, NoTornReadsUnderConcurrency) {
     done = true;
   });
   long last = 0, reads = 0;
-  while (!done || v.update()) {
+  while (true) {
+    const bool finished = done.load();
     if (v.update()) {
       const Pair p = v.front();
       ASSERT_EQ(p.a, -p.b);
       ASSERT_GE(p.a, last);  // never older than what was seen
       last = p.a;
       ++reads;
+    } else if (finished) {
+      break;
     }
   }
   writer.join();
   EXPECT_GT(reads, 0);
+  EXPECT_EQ(last, 200000);  // the newest value always arrives
 }
 
 TEST(SpscRing, FifoAndFull) {
