@@ -165,12 +165,19 @@ class Flight:
             # another file (mppid.config) and overrides (mppid.set: ["mppi.lambda=10", ...]).
             mp = scen.get("mppid") or {}
             cfg = paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{task}.yaml"
+            interim = paths.SCENARIOS / "controllers" / f"{task}.yaml"
+            if not mp.get("config") and not cfg.is_file() and interim.is_file():
+                cfg = interim  # until the task's own settings file exists
+                self.events.append(f"controller config: interim {interim.relative_to(paths.ROOT)}")
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
             ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
             if lockstep:
                 ctrl_cmd.append("--lockstep")
             ctrl_cmd += ["--backend", spec.backend]
+            # The flight's seed also seeds the controller's sampling (a campaign over seeds
+            # varies both the world and the noise); --set can still override it.
+            ctrl_cmd += ["--set", f"mppi.seed={spec.seed}"]
             for kv in list(mp.get("set", [])) + list(spec.sets):
                 ctrl_cmd += ["--set", kv]
         else:
@@ -181,6 +188,7 @@ class Flight:
 
         t0 = time.monotonic()
         outcome = None
+        cfg = locals().get("cfg")
         try:
             self._start_namespace()
             self._spawn("logger", logger_cmd)
@@ -224,6 +232,7 @@ class Flight:
                 "returncodes": {k: p.returncode for k, p in self.procs.items()},
                 "events": self.events,
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
+                "controller_config": str(cfg) if spec.controller == "mppid" else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "controller": spec.controller},
             }

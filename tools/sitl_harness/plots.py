@@ -47,6 +47,7 @@ def _path(out, world, t, X, ticks, events, model, nx, m):
         ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
         ax1.plot(t, X[:, 2], label="theta (0 = down)")
         ax1.axhline(np.pi, ls="--", c="k", lw=0.8, label="upright")
+        ax1.axhline(-np.pi, ls="--", c="k", lw=0.8)
         ax1.set_ylabel("pole angle [rad]")
         ax1.legend()
         ax2.plot(t, X[:, 0], label="cart x")
