@@ -19,6 +19,8 @@
 #include "mppi/rt/histogram.hpp"
 #include "mppi_lcm/command_t.hpp"
 #include "mppi_lcm/controller_status_t.hpp"
+#include "mppi_lcm/obstacles_t.hpp"
+#include "mppi_lcm/reference_t.hpp"
 #include "mppi_lcm/vehicle_state_t.hpp"
 
 namespace {
@@ -82,6 +84,7 @@ int main(int argc, char** argv) {
               status_ch = "MPPI_STATUS";
   double rate = 100.0, duration = 10.0, wait_s = 0.0, nan_at = -1, garbage_at = -1, pause_at = -1, pause_for = 0;
   bool simulate = false;
+  int forest = 0;
   float z0 = 1.0f;
   app.add_option("--lcm-url", url);
   app.add_option("--state-channel", state_ch);
@@ -96,6 +99,7 @@ int main(int argc, char** argv) {
   app.add_option("--pause-for", pause_for, "... for this long [s]");
   app.add_flag("--simulate", simulate, "integrate the quadrotor model with the received commands");
   app.add_option("--z0", z0, "start height [m]");
+  app.add_option("--forest", forest, "publish this many cylinders (4 m grid ahead) and a goal at (30, 0, z0), 1 Hz");
   CLI11_PARSE(app, argc, argv);
 
   lcm::LCM lcm(url);
@@ -125,6 +129,24 @@ int main(int argc, char** argv) {
   msg.n = 16;
   std::vector<std::uint8_t> buf(4096);
 
+  // The world: a grid of cylinders ahead of the vehicle and a goal beyond it.
+  mppi_lcm::obstacles_t world{};
+  for (int i = 0; i < forest; ++i) {
+    mppi_lcm::cylinder_t c{};
+    c.x = 4.0f + 4.0f * static_cast<float>(i / 7);
+    c.y = -12.0f + 4.0f * static_cast<float>(i % 7) + (i / 7 % 2 ? 2.0f : 0.0f);
+    c.radius = 0.3f;
+    world.cylinders.push_back(c);
+  }
+  world.n = static_cast<std::int32_t>(world.cylinders.size());
+  mppi_lcm::reference_t goal{};
+  goal.kind = mppi_lcm::reference_t::KIND_WAYPOINT;
+  goal.center[0] = 30.0f;
+  goal.center[2] = z0;
+  goal.vehicle_count = 1;
+  goal.goals = {{30.0f, 0.0f, z0}};
+  std::int64_t world_seq = 0, last_world = -1;
+
   const std::int64_t period = std::llround(1e9 / rate);
   const std::int64_t t0 = mppi::rt::monotonic_ns();
   std::int64_t next = t0, seq = 0, published = 0, max_late = 0;
@@ -146,6 +168,13 @@ int main(int argc, char** argv) {
       const float dt = static_cast<float>(period) * 1e-9f;
       for (int s = 0; s < 10; ++s) mppi::Quadrotor::step(qp, x.data(), u.data(), dt / 10.0f);
       if (x[2] < 0.0f) x[2] = 0.0f;
+    }
+    if (forest > 0 && static_cast<std::int64_t>(t) != last_world) {
+      last_world = static_cast<std::int64_t>(t);
+      world.utime = goal.utime = mppi::rt::wall_utime();
+      world.seq = goal.seq = ++world_seq;
+      lcm.publish("MPPI_OBSTACLES", &world);
+      lcm.publish("MPPI_REFERENCE", &goal);
     }
     if (pause_at >= 0 && t >= pause_at && t < pause_at + pause_for) continue;
     if (garbage_at >= 0 && !garbage_done && t >= garbage_at) {
