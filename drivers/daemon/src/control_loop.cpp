@@ -170,6 +170,9 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
   const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
                        consecutive_bad_updates_ < s_.watchdog_max_optimizer_errors;
   loop_healthy_.store(loop_ok, std::memory_order_relaxed);
+  snap_cycles_.store(monitor_.cycles(), std::memory_order_relaxed);
+  snap_misses_.store(monitor_.misses(), std::memory_order_relaxed);
+  snap_consecutive_.store(monitor_.consecutive_misses(), std::memory_order_relaxed);
   heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
 
   maybe_status(published != last_status_mode_, lockstep ? start_ns : end);
@@ -342,6 +345,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.period_ms_max = f(w.period.max_ms);
   status_.period_ms_p99 = f(w.period.p99_ms);
   status_.jitter_ms_p99 = f(w.jitter.p99_ms);
+  if (w.period.count > 0 && w.period.mean_ms > 0.0) snap_rate_.store(1000.0 / w.period.mean_ms, std::memory_order_relaxed);
   status_.cycles = w.cycles;
   status_.misses = w.misses;
   status_.consecutive_misses = w.consecutive_misses;

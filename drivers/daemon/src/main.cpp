@@ -26,11 +26,12 @@ constexpr int kExitConfig = 2;
 constexpr int kExitRuntime = 1;
 
 std::string status_line(const mppi::daemon::ControlLoop& loop, double rate_hz) {
-  const auto t = loop.timing_window();
+  const auto s = loop.snapshot();
   char buf[200];
-  std::snprintf(buf, sizeof(buf), "%s %.0f Hz, cycles %lld, misses %lld, mode %s", loop.settings().lockstep ? "lock-step" : "running",
-                rate_hz, static_cast<long long>(t.cycles), static_cast<long long>(t.misses),
-                mppi::transport::to_string(loop.mode()));
+  std::snprintf(buf, sizeof(buf), "%s at %.1f Hz (nominal %.0f), cycles %lld, misses %lld (%lld in a row), mode %s",
+                loop.settings().lockstep ? "lock-step" : "running", s.rate_hz, rate_hz,
+                static_cast<long long>(s.cycles), static_cast<long long>(s.misses),
+                static_cast<long long>(s.consecutive_misses), mppi::transport::to_string(loop.mode()));
   return buf;
 }
 

@@ -79,6 +79,15 @@ class ControlLoop {
   rt::TimingSummary timing_window() const { return monitor_.window(); }
   std::int64_t skipped_periods() const { return schedule_.skipped_periods(); }
   transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
+  // For other threads while the loop runs (the histograms are the loop thread's alone).
+  struct Snapshot {
+    std::int64_t cycles, misses, consecutive_misses;
+    double rate_hz;  // measured over the last status window
+  };
+  Snapshot snapshot() const {
+    return {snap_cycles_.load(std::memory_order_relaxed), snap_misses_.load(std::memory_order_relaxed),
+            snap_consecutive_.load(std::memory_order_relaxed), snap_rate_.load(std::memory_order_relaxed)};
+  }
   // For the watchdog: monotonic time of the last completed cycle, and whether the loop
   // itself is well (cycling, not stuck in misses or optimizer failures).
   std::int64_t heartbeat_ns() const { return heartbeat_ns_.load(std::memory_order_relaxed); }
@@ -141,6 +150,8 @@ class ControlLoop {
   transport::Mode last_status_mode_ = transport::Mode::kFailsafe;
   std::atomic<std::int64_t> heartbeat_ns_{0};
   std::atomic<bool> loop_healthy_{true};
+  std::atomic<std::int64_t> snap_cycles_{0}, snap_misses_{0}, snap_consecutive_{0};
+  std::atomic<double> snap_rate_{0.0};
   LoopCounters counters_;
 };
 
