@@ -47,3 +47,28 @@ def test_harness_sigterm_mid_flight(controller, tmp_path):
     p.wait(timeout=30)
     assert p.returncode != 0
     _assert_all_gone(out)
+
+
+def test_campaign_ctrl_c(tmp_path):
+    """Ctrl-C on a campaign stops its running flights at once, each cleaned up."""
+    from sitl_harness import paths
+    if paths.find_binary("mppid-sim") is None:
+        import pytest
+        pytest.skip("mppid-sim not built")
+    out = tmp_path / "camp"
+    p = subprocess.Popen([str(SITL), "campaign", "--scenarios", "forest_4m", "--seeds", "4", "--out", str(out),
+                          "--controller", "standin", "--realtime"], cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    pid_files = lambda: list(out.glob("forest_4m/seed_*/pids.json"))
+    deadline = time.monotonic() + 30
+    while not pid_files() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert pid_files()
+    time.sleep(1.0)
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    p.wait(timeout=40)
+    assert time.monotonic() - t0 < 20  # not after the remaining flights
+    assert p.returncode == 130
+    for f in pid_files():
+        _assert_all_gone(f.parent)

@@ -85,27 +85,31 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
         return scen, seed, score
 
     results = []
+    ex = ThreadPoolExecutor(max_workers=max(1, jobs))
     try:
-        with ThreadPoolExecutor(max_workers=max(1, jobs)) as ex:
-            futs = [ex.submit(one, s, k) for s, k in runs]
-            for f in as_completed(futs):
-                scen, seed, score = f.result()
-                if score is not None:
-                    results.append(score)
+        futs = [ex.submit(one, s, k) for s, k in runs]
+        for f in as_completed(futs):
+            scen, seed, score = f.result()
+            if score is not None:
+                results.append(score)
     except KeyboardInterrupt:
+        # Not `with ThreadPoolExecutor`: its exit would wait for every running flight.
         stopping.set()
+        ex.shutdown(wait=False, cancel_futures=True)
         with lock:
-            for p in children:
-                try:
-                    p.send_signal(signal.SIGTERM)  # each run cleans up its own flight
-                except ProcessLookupError:
-                    pass
-        for p in list(children):
+            running = list(children)
+        for p in running:
             try:
-                p.wait(timeout=15)
+                p.send_signal(signal.SIGTERM)  # each run cleans up its own flight
+            except ProcessLookupError:
+                pass
+        for p in running:
+            try:
+                p.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
         raise
+    ex.shutdown(wait=True)
     summary = summarize(results)
     summary["command"] = " ".join(sys.argv)
     summary["jobs"] = jobs

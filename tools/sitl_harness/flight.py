@@ -112,7 +112,20 @@ class Flight:
     def cleanup(self):
         """Stops everything: the controller and the simulator, then the logger (so it has
         recorded their last messages), then the holder; then SIGKILL to whatever is left of
-        the process group. Safe to call twice."""
+        the process group. Safe to call twice. Further SIGINT/SIGTERM are ignored meanwhile,
+        so a second Ctrl-C cannot cut the clean-up short."""
+        main = threading.current_thread() is threading.main_thread()
+        saved = {}
+        if main:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                saved[sig] = signal.signal(sig, signal.SIG_IGN)
+        try:
+            self._cleanup()
+        finally:
+            for sig, h in saved.items():
+                signal.signal(sig, h)
+
+    def _cleanup(self):
         for name in ("sim", "controller"):
             self._terminate(name, 3.0)
         if "logger" in self.procs and self.procs["logger"].poll() is None:
