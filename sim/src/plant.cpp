@@ -3,6 +3,7 @@
 #include <mppi_lcm/command_t.hpp>
 #include <mppi_lcm/vehicle_state_t.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -245,11 +246,132 @@ template <> StateGroup ModelPlant<Racecar>::group(int i) const {
 }
 template <> void ModelPlant<Racecar>::fix_published(float*) const {}
 
+
+// ---- rate-controlled quadrotor as a rigid body with an autopilot -----------------------
+// The 16-state quadrotor (motors with their lag included) under a P body-rate loop and a
+// mixer, as an autopilot runs it, at the physics rate: it takes the rate-controlled tasks'
+// commands (thrust, body rates) and publishes their 13-state view (position, velocity,
+// attitude quaternion, body rates). Unlike the quadrotor_rate plant, its rate response is
+// not the controller's first-order lag but a P loop through the motor lag: a real mismatch.
+class RateBodyPlant : public Plant {
+ public:
+  explicit RateBodyPlant(const Scenario& s) : p_(plant_params<Quadrotor::Params>(s)), s_(s) {
+    vehicles_ = s.vehicles;
+    body_.assign(static_cast<std::size_t>(Quadrotor::kNx * vehicles_), 0.0f);
+    x_.assign(static_cast<std::size_t>(QuadrotorRate::kNx * vehicles_), 0.0f);
+    for (int v = 0; v < vehicles_; ++v) {
+      float* b = body_.data() + v * Quadrotor::kNx;
+      const Vec3 st = s.start_of(v);
+      for (int i = 0; i < 3; ++i) b[i] = static_cast<float>(st[static_cast<std::size_t>(i)]);
+      for (int i = 0; i < 4; ++i) b[Quadrotor::M1 + i] = Quadrotor::hover_speed(p_);
+    }
+    publish_view();
+  }
+  int nx() const override { return QuadrotorRate::kNx; }
+  int nu() const override { return QuadrotorRate::kNu; }
+  std::int8_t model_id() const override { return vehicle_state_t::MODEL_QUADROTOR_RATE; }
+  std::int8_t command_kind() const override { return command_t::KIND_THRUST_RATES; }
+  bool flies() const override { return true; }
+
+  void step(const float* u, const double* wind, double h) override {
+    float accel[3];
+    for (int i = 0; i < 3; ++i) accel[i] = static_cast<float>(p_.drag / p_.mass * wind[i]);
+    for (int v = 0; v < vehicles_; ++v) {
+      if ((frozen >> v) & 1u) continue;
+      float* b = body_.data() + v * Quadrotor::kNx;
+      float motors[4];
+      autopilot(b, u + v * QuadrotorRate::kNu, motors);
+      rk4_model<Quadrotor>(p_, b, motors, static_cast<float>(h), accel, Quadrotor::VX);
+    }
+    publish_view();
+  }
+  bool saturate(float* u) const override {
+    for (int i = 0; i < QuadrotorRate::kNu * vehicles_; ++i)
+      if (!std::isfinite(u[i])) return false;
+    const auto r = static_cast<float>(s_.max_body_rate);
+    for (int v = 0; v < vehicles_; ++v) {
+      float* uv = u + v * QuadrotorRate::kNu;
+      uv[0] = clampf(uv[0], 0.0f, static_cast<float>(s_.max_thrust));
+      for (int i = 1; i < 4; ++i) uv[i] = clampf(uv[i], -r, r);
+    }
+    return true;
+  }
+  void position(int v, double* pos) const override {
+    for (int i = 0; i < 3; ++i) pos[i] = body_[static_cast<std::size_t>(v * Quadrotor::kNx + i)];
+  }
+  double speed(int v) const override {
+    const float* b = body_.data() + v * Quadrotor::kNx;
+    return std::sqrt(double(b[3]) * b[3] + double(b[4]) * b[4] + double(b[5]) * b[5]);
+  }
+  std::vector<float> hover() const override {
+    std::vector<float> u(static_cast<std::size_t>(4 * vehicles_), 0.0f);
+    for (int v = 0; v < vehicles_; ++v) u[static_cast<std::size_t>(4 * v)] = p_.mass * p_.gravity;
+    return u;
+  }
+  StateGroup group(int i) const override {
+    const int k = i % QuadrotorRate::kNx;
+    if (k < 3) return StateGroup::kPosition;
+    if (k < 6) return StateGroup::kVelocity;
+    if (k < 10) return StateGroup::kAttitude;
+    return StateGroup::kRate;
+  }
+  void fix_published(float* x) const override {
+    for (int v = 0; v < vehicles_; ++v) {
+      float* q = x + v * QuadrotorRate::kNx + QuadrotorRate::QW;
+      const float n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+      if (n > 0.0f)
+        for (int i = 0; i < 4; ++i) q[i] /= n;
+    }
+  }
+
+ private:
+  // Desired torques from the P rate loop (plus the gyroscopic term), then the mixer:
+  // T = sum F, tx = L (F2 - F4), ty = L (F3 - F1), tz = (kM / kF)(F1 - F2 + F3 - F4).
+  void autopilot(const float* b, const float* u, float* motors) const {
+    const float k = static_cast<float>(s_.rate_gain);
+    const float wx = b[Quadrotor::WX], wy = b[Quadrotor::WY], wz = b[Quadrotor::WZ];
+    const float tx = p_.ixx * k * (u[1] - wx) + (wy * p_.izz * wz - wz * p_.iyy * wy);
+    const float ty = p_.iyy * k * (u[2] - wy) + (wz * p_.ixx * wx - wx * p_.izz * wz);
+    const float tz = p_.izz * k * (u[3] - wz) + (wx * p_.iyy * wy - wy * p_.ixx * wx);
+    const float half = 0.5f * u[0], c = p_.k_moment / p_.k_force;
+    const float f[4] = {0.5f * (half + tz / (2.0f * c) - ty / p_.arm), 0.5f * (half - tz / (2.0f * c) + tx / p_.arm),
+                        0.5f * (half + tz / (2.0f * c) + ty / p_.arm), 0.5f * (half - tz / (2.0f * c) - tx / p_.arm)};
+    for (int i = 0; i < 4; ++i)
+      motors[i] = clampf(std::sqrt(std::max(f[i], 0.0f) / p_.k_force), 0.0f, static_cast<float>(s_.max_motor_speed));
+  }
+  // The 13-state view: position, velocity, q = qz(yaw) qx(roll) qy(pitch) (core's ZXY
+  // Euler convention, R_WB = Rz Rx Ry), body rates.
+  void publish_view() {
+    for (int v = 0; v < vehicles_; ++v) {
+      const float* b = body_.data() + v * Quadrotor::kNx;
+      float* x = x_.data() + v * QuadrotorRate::kNx;
+      for (int i = 0; i < 6; ++i) x[i] = b[i];
+      const double hr = 0.5 * b[Quadrotor::ROLL], hp = 0.5 * b[Quadrotor::PITCH], hy = 0.5 * b[Quadrotor::YAW];
+      const double cz = std::cos(hy), sz = std::sin(hy), cx = std::cos(hr), sx = std::sin(hr);
+      const double cy = std::cos(hp), sy = std::sin(hp);
+      // qz * qx = (cz cx, cz sx, sz sx, sz cx); then * qy.
+      const double aw = cz * cx, ax = cz * sx, ay = sz * sx, az = sz * cx;
+      x[QuadrotorRate::QW] = static_cast<float>(aw * cy - ay * sy);
+      x[QuadrotorRate::QX] = static_cast<float>(ax * cy - az * sy);
+      x[QuadrotorRate::QY] = static_cast<float>(aw * sy + ay * cy);
+      x[QuadrotorRate::QZ] = static_cast<float>(az * cy + ax * sy);
+      x[QuadrotorRate::WX] = b[Quadrotor::WX];
+      x[QuadrotorRate::WY] = b[Quadrotor::WY];
+      x[QuadrotorRate::WZ] = b[Quadrotor::WZ];
+    }
+  }
+
+  Quadrotor::Params p_;
+  const Scenario& s_;
+  std::vector<float> body_;  // 16 states per vehicle: the truth
+};
+
 }  // namespace
 
 std::unique_ptr<Plant> make_plant(const Scenario& s) {
   if (s.model == "quadrotor") return std::make_unique<ModelPlant<Quadrotor>>(s);
   if (s.model == "quadrotor_rate") return std::make_unique<ModelPlant<QuadrotorRate>>(s);
+  if (s.model == "quadrotor_rate_body") return std::make_unique<RateBodyPlant>(s);
   if (s.model == "cartpole") return std::make_unique<ModelPlant<Cartpole>>(s);
   if (s.model == "racecar") return std::make_unique<ModelPlant<Racecar>>(s);
   throw std::runtime_error("plant.model: unknown model '" + s.model + "'");

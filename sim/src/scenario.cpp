@@ -82,13 +82,16 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   const auto plant = root["plant"];
   if (!plant) c.fail("plant", "required");
   check_keys(c, plant, "plant",
-             {"model", "vehicles", "params", "initial_state", "max_motor_speed", "max_thrust", "max_body_rate"});
+             {"model", "vehicles", "params", "initial_state", "max_motor_speed", "max_thrust", "max_body_rate",
+              "rate_gain"});
   read(c, plant, "plant", "model", s.model);
   read(c, plant, "plant", "vehicles", s.vehicles);
   read(c, plant, "plant", "initial_state", s.initial_state);
   read(c, plant, "plant", "max_motor_speed", s.max_motor_speed);
   read(c, plant, "plant", "max_thrust", s.max_thrust);
   read(c, plant, "plant", "max_body_rate", s.max_body_rate);
+  read(c, plant, "plant", "rate_gain", s.rate_gain);
+  if (!(s.rate_gain > 0.0)) c.fail("plant.rate_gain", "must be > 0");
   if (plant["params"]) {
     if (!plant["params"].IsMap()) c.fail("plant.params", "expected a mapping");
     for (const auto& kv : plant["params"]) {
@@ -100,7 +103,8 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
       }
     }
   }
-  if (s.model != "quadrotor" && s.model != "quadrotor_rate" && s.model != "cartpole" && s.model != "racecar")
+  if (s.model != "quadrotor" && s.model != "quadrotor_rate" && s.model != "quadrotor_rate_body" &&
+      s.model != "cartpole" && s.model != "racecar")
     c.fail("plant.model", "unknown model '" + s.model + "'");
   if (s.vehicles < 1 || s.vehicles > 32) c.fail("plant.vehicles", "must be 1..32");
   if ((s.model == "cartpole" || s.model == "racecar") && s.vehicles != 1)

@@ -121,3 +121,46 @@ TEST(Scenario, MovingObstaclesHaveTheirSpeed) {
 }
 
 }  // namespace
+
+namespace {
+
+sim::Scenario rate_body() {
+  sim::Scenario s = sim::load_scenario(scenario("rate_forest_4m_body"), 1);
+  s.forest.enabled = false;
+  s.obstacles.clear();
+  return s;
+}
+
+TEST(RateBodyPlant, HoversOnItsHoverThrust) {
+  const auto s = rate_body();
+  auto plant = sim::make_plant(s);
+  ASSERT_EQ(plant->nx(), 13);
+  const auto u = plant->hover();
+  const double wind[3] = {0, 0, 0};
+  for (int i = 0; i < 3000; ++i) plant->step(u.data(), wind, 1e-3);
+  double p[3];
+  plant->position(0, p);
+  EXPECT_NEAR(p[2], 2.0, 2e-3);
+  EXPECT_NEAR(plant->state()[6], 1.0f, 1e-5f);  // level: q = identity
+}
+
+TEST(RateBodyPlant, TracksARateSetpointAndTiltsTheThrust) {
+  const auto s = rate_body();
+  auto plant = sim::make_plant(s);
+  auto u = plant->hover();
+  u[1] = 1.0f;  // roll rate 1 rad/s
+  const double wind[3] = {0, 0, 0};
+  for (int i = 0; i < 300; ++i) plant->step(u.data(), wind, 1e-3);
+  const auto& x = plant->state();
+  EXPECT_NEAR(x[10], 1.0f, 0.1f);  // the P loop through the motor lag has settled
+  // Positive roll about x tilts the body z axis towards -y: the thrust pushes along -y.
+  for (int i = 0; i < 300; ++i) plant->step(plant->hover().data(), wind, 1e-3);
+  EXPECT_LT(plant->state()[4], 0.0f);
+  // The published quaternion's body z axis is R_WB's third column from the Euler angles.
+  const float qw = x[6], qx = x[7], qy = x[8], qz = x[9];
+  const float bz = 1.0f - 2.0f * (qx * qx + qy * qy);
+  EXPECT_GT(bz, 0.9f);
+  EXPECT_NEAR(qw * qw + qx * qx + qy * qy + qz * qz, 1.0f, 1e-5f);
+}
+
+}  // namespace

@@ -52,7 +52,7 @@ class Progress:
 
 
 def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu", first_seed: int = 1,
-                 controller: str = "mppid", realtime: bool = False) -> dict:
+                 controller: str = "mppid", realtime: bool = False, sets=()) -> dict:
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     runs = [(s, first_seed + k) for s in scenarios for k in range(seeds)]
@@ -67,6 +67,8 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
         d = out / scen / f"seed_{seed:04d}"
         cmd = [sys.executable, "-m", "sitl_harness", "run", "--scenario", scen, "--seed", str(seed), "--out", str(d),
                "--backend", backend, "--controller", controller, "--quiet"] + (["--realtime"] if realtime else [])
+        for kv in sets:
+            cmd += ["--set", kv]
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
         if stopping.is_set():
             return scen, seed, None
@@ -113,6 +115,7 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
     summary = summarize(results)
     summary["command"] = " ".join(sys.argv)
     summary["jobs"] = jobs
+    summary["sets"] = list(sets)
     (out / "summary.json").write_text(json.dumps({"summary": summary, "runs": sorted(results, key=lambda r: (r.get("scenario", ""), r.get("seed", 0)))}, indent=2))
     (out / "summary.md").write_text(markdown(summary))
     try:

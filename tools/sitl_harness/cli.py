@@ -37,6 +37,7 @@ def main(argv=None) -> int:
     c.add_argument("--backend", choices=["cpu", "cuda"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
     c.add_argument("--realtime", action="store_true")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
 
     p = sub.add_parser("plot", help="re-make the plots of a result folder")
     p.add_argument("folder", type=Path)
@@ -78,7 +79,7 @@ def main(argv=None) -> int:
                 return 2
         try:
             summary = run_campaign(names, a.seeds, a.out, jobs=a.jobs, backend=a.backend, first_seed=a.first_seed,
-                                   controller=a.controller, realtime=a.realtime)
+                                   controller=a.controller, realtime=a.realtime, sets=a.set)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130

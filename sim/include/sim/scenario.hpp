@@ -62,13 +62,14 @@ struct ReferenceSpec {
 struct Scenario {
   std::string name;
   std::string task;       // controller config: config/tasks/<task>.yaml
-  std::string model;      // quadrotor | quadrotor_rate | cartpole | racecar
+  std::string model;      // quadrotor | quadrotor_rate | quadrotor_rate_body | cartpole | racecar
   int vehicles = 1;
   std::map<std::string, double> params;  // plant parameters by name (core's field tables)
   std::vector<double> initial_state;     // one vehicle's state; empty: model default
   double max_motor_speed = 8000.0;       // rpm, the plant's motor saturation (quadrotor)
   double max_thrust = 40.0;              // N, quadrotor_rate saturation
   double max_body_rate = 10.0;           // rad/s, quadrotor_rate saturation
+  double rate_gain = 20.0;               // 1/s, quadrotor_rate_body: the autopilot's P rate loop
 
   // Timing.
   double physics_hz = 1000.0;
