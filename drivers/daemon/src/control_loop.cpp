@@ -115,7 +115,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     published = Mode::kFailsafe;
   } else if (age > s_.state_timeout_ns) {
     counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
-    published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+    published = publish_held(state_seq);
     c_->fallback(u_.data());  // keep the warm start aligned with time
   } else {
     bool good = false;
@@ -138,11 +138,11 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       // The optimizer's plan may hold NaN: restart it from u_init, fly the held plan.
       c_->reset();
       ++consecutive_bad_updates_;
-      published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+      published = publish_held(state_seq);
     } else if (missed_deadline) {
       counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
       consecutive_bad_updates_ = 0;
-      published = publish_held(state_seq) ? Mode::kHoldPlan : Mode::kFailsafe;
+      published = publish_held(state_seq);
       held_ = c_->plan();  // same size: copies, no allocation
     } else {
       consecutive_bad_updates_ = 0;
@@ -164,7 +164,6 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     missed = schedule_.finish(end);
     monitor_.record(start_ns, end, missed);
   }
-  (void)missed_deadline;
   ++cycle_index_;
 
   const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
@@ -290,7 +289,7 @@ bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
   cmd_.kind = s_.command_kind;
   cmd_.n = nu_;
   std::copy_n(u, nu_, cmd_.u);
-  tx_->publish_command(cmd_);
+  if (!tx_->publish_command(cmd_)) counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
   switch (mode) {
     case Mode::kNormal: counters_.commands_normal.fetch_add(1, std::memory_order_relaxed); break;
     case Mode::kHoldPlan: counters_.commands_hold.fetch_add(1, std::memory_order_relaxed); break;
@@ -299,13 +298,15 @@ bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
   return true;
 }
 
-// The held plan's next step, then the held plan shifted (u_init appended).
-bool ControlLoop::publish_held(std::int64_t state_seq) {
+// The held plan's next step, then the held plan shifted (u_init appended). Returns the
+// mode actually published: the failsafe if the held step fails the gate.
+Mode ControlLoop::publish_held(std::int64_t state_seq) {
   std::copy_n(held_.data(), nu_, u_.data());
   std::copy(held_.begin() + nu_, held_.end(), held_.begin());
   std::copy_n(u_init_.data(), nu_, held_.end() - nu_);
-  if (publish(Mode::kHoldPlan, u_.data(), state_seq)) return true;
-  return publish_failsafe(state_seq);
+  if (publish(Mode::kHoldPlan, u_.data(), state_seq)) return Mode::kHoldPlan;
+  publish_failsafe(state_seq);
+  return Mode::kFailsafe;
 }
 
 bool ControlLoop::publish_failsafe(std::int64_t state_seq) {

@@ -29,9 +29,9 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   out += line("period", t.period);
   out += line("jitter |period-nominal|", t.jitter);
   out += line("state-in -> command-out", t.latency);
-  out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} (failsafe entries {})\n",
+  out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} send_failures={} (failsafe entries {})\n",
                      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
-                     v(c.failsafe_entries));
+                     v(c.publish_failures), v(c.failsafe_entries));
   out += fmt::format("  optimizer nonfinite={} errors={} gate_rejects={} late_holds={} stale_cycles={}\n",
                      v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.gate_rejects), v(c.late_holds),
                      v(c.stale_cycles));

@@ -54,6 +54,7 @@ struct LoopCounters {
   std::atomic<std::int64_t> status_published{0};
   std::atomic<std::int64_t> plans_published{0};
   std::atomic<std::int64_t> failsafe_entries{0};
+  std::atomic<std::int64_t> publish_failures{0};  // the transport could not send a command
 };
 
 class ControlLoop {
@@ -104,7 +105,7 @@ class ControlLoop {
   void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
   void select_obstacles(const transport::StateSample& x);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
-  bool publish_held(std::int64_t state_seq);
+  transport::Mode publish_held(std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
   void maybe_status(bool force, std::int64_t now_ns);
   void maybe_plan(std::int64_t state_seq);
