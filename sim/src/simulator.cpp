@@ -160,10 +160,13 @@ void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const
     ++ignored_commands_;  // an answer to an older state (e.g. a republished one)
     return;
   }
+  // A malformed answer still answers its state (lock-step goes on, the previous control
+  // stays applied); it is counted, and the score reports it.
+  if (o_.lockstep) answered_ = true;
   if (msg->n != nu_total_ || static_cast<int>(msg->u.size()) != nu_total_ ||
       (msg->kind != plant_->command_kind() && msg->kind != mppi_lcm::command_t::KIND_GENERIC)) {
     ++rejected_commands_;
-    if (!o_.quiet)
+    if (!o_.quiet && rejected_commands_ <= 5)
       std::fprintf(stderr, "mppid-sim: command rejected (n=%d kind=%d, expected n=%d kind=%d)\n", msg->n,
                    msg->kind, nu_total_, plant_->command_kind());
     return;
@@ -174,7 +177,6 @@ void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const
     return;
   }
   if (o_.lockstep) {
-    answered_ = true;
     last_latency_ms_ = 1e3 * std::chrono::duration<double>(Clock::now() - published_at_).count();
   }
   pending_.push_back({now_ + s_.actuation_delay, std::move(u), msg->mode, msg->seq, msg->state_seq});

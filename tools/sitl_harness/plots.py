@@ -15,12 +15,14 @@ from . import logs  # noqa: E402
 STATE_NAMES = {
     "quadrotor": ["x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "p", "q", "r", "w1", "w2", "w3", "w4"],
     "quadrotor_rate": ["x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "p", "q", "r"],
+    "quadrotor_rate_body": ["x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "p", "q", "r"],
     "cartpole": ["x", "x_dot", "theta", "theta_dot", "force"],
     "racecar": ["x", "y", "psi", "beta", "vx", "vy", "r", "delta", "Fx"],
 }
 CONTROL_NAMES = {
     "quadrotor": ["w1_des [rpm]", "w2_des", "w3_des", "w4_des"],
     "quadrotor_rate": ["thrust [N]", "p_des [rad/s]", "q_des", "r_des"],
+    "quadrotor_rate_body": ["thrust [N]", "p_des [rad/s]", "q_des", "r_des"],
     "cartpole": ["f_des [N]"],
     "racecar": ["delta_des [rad]", "Fx_des [N]"],
 }
@@ -118,6 +120,7 @@ def _traces(out, t, X, U, model, nx, nu, m):
     cnames = CONTROL_NAMES.get(model, [f"u{i}" for i in range(nu)])
     groups = {"quadrotor": [(0, 3), (3, 6), (6, 9), (9, 12), (12, 16)],
               "quadrotor_rate": [(0, 3), (3, 6), (6, 10), (10, 13)],
+              "quadrotor_rate_body": [(0, 3), (3, 6), (6, 10), (10, 13)],
               "cartpole": [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)],
               "racecar": [(0, 2), (2, 4), (4, 6), (6, 7), (7, 8), (8, 9)]}.get(model, [(0, nx)])
     rows = len(groups) + nu

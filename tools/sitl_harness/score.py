@@ -21,7 +21,7 @@ import yaml
 
 from . import logs, paths
 
-QUAD_MODELS = ("quadrotor", "quadrotor_rate")
+QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 
 
 def reference_eval(ref: dict, t: np.ndarray):
@@ -132,6 +132,8 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         res["reason"] = ho
     elif so is None:
         res["reason"] = "no simulator summary"
+    elif summary.get("rejected_commands"):
+        res["reason"] = f"{summary['rejected_commands']} malformed commands (wrong size, kind or not finite)"
     elif so == "controller_timeout":
         res["reason"] = "controller stopped answering (lock-step timeout)"
     elif so in ("interrupted", "error"):

@@ -31,8 +31,9 @@ def main(argv=None) -> int:
     m = int(sc["plant"].get("vehicles", 1))
     if model == "quadrotor":
         u, kind = [HOVER_RPM] * 4 * m, command_t.KIND_MOTOR_SPEEDS
-    elif model == "quadrotor_rate":
-        u, kind = [1.0 * 9.81, 0.0, 0.0, 0.0] * m, command_t.KIND_THRUST_RATES
+    elif model in ("quadrotor_rate", "quadrotor_rate_body"):
+        mass = float((sc["plant"].get("params") or {}).get("mass", 1.0))
+        u, kind = [mass * 9.81, 0.0, 0.0, 0.0] * m, command_t.KIND_THRUST_RATES
     elif model == "cartpole":
         u, kind = [0.0], command_t.KIND_GENERIC
     else:
