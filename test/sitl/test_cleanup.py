@@ -6,7 +6,7 @@ import signal
 import subprocess
 import time
 
-from conftest import ROOT, SITL, group_members, pid_alive, sitl
+from sitl_helpers import ROOT, SITL, group_members, pid_alive, sitl
 
 
 def _assert_all_gone(out):

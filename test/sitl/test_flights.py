@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from conftest import sitl
+from sitl_helpers import sitl
 from sitl_harness import logs, paths
 
 

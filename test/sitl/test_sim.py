@@ -4,7 +4,7 @@ from __future__ import annotations
 import json
 import subprocess
 
-from conftest import ROOT, sitl
+from sitl_helpers import ROOT, sitl
 from sitl_harness import paths
 
 
