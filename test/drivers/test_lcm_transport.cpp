@@ -141,12 +141,16 @@ TEST(LcmTransport, GarbageAndWrongTypeOnTheStateChannelAreCounted) {
   ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
   r.cycle();
   ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 2; }));
+  // The status follows the command (a mode change forces one).
+  ASSERT_TRUE(wait_until([&] {
+    std::lock_guard<std::mutex> l(r.listener.mu);
+    return !r.listener.statuses.empty();
+  }));
   std::lock_guard<std::mutex> l(r.listener.mu);
   EXPECT_EQ(r.listener.commands[0].mode, mppi_lcm::command_t::MODE_FAILSAFE);
   EXPECT_EQ(r.listener.commands[1].mode, mppi_lcm::command_t::MODE_NORMAL);
   EXPECT_EQ(r.listener.commands[1].state_seq, 2);
   EXPECT_EQ(r.listener.commands[1].kind, mppi_lcm::command_t::KIND_MOTOR_SPEEDS);
-  ASSERT_FALSE(r.listener.statuses.empty());
 }
 
 TEST(LcmTransport, NanStateOverLcmIsRejectedAndNoNanLeaves) {
@@ -159,9 +163,12 @@ TEST(LcmTransport, NanStateOverLcmIsRejectedAndNoNanLeaves) {
   for (int k = 0; k < 51; ++k) r.cycle();
   ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 51; }));
   EXPECT_FALSE(r.listener.any_nonfinite());
+  ASSERT_TRUE(wait_until([&] {
+    std::lock_guard<std::mutex> l(r.listener.mu);
+    return !r.listener.statuses.empty() && r.listener.statuses.back().rejected_nan == 2;
+  }));
   std::lock_guard<std::mutex> l(r.listener.mu);
   EXPECT_EQ(r.listener.commands[0].state_seq, 1);
-  EXPECT_EQ(r.listener.statuses.back().rejected_nan, 2);
 }
 
 TEST(LcmTransport, OutOfOrderAndDuplicateOverLcmAreCounted) {
@@ -238,4 +245,46 @@ TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
       EXPECT_LE(v, 6000.0f);
     }
   }
+}
+
+TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
+  // A simulator's side of lock-step: publish state k, then tick k, wait for the command
+  // answering state k, step. 100 steps of 20 ms sim time must take well under 2 s.
+  rt::MonotonicClock clock;
+  transport::LcmTransport tx("memq://", {}, &clock, 4096);
+  transport::Inbox inbox(LcmRig::expect());
+  Listener listener;
+  tx.lcm().subscribe("MPPI_COMMAND", &Listener::on_command, &listener);
+  FakeClock fclock;
+  FakeController fake(&fclock);
+  daemon::LoopSettings s;
+  s.lockstep = true;
+  daemon::ControlLoop loop(&fake, &clock, &tx, &inbox, s);
+  tx.start(&inbox);
+  std::atomic<bool> stop{false};
+  std::thread runner([&] { loop.run(stop); });
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int k = 1; k <= 100; ++k) {
+    auto m = state_msg(k);
+    m.sample_utime = k * 20000;
+    tx.lcm().publish("MPPI_STATE", &m);
+    mppi_lcm::sim_clock_t tick{};
+    tick.seq = k;
+    tick.step = k;
+    tick.sim_utime = k * 20000;
+    tx.lcm().publish("MPPI_SIM_CLOCK", &tick);
+    ASSERT_TRUE(wait_until([&] { return listener.n_commands() == static_cast<std::size_t>(k); })) << "step " << k;
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  stop = true;
+  runner.join();
+  tx.stop();
+  EXPECT_LT(secs, 2.0);  // 2 s of sim time
+  std::lock_guard<std::mutex> l(listener.mu);
+  ASSERT_EQ(listener.commands.size(), 100u);  // exactly one per tick
+  for (std::size_t i = 0; i < listener.commands.size(); ++i) {
+    EXPECT_EQ(listener.commands[i].state_seq, static_cast<std::int64_t>(i + 1));
+    EXPECT_EQ(listener.commands[i].mode, mppi_lcm::command_t::MODE_NORMAL);
+  }
+  EXPECT_EQ(loop.timing_total().misses, 0);
 }
