@@ -58,7 +58,9 @@ def main():
 
     err_path = "/tmp/mppid_e2e_%d.err" % os.getpid()
     with open(err_path, "w") as err:
-        proc = subprocess.Popen([a.mppid, "--config", a.config, "--lcm-url", URL, "--stats",
+        # --realtime as in service (SCHED_FIFO keeps the rate on a loaded CI machine); if the OS
+        # refuses, mppid says so and runs on.
+        proc = subprocess.Popen([a.mppid, "--config", a.config, "--lcm-url", URL, "--stats", "--realtime",
                                  "--set", "mppi.rollouts=256", "--set", "mppi.horizon=30"],
                                 stdout=subprocess.PIPE, stderr=err, text=True)
     deadline = time.monotonic() + 30
@@ -178,7 +180,7 @@ def main():
         check(last.rejected_params == 2, "status counts the 2 rejected parameter updates (%d)" % last.rejected_params)
         check(last.rejected_stale > 0, "status counts stale cycles (%d)" % last.rejected_stale)
         check(last.cycles > 150, "cycles %d" % last.cycles)
-    check(got["plans"] > 5, "plan messages for display: %d" % got["plans"])
+    check(got["plans"] > 5, "plan messages for display (5 Hz while normal): %d" % got["plans"])
     check("parameter cost.w_xy = 3 applied" in err_text, "valid parameter applied (log)")
     stats = [l for l in out.splitlines() if l.startswith("mppid-stats ")]
     check(len(stats) == 1, "--stats summary printed")
