@@ -26,6 +26,9 @@ import yaml
 from . import paths
 
 LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
+# A lock-step flight bursts thousands of datagrams a second; the logger must not drop any
+# while the CPU is busy (the kernel caps this at net.core.rmem_max).
+LOGGER_RECV_BUF = 4 * 1024 * 1024
 _NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
 
 
@@ -197,7 +200,7 @@ class Flight:
             ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
         sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
                    "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
-        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}", str(self.out / "flight.lcmlog")]
+        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}&recv_buf_size={LOGGER_RECV_BUF}", str(self.out / "flight.lcmlog")]
 
         t0 = time.monotonic()
         outcome = None

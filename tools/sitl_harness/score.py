@@ -99,6 +99,9 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         "mean_speed": None,
         "commands": len(lcm.get("MPPI_COMMAND", [])),
     }
+    if summary.get("commands") is not None:
+        # Commands the simulator received but the logger did not record (should be 0).
+        res["log_commands_missing"] = max(0, int(summary["commands"]) - res["commands"])
     res.update(_controller_stats(lcm.get("MPPI_STATUS", [])))
     lat = [tk["lat_ms"] for tk in ticks if tk.get("lat_ms") is not None]
     if lat:
