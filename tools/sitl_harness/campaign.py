@@ -72,8 +72,10 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
         if stopping.is_set():
             return scen, seed, None
-        p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
-                             stderr=open(d.parent / f"seed_{seed:04d}.stderr", "wb") if d.parent.mkdir(parents=True, exist_ok=True) is None else None)
+        d.mkdir(parents=True, exist_ok=True)
+        with open(d / "harness.stderr", "wb") as err:
+            p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                                 stderr=err)
         with lock:
             children.add(p)
         p.wait()
