@@ -2,6 +2,7 @@
 // The main thread owns signals (blocked everywhere else, taken with sigtimedwait), the
 // systemd watchdog and STATUS= line; the loop thread owns the controller and publishes.
 #include <CLI/CLI.hpp>
+#include <spdlog/async.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
@@ -56,8 +57,23 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   realtime = realtime || require_realtime;
 
-  auto logger = spdlog::stderr_color_mt("mppid");
+  // Signals go to the main thread only: block them before any thread exists (the logger's
+  // thread pool included); the main thread takes them with sigtimedwait.
+  sigset_t sigs;
+  sigemptyset(&sigs);
+  sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
+
+  // Asynchronous and non-blocking: the loop thread only enqueues (mode changes, parameter
+  // results); a slow stderr/journal never stalls a cycle (the oldest line is dropped).
+  spdlog::init_thread_pool(4096, 1);
+  auto logger = std::make_shared<spdlog::async_logger>("mppid", std::make_shared<spdlog::sinks::stderr_color_sink_mt>(),
+                                                       spdlog::thread_pool(), spdlog::async_overflow_policy::overrun_oldest);
   spdlog::set_default_logger(logger);
+  struct FlushAtExit {
+    ~FlushAtExit() { spdlog::shutdown(); }
+  } flush_at_exit;
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e %^%l%$ mppid: %v");
 
@@ -75,13 +91,6 @@ int main(int argc, char** argv) {
   }
   if (!lcm_url.empty()) ds.lcm_url = lcm_url;
   if (lockstep) ds.loop.lockstep = true;
-
-  // Signals go to the main thread only: block them before any thread exists.
-  sigset_t sigs;
-  sigemptyset(&sigs);
-  sigaddset(&sigs, SIGTERM);
-  sigaddset(&sigs, SIGINT);
-  pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   mppi::rt::RealtimeResult rt_result;
   if (realtime) mppi::rt::lock_memory(ds.realtime, &rt_result);
