@@ -4,7 +4,7 @@ option(MPPID_WERROR "Treat warnings as errors" OFF)
 
 add_library(mppid_warnings INTERFACE)
 set(_cxx_warn -Wall -Wextra -Wpedantic -Wshadow -Wconversion -Wno-sign-conversion
-    -Wnon-virtual-dtor -Wold-style-cast -Wdouble-promotion)
+    -Wnon-virtual-dtor -Wold-style-cast)
 target_compile_options(mppid_warnings INTERFACE
   $<$<COMPILE_LANGUAGE:CXX>:${_cxx_warn}>
   $<$<COMPILE_LANGUAGE:CUDA>:-Xcompiler=-Wall,-Wextra --Werror=all-warnings>)

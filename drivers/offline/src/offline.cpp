@@ -216,7 +216,7 @@ Scenario forest_scenario(const Controller& c, float spacing, std::uint64_t seed)
   s.inputs.vehicle_count = m;
   std::vector<float> x0;
   std::vector<std::array<float, 2>> clear;
-  const float start_x = 0.0f, goal_x = 40.0f, z = 2.0f;
+  const float start_x = 0.0f, goal_x = 50.0f, z = 2.0f;
   for (int j = 0; j < m; ++j) {
     const float y = (static_cast<float>(j) - static_cast<float>(m - 1) / 2.0f) * 2.0f;
     const auto xj = quad_state(c, start_x, y, z);

@@ -74,6 +74,9 @@ struct Quadrotor {
   }
 
   // Explicit Euler, as Algorithm 1.
+  // Keeps the state on its manifold after an integration step (nothing to do here).
+  MPPI_HD static void project(float*) {}
+
   MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
     float dx[kNx];
     derivative(p, x, u, dx);

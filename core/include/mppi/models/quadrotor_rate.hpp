@@ -51,14 +51,19 @@ struct QuadrotorRate {
     dx[WZ] = k * (u[RATE_Z] - wz);
   }
 
+  // Back onto the unit quaternions after an integration step.
+  MPPI_HD static void project(float* x) {
+    const float n = fsqrt(x[QW] * x[QW] + x[QX] * x[QX] + x[QY] * x[QY] + x[QZ] * x[QZ]);
+    const float inv = n > 0.0f ? 1.0f / n : 1.0f;
+    for (int i = QW; i <= QZ; ++i) x[i] *= inv;
+  }
+
   // Explicit Euler, then back onto the unit quaternions.
   MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
     float dx[kNx];
     derivative(p, x, u, dx);
     for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
-    const float n = fsqrt(x[QW] * x[QW] + x[QX] * x[QX] + x[QY] * x[QY] + x[QZ] * x[QZ]);
-    const float inv = n > 0.0f ? 1.0f / n : 1.0f;
-    for (int i = QW; i <= QZ; ++i) x[i] *= inv;
+    project(x);
   }
 
   MPPI_HD static void position(const float* x, float* pos) {

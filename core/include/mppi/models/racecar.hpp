@@ -62,6 +62,9 @@ struct Racecar {
     dx[FX] = p.force_gain * (u[DRIVE] - fx);
   }
 
+  // Keeps the state on its manifold after an integration step (nothing to do here).
+  MPPI_HD static void project(float*) {}
+
   MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
     float dx[kNx];
     derivative(p, x, u, dx);
