@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstring>
 #include <exception>
+#include <pthread.h>
+#include <sched.h>
 
 namespace mppi::daemon {
 
@@ -51,7 +53,17 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
 
 bool ControlLoop::is_loop_param(const std::string& key) { return key.rfind("daemon.", 0) == 0; }
 
+ControlLoop::~ControlLoop() {
+  guard_quit_.store(true);
+  guard_wake_.post();
+  if (guard_thread_.joinable()) guard_thread_.join();
+}
+
 void ControlLoop::start() {
+  if (s_.deadline_guard && !s_.lockstep && !guard_thread_.joinable()) {
+    guard_plan_.assign(held_.size(), 0.0f);
+    guard_thread_ = std::thread([this] { guard_main(); });
+  }
   schedule_.start(clock_->now_ns());
   heartbeat_ns_.store(clock_->now_ns(), std::memory_order_relaxed);
   started_ = true;
@@ -119,6 +131,8 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     c_->fallback(u_.data());  // keep the warm start aligned with time
   } else {
     bool good = false;
+    const bool guarded = guard_thread_.joinable() && !lockstep;
+    if (guarded) guard_arm(deadline_ns, state_seq);
     try {
       last_stats_ = c_->iterate(x.x, u_.data());
       if (!last_stats_.finite) {
@@ -134,7 +148,23 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     }
     const std::int64_t done = clock_->now_ns();
     missed_deadline = !lockstep && done > deadline_ns;
-    if (!good) {
+    const int guard_steps = guarded ? guard_disarm() : 0;
+    if (guard_steps > 0) {
+      // The guard covered the stall with the held plan, one step per period; this late
+      // result is not published. Keep the held plan in step with what went out.
+      counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
+      const std::size_t used = std::min<std::size_t>(static_cast<std::size_t>(guard_steps) * nu_, held_.size());
+      std::copy(held_.begin() + static_cast<std::ptrdiff_t>(used), held_.end(), held_.begin());
+      for (std::size_t i = held_.size() - used; i < held_.size(); ++i) held_[i] = u_init_[i % nu_];
+      if (good) {
+        consecutive_bad_updates_ = 0;
+        held_ = c_->plan();
+      } else {
+        c_->reset();
+        ++consecutive_bad_updates_;
+      }
+      published = Mode::kHoldPlan;
+    } else if (!good) {
       // The optimizer's plan may hold NaN: restart it from u_init, fly the held plan.
       c_->reset();
       ++consecutive_bad_updates_;
@@ -283,7 +313,7 @@ void ControlLoop::select_obstacles(const transport::StateSample& x) {
 bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
   if (!gate_.pass(u, nu_)) return false;
   cmd_.utime = rt::wall_utime();
-  ++cmd_.seq;
+  cmd_.seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
   cmd_.state_seq = state_seq;
   cmd_.mode = mode;
   cmd_.kind = s_.command_kind;
@@ -382,6 +412,88 @@ void ControlLoop::maybe_plan(std::int64_t state_seq) {
   p.dt = c_->dt();
   p.u = held_.data();
   if (tx_->publish_plan(p)) counters_.plans_published.fetch_add(1, std::memory_order_relaxed);
+}
+
+// ---- deadline guard ------------------------------------------------------------------
+
+void ControlLoop::guard_arm(std::int64_t deadline_ns, std::int64_t state_seq) {
+  std::copy(held_.begin(), held_.end(), guard_plan_.begin());
+  guard_state_seq_ = state_seq;
+  guard_steps_.store(0, std::memory_order_relaxed);
+  guard_deadline_.store(deadline_ns, std::memory_order_relaxed);
+  guard_word_.store((++guard_id_ << 2) | kArmed, std::memory_order_release);
+  guard_wake_.post();
+}
+
+int ControlLoop::guard_disarm() {
+  std::uint64_t armed = (guard_id_ << 2) | kArmed;
+  if (guard_word_.compare_exchange_strong(armed, guard_id_ << 2, std::memory_order_acq_rel)) return 0;
+  // The guard took over: take the cycle back between two of its publishes.
+  while (true) {
+    std::uint64_t waiting = (guard_id_ << 2) | kGuardWaiting;
+    if (guard_word_.compare_exchange_weak(waiting, guard_id_ << 2, std::memory_order_acq_rel)) break;
+    std::this_thread::yield();
+  }
+  return std::max(1, guard_steps_.load(std::memory_order_acquire));
+}
+
+void ControlLoop::guard_publish(int step) {
+  const int steps = static_cast<int>(guard_plan_.size()) / nu_;
+  const float* u = step < steps ? guard_plan_.data() + static_cast<std::ptrdiff_t>(step) * nu_ : u_init_.data();
+  Mode mode = Mode::kHoldPlan;
+  if (!gate_.pass(u, nu_)) {
+    u = failsafe_.data();
+    mode = Mode::kFailsafe;
+    if (!gate_.pass(u, nu_)) {
+      counters_.commands_blocked.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+  }
+  guard_cmd_.utime = rt::wall_utime();
+  guard_cmd_.seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
+  guard_cmd_.state_seq = guard_state_seq_;
+  guard_cmd_.mode = mode;
+  guard_cmd_.kind = s_.command_kind;
+  guard_cmd_.n = nu_;
+  std::copy_n(u, nu_, guard_cmd_.u);
+  if (!tx_->publish_command(guard_cmd_)) counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
+  (mode == Mode::kHoldPlan ? counters_.commands_hold : counters_.commands_failsafe)
+      .fetch_add(1, std::memory_order_relaxed);
+  counters_.guard_commands.fetch_add(1, std::memory_order_relaxed);
+}
+
+void ControlLoop::guard_main() {
+  if (s_.guard_fifo_priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = s_.guard_fifo_priority;
+    pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);  // refused: runs on at its policy
+  }
+  rt::MonotonicClock clock;
+  while (!guard_quit_.load(std::memory_order_relaxed)) {
+    std::uint64_t w = guard_word_.load(std::memory_order_acquire);
+    if ((w & 3u) != kArmed) {
+      guard_wake_.wait_for(period_ns_);
+      continue;
+    }
+    const std::uint64_t id = w >> 2;
+    std::int64_t t = guard_deadline_.load(std::memory_order_relaxed);
+    while (clock.now_ns() < t && !guard_quit_.load(std::memory_order_relaxed)) clock.sleep_until(t);
+    std::uint64_t armed = (id << 2) | kArmed;
+    if (!guard_word_.compare_exchange_strong(armed, (id << 2) | kGuardPublishing, std::memory_order_acq_rel))
+      continue;  // the loop finished in time (or already re-armed): nothing to do
+    counters_.guard_takeovers.fetch_add(1, std::memory_order_relaxed);
+    for (int step = 0;; ++step) {
+      guard_publish(step);
+      guard_steps_.store(step + 1, std::memory_order_release);
+      guard_word_.store((id << 2) | kGuardWaiting, std::memory_order_release);
+      t += period_ns_;
+      while (clock.now_ns() < t && !guard_quit_.load(std::memory_order_relaxed)) clock.sleep_until(t);
+      std::uint64_t waiting = (id << 2) | kGuardWaiting;
+      if (guard_quit_.load(std::memory_order_relaxed) ||
+          !guard_word_.compare_exchange_strong(waiting, (id << 2) | kGuardPublishing, std::memory_order_acq_rel))
+        break;  // the loop took the cycle back
+    }
+  }
 }
 
 }  // namespace mppi::daemon

@@ -75,13 +75,14 @@ std::int8_t state_model_for(const std::string& task) {
 DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::string& task, int nu) {
   DaemonSettings d;
   d.loop.command_kind = command_kind_for(task);
+  d.loop.deadline_guard = true;
   d.expect_model = state_model_for(task);
   if (!section || section.IsNull()) return d;
   if (!section.IsMap()) throw ConfigError("daemon: expected a map");
   check_known(section, "",
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
-               "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u"});
+               "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -96,6 +97,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   l.watchdog_max_optimizer_errors =
       static_cast<int>(number(section, "watchdog_max_optimizer_errors", l.watchdog_max_optimizer_errors, 1, 1e6));
   if (section["lockstep"]) l.lockstep = scalar<bool>(section["lockstep"], "lockstep");
+  if (section["deadline_guard"]) l.deadline_guard = scalar<bool>(section["deadline_guard"], "deadline_guard");
   d.lockstep_trigger = text(section, "lockstep_trigger", d.lockstep_trigger);
   if (d.lockstep_trigger != "clock" && d.lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
   d.lcm_url = text(section, "lcm_url", d.lcm_url);

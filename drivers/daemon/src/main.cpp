@@ -91,6 +91,8 @@ int main(int argc, char** argv) {
   }
   if (!lcm_url.empty()) ds.lcm_url = lcm_url;
   if (lockstep) ds.loop.lockstep = true;
+  // The deadline guard must preempt a stalled optimizer (and its OpenMP workers).
+  if (realtime && ds.realtime.fifo_priority > 0) ds.loop.guard_fifo_priority = std::min(99, ds.realtime.fifo_priority + 1);
 
   mppi::rt::RealtimeResult rt_result;
   if (realtime) mppi::rt::lock_memory(ds.realtime, &rt_result);

@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cstdint>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "mppi/controller.hpp"
@@ -20,6 +21,7 @@
 #include "mppi/rt/command_gate.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/schedule.hpp"
+#include "mppi/rt/wakeup.hpp"
 #include "mppi/transport/transport.hpp"
 
 namespace mppi::daemon {
@@ -36,6 +38,12 @@ struct LoopSettings {
   int watchdog_max_optimizer_errors = 5;    // ... or past this many consecutive bad updates
   std::int8_t command_kind = -1;            // command_t::KIND_*; -1 = from the task name
   std::vector<float> failsafe_u;            // per control channel; empty = u_init
+  // Deadline guard (real time only): a second thread that, when the optimizer is still
+  // running at the deadline, publishes the held plan's next step at that deadline and at
+  // every period after it until the optimizer returns, so commands keep their rate
+  // through a stall. It always sleeps on CLOCK_MONOTONIC (off with a fake clock).
+  bool deadline_guard = false;
+  int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -55,6 +63,8 @@ struct LoopCounters {
   std::atomic<std::int64_t> plans_published{0};
   std::atomic<std::int64_t> failsafe_entries{0};
   std::atomic<std::int64_t> publish_failures{0};  // the transport could not send a command
+  std::atomic<std::int64_t> guard_takeovers{0};   // stalls the deadline guard covered
+  std::atomic<std::int64_t> guard_commands{0};    // held-plan commands it published
 };
 
 class ControlLoop {
@@ -63,6 +73,9 @@ class ControlLoop {
   // from the inbox's ticks and `clock` only measures compute time.
   ControlLoop(Controller* controller, rt::Clock* clock, transport::Transport* transport,
               transport::Inbox* inbox, LoopSettings settings);
+  ~ControlLoop();
+  ControlLoop(const ControlLoop&) = delete;
+  ControlLoop& operator=(const ControlLoop&) = delete;
 
   // Runs until stop is set (or max_cycles cycles, if >= 0). Real-time or lock-step.
   void run(const std::atomic<bool>& stop, std::int64_t max_cycles = -1);
@@ -110,6 +123,10 @@ class ControlLoop {
   void maybe_status(bool force, std::int64_t now_ns);
   void maybe_plan(std::int64_t state_seq);
   void set_mode(transport::Mode m);
+  void guard_arm(std::int64_t deadline_ns, std::int64_t state_seq);
+  int guard_disarm();  // 0 when the loop kept the cycle, else the guard's command count
+  void guard_main();
+  void guard_publish(int step);
 
   Controller* c_;
   rt::Clock* clock_;
@@ -146,6 +163,24 @@ class ControlLoop {
   std::int64_t cycle_index_ = 0;
   int consecutive_bad_updates_ = 0;
   std::int64_t prev_tick_sim_ns_ = -1;
+
+  std::atomic<std::int64_t> cmd_seq_{0};  // shared by the loop and the guard
+
+  // Deadline guard. word = (cycle id << 2) | phase; phases: idle, armed (the loop is in
+  // the optimizer), guard waiting (it has taken the cycle over, between publishes), guard
+  // publishing. The loop writes guard_plan_ only while idle; the guard reads it only
+  // after taking over, so the buffer itself needs no lock.
+  enum : std::uint64_t { kIdle = 0, kArmed = 1, kGuardWaiting = 2, kGuardPublishing = 3 };
+  std::atomic<std::uint64_t> guard_word_{0};
+  std::atomic<std::int64_t> guard_deadline_{0};
+  std::atomic<int> guard_steps_{0};
+  std::atomic<bool> guard_quit_{false};
+  std::uint64_t guard_id_ = 0;
+  std::int64_t guard_state_seq_ = -1;
+  std::vector<float> guard_plan_;
+  transport::Command guard_cmd_;
+  rt::Wakeup guard_wake_;
+  std::thread guard_thread_;
 
   std::atomic<transport::Mode> mode_{transport::Mode::kFailsafe};
   transport::Mode last_status_mode_ = transport::Mode::kFailsafe;
