@@ -29,7 +29,12 @@ MPPI_HD float sanitize_cost(float q) {
 }
 
 // Unnormalised weight of a rollout whose cost exceeds the minimum by `excess` (>= 0).
-MPPI_HD float unnormalised_weight(float excess, float inv_lambda) { return fexp(-excess * inv_lambda); }
+// Below e^-60 a weight is flushed to zero: it changes no sum at float precision, and
+// denormal products would make the weighted update many times slower on a CPU.
+MPPI_HD float unnormalised_weight(float excess, float inv_lambda) {
+  const float a = excess * inv_lambda;
+  return a > 60.0f ? 0.0f : fexp(-a);
+}
 
 template <int NU>
 SamplerConstants<NU> make_sampler_constants(const MppiSettings& s) {

@@ -134,6 +134,13 @@ AppConfig parse_config(YAML::Node root, const std::vector<std::string>& override
   const bool known = visit_task(c.task, [&](auto tag) {
     using T = typename decltype(tag)::type;
     nu = T::kNu;
+    // A team's per-channel lists may be given for one vehicle: every vehicle gets them.
+    for (auto* v : {&c.mppi.sigma, &c.mppi.u_min, &c.mppi.u_max, &c.mppi.u_init, &c.mppi.u_nominal}) {
+      if (T::kVehicles > 1 && static_cast<int>(v->size()) == T::kVehicleNu) {
+        const std::vector<float> one = *v;
+        for (int j = 1; j < T::kVehicles; ++j) v->insert(v->end(), one.begin(), one.end());
+      }
+    }
     typename T::Params p{};
     for (const auto& [key, value] : c.params) {
       const std::string err = set_task_param<T>(p, key, value);
