@@ -59,11 +59,15 @@ ControlLoop::~ControlLoop() {
   if (guard_thread_.joinable()) guard_thread_.join();
 }
 
-void ControlLoop::start() {
+void ControlLoop::prepare() {
   if (s_.deadline_guard && !s_.lockstep && !guard_thread_.joinable()) {
     guard_plan_.assign(held_.size(), 0.0f);
     guard_thread_ = std::thread([this] { guard_main(); });
   }
+}
+
+void ControlLoop::start() {
+  prepare();
   schedule_.start(clock_->now_ns());
   heartbeat_ns_.store(clock_->now_ns(), std::memory_order_relaxed);
   started_ = true;

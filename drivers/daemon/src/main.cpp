@@ -169,6 +169,7 @@ int main(int argc, char** argv) {
       pin.cpu = cpu;
       mppi::rt::make_thread_realtime(pin, &rt_result);
     }
+    loop.prepare();  // the deadline guard thread, before READY
     ready = 1;
     while (ready.load() == 1 && !stop.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     if (stop.load()) return;

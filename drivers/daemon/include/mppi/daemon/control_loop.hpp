@@ -79,6 +79,9 @@ class ControlLoop {
 
   // Runs until stop is set (or max_cycles cycles, if >= 0). Real-time or lock-step.
   void run(const std::atomic<bool>& stop, std::int64_t max_cycles = -1);
+  // Starts the deadline guard thread (if enabled) without starting the schedule: call it
+  // before reporting ready, so no thread (and no locked stack) appears later.
+  void prepare();
   // Fixes the first release (real time) at clock now; run() calls it if not done.
   void start();
   // One real-time cycle: sleeps until its release, then runs. False if stopped first.
