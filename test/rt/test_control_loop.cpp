@@ -447,3 +447,39 @@ TEST(ControlLoop, DeadlineGuardStaysQuietWhenOnTime) {
   const long takeovers = loop.counters().guard_takeovers.load();
   EXPECT_EQ(static_cast<long>(tx.commands.size()), 10 - takeovers + loop.counters().guard_commands.load());
 }
+
+TEST(ControlLoop, DeadlineGuardFallsToFailsafeWhenTheStallOutlastsTheFailsafeTimeout) {
+  rt::MonotonicClock clock;
+  FakeClock unused;
+  FakeController ctl(&unused);
+  RecordingTransport tx;
+  transport::Inbox inbox(expect16());
+  daemon::LoopSettings s;
+  s.deadline_guard = true;
+  s.state_timeout_ns = 30 * kMs;
+  s.failsafe_timeout_ns = 60 * kMs;
+  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
+  ctl.compute_ns = [](int n) {
+    if (n == 2) std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    return std::int64_t{0};
+  };
+  std::atomic<bool> run{false};
+  for (int k = 1; k <= 2; ++k) {
+    auto& st = inbox.state_buffer();
+    st.seq = k;
+    st.nx = 16;
+    st.n = 16;
+    st.vehicle_count = 1;
+    st.model = 1;
+    st.recv_ns = clock.now_ns();
+    inbox.offer_state();
+    ASSERT_TRUE(loop.step_realtime(run));
+  }
+  std::vector<Mode> guard_modes;
+  for (const auto& c : tx.commands)
+    if (c.state_seq == 2) guard_modes.push_back(c.mode);
+  ASSERT_GE(guard_modes.size(), 5u);  // ~7 over a 150 ms stall
+  EXPECT_EQ(guard_modes.front(), Mode::kHoldPlan);
+  EXPECT_EQ(guard_modes.back(), Mode::kFailsafe);  // past 60 ms of stall
+  EXPECT_FALSE(tx.any_nonfinite());
+}

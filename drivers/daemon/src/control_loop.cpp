@@ -445,7 +445,9 @@ void ControlLoop::guard_publish(int step) {
   const int steps = static_cast<int>(guard_plan_.size()) / nu_;
   const float* u = step < steps ? guard_plan_.data() + static_cast<std::ptrdiff_t>(step) * nu_ : u_init_.data();
   Mode mode = Mode::kHoldPlan;
-  if (!gate_.pass(u, nu_)) {
+  // A stall longer than the failsafe timeout is no better than no state: failsafe.
+  const bool too_long = static_cast<std::int64_t>(step) * period_ns_ > s_.failsafe_timeout_ns;
+  if (too_long || !gate_.pass(u, nu_)) {
     u = failsafe_.data();
     mode = Mode::kFailsafe;
     if (!gate_.pass(u, nu_)) {
