@@ -1,0 +1,135 @@
+// mppid-bench: the project's public speed figure. Times one full MPPI iteration as the
+// controller sees it (state in, sample, roll out, weight, plan out) for each configuration
+// and prints one JSON object per configuration: median and p99 in microseconds, the memory
+// allocated at start-up, heap allocations per iteration, and the machine.
+#include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "alloc_counter.hpp"
+#include "mppi/app/config.hpp"
+#include "mppi/offline/offline.hpp"
+#ifdef MPPID_HAVE_CUDA
+#include "mppi/gpu/cuda_backend.hpp"
+#endif
+
+namespace {
+
+std::string cpu_name() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  return "unknown";
+}
+
+std::string task_for(const std::string& model) {
+  if (model == "quadrotor") return "quadrotor_forest";
+  if (model == "quadrotor_rate") return "quadrotor_rate_forest";
+  if (model == "cartpole") return "cartpole_swingup";
+  if (model == "racecar") return "racecar_ellipse";
+  if (model == "team3") return "team3_forest";
+  if (model == "team9") return "team9_forest";
+  return model;  // a task name
+}
+
+std::vector<int> parse_list(const std::string& text) {
+  std::vector<int> out;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) out.push_back(std::stoi(item));
+  return out;
+}
+
+std::string escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '"' || c == '\\') o += '\\';
+    o += c;
+  }
+  return o;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Time one full MPPI iteration (median, p99) for each configuration; prints JSON"};
+  std::string model = "quadrotor", backend = "cpu", rollouts = "1024", threads = "2", config;
+  int horizon = 100, iterations = 1000, warmup = 20, obstacles = 32;
+  bool json = false;
+  app.add_option("--model", model, "quadrotor | quadrotor_rate | cartpole | racecar | team3 | team9 | a task name");
+  app.add_option("--backend", backend, "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}));
+  app.add_option("--rollouts", rollouts, "K, or a comma list");
+  app.add_option("--horizon", horizon, "T");
+  app.add_option("--threads", threads, "CPU threads, or a comma list");
+  app.add_option("--iterations", iterations, "timed iterations per configuration");
+  app.add_option("--warmup", warmup, "untimed iterations first");
+  app.add_option("--obstacles", obstacles, "obstacles the controller is told about (forest tasks)");
+  app.add_option("--config", config, "settings file (default: the task's)");
+  app.add_flag("--json", json, "one JSON object per line (the default output; kept for scripts)");
+  CLI11_PARSE(app, argc, argv);
+
+  const std::string task = task_for(model);
+  if (config.empty()) config = mppi::app::default_config_path(task);
+  const auto ks = parse_list(rollouts);
+  const auto ns = backend == "cpu" ? parse_list(threads) : std::vector<int>{0};
+  std::string gpu;
+#ifdef MPPID_HAVE_CUDA
+  if (backend == "cuda") gpu = mppi::cuda_device_name();
+#endif
+  try {
+    for (int k : ks) {
+      for (int n : ns) {
+        std::vector<std::string> sets = {"backend=" + backend, "mppi.rollouts=" + std::to_string(k),
+                                         "mppi.horizon=" + std::to_string(horizon),
+                                         "mppi.threads=" + std::to_string(n)};
+        const auto cfg = mppi::app::load_config(config, sets);
+        const std::size_t bytes0 = mppi::testing::allocated_bytes();
+        auto c = mppi::app::make_controller(cfg);
+        auto scenario = mppi::offline::default_scenario(*c, 4.0f, 1);
+        scenario.inputs.obstacles.count = std::min<int>({obstacles, static_cast<int>(scenario.forest.size()),
+                                                         mppi::ObstacleSet::kCapacity});
+        // The nearest ones first, as the daemon sends them.
+        auto forest = scenario.forest;
+        const float x0 = scenario.x0[0], y0 = scenario.x0[1];
+        std::sort(forest.begin(), forest.end(), [&](const mppi::Cylinder& a, const mppi::Cylinder& b) {
+          return std::hypot(a.x - x0, a.y - y0) - a.radius < std::hypot(b.x - x0, b.y - y0) - b.radius;
+        });
+        for (int i = 0; i < scenario.inputs.obstacles.count; ++i) scenario.inputs.obstacles.items[i] = forest[i];
+        c->set_inputs(scenario.inputs);
+        std::vector<float> u(static_cast<std::size_t>(c->nu()));
+        std::vector<double> us(static_cast<std::size_t>(iterations));
+        for (int i = 0; i < warmup; ++i) c->iterate(scenario.x0.data(), u.data());
+        const std::size_t startup_bytes = mppi::testing::allocated_bytes() - bytes0;
+        const std::size_t count0 = mppi::testing::allocation_count();
+        for (int i = 0; i < iterations; ++i) {
+          const auto t0 = std::chrono::steady_clock::now();
+          c->iterate(scenario.x0.data(), u.data());
+          us[i] = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
+        }
+        const double allocs = static_cast<double>(mppi::testing::allocation_count() - count0) / iterations;
+        std::sort(us.begin(), us.end());
+        const double median = us[us.size() / 2];
+        const double p99 = us[std::min(us.size() - 1, static_cast<std::size_t>(0.99 * static_cast<double>(us.size())))];
+        std::cout << "{\"task\":\"" << task << "\",\"backend\":\"" << c->backend() << "\",\"rollouts\":" << k
+                  << ",\"horizon\":" << horizon << ",\"threads\":" << n << ",\"iterations\":" << iterations
+                  << ",\"median_us\":" << median << ",\"p99_us\":" << p99 << ",\"min_us\":" << us.front()
+                  << ",\"startup_host_bytes\":" << startup_bytes << ",\"device_bytes\":" << c->device_bytes()
+                  << ",\"allocations_per_iteration\":" << allocs << ",\"obstacles\":" << scenario.inputs.obstacles.count
+                  << ",\"weighting\":\"" << mppi::to_string(cfg.mppi.weighting) << "\""
+                  << ",\"machine\":{\"cpu\":\"" << escape(cpu_name()) << "\",\"cores\":" << std::thread::hardware_concurrency()
+                  << ",\"gpu\":\"" << escape(gpu) << "\"}}" << std::endl;
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "mppid-bench: " << e.what() << std::endl;
+    return 1;
+  }
+  return 0;
+}
