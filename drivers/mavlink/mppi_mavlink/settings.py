@@ -1,0 +1,142 @@
+"""The bridge's settings: one YAML file (config/bridge/*.yaml), `--set section.key=value`
+overrides, validated into one frozen snapshot at start-up. Unknown keys are errors."""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+DEFAULTS = {
+    "mavlink": {
+        "url": "udpin:127.0.0.1:14540",   # pymavlink connection string (serial: /dev/ttyACM0, baud below)
+        "baud": 921600,
+        "dialect": "px4",                 # px4 | ardupilot
+        "system_id": 1,                   # the bridge's own ids: the autopilot's system,
+        "component_id": 191,              # MAV_COMP_ID_ONBOARD_COMPUTER
+        "target_component": 1,            # MAV_COMP_ID_AUTOPILOT1
+        "heartbeat_timeout_s": 1.0,       # autopilot HEARTBEAT overdue this long past its period: link lost
+        "reconnect_period_s": 2.0,        # re-open a lost serial/TCP link this often
+        "param_timeout_s": 1.0,           # per PARAM_REQUEST_READ attempt
+        "param_retries": 3,
+        "command_timeout_s": 1.0,         # per COMMAND_LONG attempt (COMMAND_ACK)
+        "command_retries": 3,
+        "mode_confirm_timeout_s": 2.0,    # mode seen in the HEARTBEAT after the ACK
+    },
+    "lcm": {
+        "url": "udpm://239.255.76.67:7667?ttl=0",
+        "state_channel": "MPPI_STATE",
+        "command_channel": "MPPI_COMMAND",
+        "status_channel": "MPPI_STATUS",
+        "link_channel": "MPPI_MAVLINK_LINK",
+        "link_hz": 2.0,
+    },
+    "vehicle": {
+        "mass": 1.0,                      # kg: must match the controller's model.mass
+        "gravity": 9.81,
+        "hover_thrust": None,             # 0..1; None: read MPC_THR_HOVER / MOT_THST_HOVER
+        "state_source": "auto",           # odometry | split | auto
+    },
+    "forwarding": {
+        "status_timeout_s": 2.5,          # mppid's status (1 Hz + on mode changes) older: unhealthy
+        "max_state_age_s": 0.25,          # a command answering an older state is not forwarded
+        "forward_hold_plan": True,        # MODE_HOLD_PLAN commands (deadline guard) are forwarded
+        "restart_gap_s": 1.0,             # a seq step back after this long a silence: mppid restarted
+    },
+    "offboard": {
+        "min_rate_hz": 5.0,               # stream at least this fast (PX4 needs > 2 Hz) ...
+        "prestream_s": 1.0,               # ... for this long before OFFBOARD is requested
+        "wait_s": 3.0,                    # how long `offboard` waits for such a stream
+    },
+    "takeoff": {"altitude": 2.0},         # m above home
+    "control": {"socket": "/run/mppid-mavlink/control.sock"},
+    "trace": {"file": None},              # JSONL of every forwarded setpoint (latency measurement)
+}
+
+
+class SettingsError(ValueError):
+    pass
+
+
+def _merge(base: dict, over: dict, path=""):
+    for k, v in (over or {}).items():
+        if k not in base:
+            raise SettingsError(f"{path}{k}: unknown setting")
+        if isinstance(base[k], dict):
+            if not isinstance(v, dict):
+                raise SettingsError(f"{path}{k}: expected a map")
+            _merge(base[k], v, f"{path}{k}.")
+        else:
+            base[k] = v
+
+
+def _parse_scalar(text: str):
+    v = yaml.safe_load(text)
+    return v
+
+
+@dataclass(frozen=True)
+class Settings:
+    raw: dict
+
+    def __getitem__(self, section):
+        return self.raw[section]
+
+
+def load(path: str | Path | None = None, sets: list[str] | None = None) -> Settings:
+    s = copy.deepcopy(DEFAULTS)
+    if path:
+        doc = yaml.safe_load(Path(path).read_text()) or {}
+        if not isinstance(doc, dict):
+            raise SettingsError(f"{path}: expected a map")
+        doc.pop("description", None)
+        _merge(s, doc)
+    for kv in sets or []:
+        if "=" not in kv:
+            raise SettingsError(f"--set {kv}: expected section.key=value")
+        key, val = kv.split("=", 1)
+        parts = key.split(".")
+        if len(parts) != 2:
+            raise SettingsError(f"--set {key}: expected section.key")
+        _merge(s, {parts[0]: {parts[1]: _parse_scalar(val)}})
+    validate(s)
+    return Settings(s)
+
+
+def validate(s: dict):
+    def num(sec, key, lo, hi, allow_none=False):
+        v = s[sec][key]
+        if v is None and allow_none:
+            return
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or not (lo <= v <= hi):
+            raise SettingsError(f"{sec}.{key}: must be a number in [{lo}, {hi}], got {v!r}")
+
+    if s["mavlink"]["dialect"] not in ("px4", "ardupilot"):
+        raise SettingsError(f"mavlink.dialect: must be px4 or ardupilot, got {s['mavlink']['dialect']!r}")
+    num("mavlink", "system_id", 1, 255)
+    num("mavlink", "component_id", 1, 255)
+    num("mavlink", "target_component", 0, 255)
+    num("mavlink", "heartbeat_timeout_s", 0.1, 60)
+    num("mavlink", "reconnect_period_s", 0.1, 60)
+    num("mavlink", "param_timeout_s", 0.05, 30)
+    num("mavlink", "param_retries", 1, 20)
+    num("mavlink", "command_timeout_s", 0.05, 30)
+    num("mavlink", "command_retries", 1, 20)
+    num("mavlink", "mode_confirm_timeout_s", 0.1, 30)
+    num("lcm", "link_hz", 0.1, 50)
+    num("vehicle", "mass", 1e-3, 1e4)
+    num("vehicle", "gravity", 0.1, 100)
+    num("vehicle", "hover_thrust", 0.01, 0.99, allow_none=True)
+    if s["vehicle"]["state_source"] not in ("odometry", "split", "auto"):
+        raise SettingsError("vehicle.state_source: must be odometry, split or auto")
+    num("forwarding", "status_timeout_s", 0.05, 60)
+    num("forwarding", "max_state_age_s", 0.005, 10)
+    num("forwarding", "restart_gap_s", 0.0, 60)
+    num("offboard", "min_rate_hz", 2.0001, 1000)
+    num("offboard", "prestream_s", 1.0, 60)
+    num("offboard", "wait_s", 0.0, 60)
+    num("takeoff", "altitude", 0.1, 1000)
+    if not isinstance(s["mavlink"]["url"], str) or not s["mavlink"]["url"]:
+        raise SettingsError("mavlink.url: must be a pymavlink connection string")

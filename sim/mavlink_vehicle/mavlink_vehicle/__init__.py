@@ -1,0 +1,1 @@
+"""A simulated autopilot on MAVLink for bridge tests. See ../README.md."""

@@ -1,0 +1,431 @@
+"""The simulated autopilot: a rate-controlled quadrotor (plant.py) behind a MAVLink front end
+with PX4's custom modes (or ArduPilot Copter's, --autopilot ardupilot), arming checks,
+its own position controller for take-off, hold and landing, and the offboard-loss failsafe.
+
+One thread, paced by the wall clock: receive whatever MAVLink is waiting, step the physics
+(RK4, physics_hz) up to now, send telemetry at state_hz, run the mission at 10 Hz; sleep in
+select() on the link's socket until the next physics step, so a setpoint is applied within
+one physics step of its arrival.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import select
+import time
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from . import ned, plant as pl  # noqa: E402
+
+mavlink = mavutil.mavlink
+
+# PX4 custom mode: main mode in bits 16..23, sub mode in bits 24..31.
+PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "OFFBOARD": (6, 0), "AUTO.TAKEOFF": (4, 2),
+             "AUTO.LOITER": (4, 3), "AUTO.LAND": (4, 6)}
+# ArduPilot Copter custom modes.
+APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
+
+
+def wall_us():
+    return time.time_ns() // 1000
+
+
+class Vehicle:
+    def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
+                 state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0):
+        self.ap = autopilot
+        self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
+        self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
+                       "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0}
+        self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
+        self.params.update(params or {})
+        hover = self.params["MOT_THST_HOVER" if autopilot == "ardupilot" else "MPC_THR_HOVER"]
+        self.pp = pl.Params(mass=mass, max_thrust=mass * 9.81 / hover)
+        self.plant = pl.Plant(self.pp, start)
+        self.dt = 1.0 / physics_hz
+        self.state_period = 1.0 / state_hz
+        self.mission = mission
+        self.world = world
+        self.out = out
+        self.boot = time.monotonic()
+        self.t = 0.0                       # simulated time since boot, follows the wall clock
+        self.armed = False
+        self.mode = "AUTO.LOITER" if autopilot == "px4" else "STABILIZE"
+        self.setpoint = None               # (thrust 0..1, p, q, r FRD)
+        self.setpoint_t = None
+        self.takeoff_alt = None
+        self.hold_sp = None                # position setpoint of the vehicle's own controller
+        self.landed_since = None
+        self.counters = {"setpoints": 0, "setpoints_rejected": 0, "nonfinite_rejected": 0, "failsafes": 0,
+                         "overruns": 0, "heartbeats_from_companion": 0}
+        self.events = []
+        self.companion = None
+        self.wire = open(os.path.join(out, "wire.jsonl"), "w") if out else None
+        self.truth = open(os.path.join(out, "truth.jsonl"), "w") if out else None
+        self.gcs_seen = set()
+
+    # ---- helpers ------------------------------------------------------------------------
+    def event(self, what, **kw):
+        e = {"event": what, "t": round(self.t, 4), "wall_us": wall_us(), **kw}
+        self.events.append(e)
+        if self.truth:
+            self.truth.write(json.dumps(e) + "\n")
+            self.truth.flush()
+
+    def statustext(self, text, severity=mavlink.MAV_SEVERITY_INFO):
+        self.conn.mav.statustext_send(severity, text.encode()[:50])
+
+    def set_mode(self, mode, why=""):
+        if mode != self.mode:
+            self.event("mode", mode=mode, previous=self.mode, why=why)
+            self.mode = mode
+
+    def custom_mode(self):
+        if self.ap == "px4":
+            main, sub = PX4_MODES[self.mode]
+            return (main << 16) | (sub << 24)
+        return APM_MODES[self.mode]
+
+    def offboard_mode(self):
+        return self.mode == "OFFBOARD" or (self.ap == "ardupilot" and self.mode == "GUIDED")
+
+    def fresh_setpoint(self, age=None):
+        age = self.params["COM_OF_LOSS_T"] if age is None else age
+        return self.setpoint_t is not None and self.t - self.setpoint_t <= age
+
+    # ---- MAVLink in ---------------------------------------------------------------------
+    def receive(self):
+        while True:
+            msg = self.conn.recv_match(blocking=False)
+            if msg is None:
+                return
+            t = msg.get_type()
+            if t == "BAD_DATA":
+                continue
+            now = time.monotonic_ns() // 1000
+            if t == "SET_ATTITUDE_TARGET":
+                self.on_setpoint(msg, now)
+            elif t == "HEARTBEAT":
+                if msg.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
+                    self.counters["heartbeats_from_companion"] += 1
+                    if self.companion is None:
+                        self.companion = (msg.get_srcSystem(), msg.get_srcComponent())
+                        self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
+                elif msg.type == mavlink.MAV_TYPE_GCS:
+                    self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
+            elif t == "COMMAND_LONG":
+                self._wire({"mono_us": now, "type": t, "command": msg.command,
+                            "params": [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
+                                       msg.param7]})
+                self.on_command(msg)
+            elif t == "PARAM_REQUEST_READ":
+                self._wire({"mono_us": now, "type": t, "id": _pid(msg.param_id)})
+                self.send_param(_pid(msg.param_id))
+            elif t == "PARAM_REQUEST_LIST":
+                for name in sorted(self.params):
+                    self.send_param(name)
+            elif t == "PARAM_SET":
+                name = _pid(msg.param_id)
+                self._wire({"mono_us": now, "type": t, "id": name, "value": msg.param_value})
+                if name in self.params and math.isfinite(msg.param_value):
+                    self.params[name] = float(msg.param_value)
+                self.send_param(name)
+
+    def _wire(self, rec):
+        if self.wire:
+            self.wire.write(json.dumps(rec) + "\n")
+
+    def on_setpoint(self, m, now_us):
+        vals = [m.thrust, m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate]
+        finite = all(math.isfinite(v) for v in vals)
+        self._wire({"mono_us": now_us, "type": "SET_ATTITUDE_TARGET", "seq": m.get_seq(),
+                    "src": [m.get_srcSystem(), m.get_srcComponent()], "type_mask": m.type_mask,
+                    "thrust": vals[0] if finite else repr(vals[0]), "rates": [repr(v) if not math.isfinite(v) else v
+                                                                              for v in vals[1:]],
+                    "finite": finite})
+        if not finite:
+            self.counters["nonfinite_rejected"] += 1
+            return
+        rates_ignored = m.type_mask & 0b111
+        if not (m.type_mask & mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE) or rates_ignored or \
+                m.type_mask & mavlink.ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE:
+            self.counters["setpoints_rejected"] += 1  # this autopilot takes rates + thrust only
+            return
+        self.setpoint = (min(max(vals[0], 0.0), 1.0), vals[1], vals[2], vals[3])
+        self.setpoint_t = self.t
+        self.counters["setpoints"] += 1
+
+    def ack(self, cmd, result, text=None):
+        self.conn.mav.command_ack_send(cmd, result)
+        if text:
+            self.statustext(text, mavlink.MAV_SEVERITY_WARNING if result else mavlink.MAV_SEVERITY_INFO)
+            self.event("command", command=cmd, result=result, text=text)
+
+    def on_command(self, m):
+        c = m.command
+        if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
+            if m.param1 >= 0.5:
+                why = self.arming_check()
+                if why:
+                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Arming denied: " + why)
+                self.armed = True
+                self.landed_since = None
+                self.event("armed")
+            else:
+                if not self.plant.on_ground and int(m.param2) != 21196:
+                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Disarm denied: in air")
+                self.disarm("command")
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        if c == mavlink.MAV_CMD_DO_SET_MODE:
+            mode = self.decode_mode(m)
+            if mode is None:
+                return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
+            if mode == "OFFBOARD" and not self.fresh_setpoint():
+                return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
+            if mode in ("AUTO.LOITER", "LOITER"):
+                self.hold_sp = list(self.plant.x[0:3])
+            if mode == "GUIDED":
+                self.hold_sp = list(self.plant.x[0:3])
+            self.set_mode(mode, "command")
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        if c == mavlink.MAV_CMD_NAV_TAKEOFF:
+            if not self.armed:
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: disarmed")
+            if self.ap == "ardupilot":
+                if self.mode != "GUIDED":
+                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: not in GUIDED")
+                alt = m.param7
+            else:
+                alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
+                self.set_mode("AUTO.TAKEOFF", "command")
+            self.takeoff_alt = float(alt)
+            self.hold_sp = [self.plant.x[0], self.plant.x[1], float(alt)]
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        if c == mavlink.MAV_CMD_NAV_LAND:
+            self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", "command")
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                 mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def decode_mode(self, m):
+        if self.ap == "px4":
+            main, sub = int(m.param2), int(m.param3)
+            for name, (mm, ss) in PX4_MODES.items():
+                if mm == main and (ss == sub or (mm != 4 and sub == 0)):
+                    return name
+            return None
+        for name, num in APM_MODES.items():
+            if num == int(m.param2):
+                return name
+        return None
+
+    def arming_check(self) -> str:
+        if self.t < 1.0:
+            return "estimator not ready"
+        if not self.plant.on_ground:
+            return "not landed"
+        if self.mode == "OFFBOARD" and not self.fresh_setpoint():
+            return "no offboard setpoints"
+        if self.ap == "ardupilot" and self.mode not in ("GUIDED", "STABILIZE", "LOITER"):
+            return f"mode {self.mode} not armable"
+        return ""
+
+    def disarm(self, why):
+        if self.armed:
+            self.armed = False
+            self.event("disarmed", why=why)
+
+    def send_param(self, name):
+        if name not in self.params:
+            return
+        v = self.params[name]
+        ptype = self.param_types.get(name, mavlink.MAV_PARAM_TYPE_REAL32)
+        if ptype == mavlink.MAV_PARAM_TYPE_INT32 and self.ap == "px4":
+            import struct
+            v = struct.unpack("<f", struct.pack("<i", int(v)))[0]  # PX4: integers byte-wise
+        names = sorted(self.params)
+        self.conn.mav.param_value_send(name.encode(), float(v), ptype, len(names), names.index(name))
+
+    # ---- the autopilot's own controllers ------------------------------------------------
+    def position_control(self, p_sp, vz_sp=None, yaw_sp=0.0):
+        """Cascaded P position -> P velocity -> thrust direction -> body rates (FLU)."""
+        x = self.plant.x
+        vs = [min(max(1.0 * (p_sp[i] - x[i]), -2.0), 2.0) for i in range(2)]
+        vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[2]), -1.0), 1.5))
+        a = [min(max(3.0 * (vs[i] - x[3 + i]), -4.0), 4.0) for i in range(3)]
+        f = [self.pp.mass * a[0], self.pp.mass * a[1], self.pp.mass * (a[2] + self.pp.gravity)]
+        fn = math.sqrt(sum(c * c for c in f))
+        bz_des = [c / fn for c in f]
+        r = ned.quat_to_matrix(x[6:10])
+        bz = [r[0][2], r[1][2], r[2][2]]
+        e = [bz[1] * bz_des[2] - bz[2] * bz_des[1], bz[2] * bz_des[0] - bz[0] * bz_des[2],
+             bz[0] * bz_des[1] - bz[1] * bz_des[0]]
+        eb = ned.matvec(ned.transpose(r), e)
+        yaw = pl.yaw_of(x)
+        dyaw = math.atan2(math.sin(yaw_sp - yaw), math.cos(yaw_sp - yaw))
+        thrust = max(0.0, sum(fi * bi for fi, bi in zip(f, bz)))
+        return [thrust, 6.0 * eb[0], 6.0 * eb[1], 2.0 * dyaw]
+
+    def control(self):
+        """The command applied to the plant this physics step."""
+        if not self.armed:
+            return [0.0, 0.0, 0.0, 0.0]
+        x = self.plant.x
+        hover = self.params["MOT_THST_HOVER" if self.ap == "ardupilot" else "MPC_THR_HOVER"]
+        if self.offboard_mode() and self.fresh_setpoint():
+            th, p, q, r = self.setpoint
+            if self.ap == "ardupilot" and not int(self.params["GUID_OPTIONS"]) & 8:
+                # ArduPilot without bit 3: thrust is a climb rate, 0.5 = hold altitude.
+                u = self.position_control([x[0], x[1], x[2]], vz_sp=(th - 0.5) * 5.0)
+                return [u[0], p, -q, -r]
+            return [th / hover * self.pp.mass * self.pp.gravity, p, -q, -r]  # FRD -> FLU
+        if self.mode == "OFFBOARD":
+            return self.position_control(self.hold_sp or x[0:3])  # brief gap before the failsafe
+        if self.mode in ("AUTO.LAND", "LAND"):
+            if self.hold_sp is None or len(self.hold_sp) != 3:
+                self.hold_sp = list(x[0:3])
+            return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[2] > 0.6 else -0.4)
+        if self.hold_sp is None:
+            self.hold_sp = list(x[0:3])
+        if self.plant.on_ground and self.mode not in ("AUTO.TAKEOFF", "GUIDED"):
+            return [0.0, 0.0, 0.0, 0.0]  # armed, idle on the ground
+        return self.position_control(self.hold_sp)
+
+    def supervise(self):
+        """Failsafe, take-off completion, auto-disarm; at the physics rate."""
+        if self.mode == "OFFBOARD" and self.setpoint_t is not None and not self.fresh_setpoint():
+            self.counters["failsafes"] += 1
+            self.hold_sp = list(self.plant.x[0:3])
+            self.set_mode("AUTO.LAND", "offboard lost")
+            self.event("failsafe", reason="offboard setpoints lost",
+                       last_setpoint_age_s=round(self.t - self.setpoint_t, 4))
+            self.statustext("Failsafe: offboard lost, landing", mavlink.MAV_SEVERITY_CRITICAL)
+        if self.mode == "OFFBOARD" and self.setpoint_t is None and not self.plant.on_ground:
+            pass
+        if self.mode == "AUTO.TAKEOFF" and self.takeoff_alt is not None and \
+                abs(self.plant.x[2] - self.takeoff_alt) < 0.15:
+            self.hold_sp = [self.plant.x[0], self.plant.x[1], self.takeoff_alt]
+            self.set_mode("AUTO.LOITER", "takeoff complete")
+        if self.armed and self.plant.on_ground and self.mode in ("AUTO.LAND", "LAND"):
+            self.landed_since = self.landed_since if self.landed_since is not None else self.t
+            if self.t - self.landed_since > self.params["COM_DISARM_LAND"]:
+                self.disarm("landed")
+                self.event("landed")
+        else:
+            self.landed_since = None
+        if self.plant.crashed and not any(e["event"] == "collision" for e in self.events):
+            self.event("collision", reason=self.plant.crashed, **{"with": "ground"})
+
+    # ---- MAVLink out --------------------------------------------------------------------
+    def send_heartbeat(self):
+        base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mavlink.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
+        ap = mavlink.MAV_AUTOPILOT_PX4 if self.ap == "px4" else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+        state = mavlink.MAV_STATE_ACTIVE if self.armed else mavlink.MAV_STATE_STANDBY
+        self.conn.mav.heartbeat_send(mavlink.MAV_TYPE_QUADROTOR, ap, base, self.custom_mode(), state)
+
+    def send_telemetry(self):
+        x = self.plant.x
+        p, v, q, vb, w = ned.state_to_ned(x)
+        tb_us = int(self.t * 1e6)
+        tb_ms = tb_us // 1000
+        mono = time.monotonic_ns() // 1000
+        cov = [math.nan] + [0.0] * 20
+        self.conn.mav.odometry_send(tb_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
+                                    p[0], p[1], p[2], list(q), vb[0], vb[1], vb[2], w[0], w[1], w[2], cov, cov, 0,
+                                    mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
+        self.conn.mav.attitude_quaternion_send(tb_ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2])
+        self.conn.mav.local_position_ned_send(tb_ms, p[0], p[1], p[2], v[0], v[1], v[2])
+        self._wire({"mono_us": mono, "type": "ODOMETRY", "time_usec": tb_us})
+
+    def send_slow(self):
+        on_ground = self.plant.on_ground
+        sensors = 0x7FFF
+        self.conn.mav.sys_status_send(sensors, sensors, sensors, 100, 15800, -1, 90, 0, 0, 0, 0, 0, 0)
+        landed = mavlink.MAV_LANDED_STATE_ON_GROUND if on_ground else mavlink.MAV_LANDED_STATE_IN_AIR
+        self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
+
+    # ---- run ----------------------------------------------------------------------------
+    def run(self, duration=0.0, stop=None):
+        next_state = next_hb = next_slow = next_mission = 0.0
+        fd = self.conn.fd if hasattr(self.conn, "fd") and self.conn.fd is not None else None
+        while stop is None or not stop.is_set():
+            self.receive()
+            target = time.monotonic() - self.boot
+            steps = 0
+            while self.t + self.dt <= target:
+                self.plant.u = self.plant.saturate(self.control())
+                self.plant.step(self.dt)
+                self.t += self.dt
+                self.supervise()
+                steps += 1
+                if steps >= 50:  # fell > 0.1 s behind: skip, don't catch up
+                    self.counters["overruns"] += 1
+                    self.t = target
+                    break
+                if self.t >= next_state:
+                    break  # telemetry at its tick, not after a catch-up burst
+            if self.t >= next_state:
+                next_state = max(next_state + self.state_period, self.t)
+                self.send_telemetry()
+                self.log_truth()
+            if self.t >= next_hb:
+                next_hb = self.t + 1.0
+                self.send_heartbeat()
+            if self.t >= next_slow:
+                next_slow = self.t + 0.5
+                self.send_slow()
+            if self.mission is not None and self.t >= next_mission:
+                next_mission = self.t + 0.1
+                self.mission.update(self.t, self.plant.x, self.offboard_mode() and self.fresh_setpoint(),
+                                    not self.plant.on_ground)
+                self.events_flushed()
+            if duration and self.t > duration:
+                break
+            wait = max(0.0, self.boot + self.t + self.dt - time.monotonic())
+            if fd is not None:
+                select.select([fd], [], [], wait)
+            else:
+                time.sleep(wait)
+
+    def events_flushed(self):
+        """Mission events into the truth log as they happen."""
+        while self.mission is not None and self.mission.events:
+            e = {**self.mission.events.pop(0), "wall_us": wall_us()}
+            self.events.append(e)
+            if self.truth is not None:
+                self.truth.write(json.dumps(e) + "\n")
+                self.truth.flush()
+
+    def log_truth(self):
+        if self.mission is not None and self.world is not None:
+            if self.mission.phase == "run":
+                self.mission.record(self.t, self.plant.x)
+            if self.world.get("obstacles") and not self.plant.on_ground:
+                if self.mission.clearance(self.plant.x) < 0 and not any(e["event"] == "collision" for e in self.events):
+                    self.event("collision", **{"with": "cylinder"})
+        if self.truth:
+            self.truth.write(json.dumps({"t": round(self.t, 4), "x": [round(c, 5) for c in self.plant.x],
+                                         "u": [round(c, 4) for c in self.plant.u], "mode": self.mode,
+                                         "armed": self.armed, "ground": self.plant.on_ground}) + "\n")
+
+    def summary(self):
+        s = {"autopilot": self.ap, "counters": self.counters, "events": self.events,
+             "companion": self.companion, "gcs_seen": sorted(self.gcs_seen), "final_mode": self.mode,
+             "armed": self.armed, "final_state": self.plant.x, "t": self.t}
+        if self.mission is not None:
+            s["mission"] = self.mission.summary()
+        return s
+
+    def close(self):
+        for f in (self.wire, self.truth):
+            if f:
+                f.close()
+
+
+def _pid(p):
+    return (p if isinstance(p, str) else p.decode(errors="replace")).rstrip("\x00")
