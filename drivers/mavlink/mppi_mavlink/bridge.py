@@ -262,7 +262,11 @@ class Bridge:
                 self.cond.notify_all()
         elif t == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(errors="replace")
-            log.info("autopilot: %s", text.rstrip("\x00"))
+            text = text.rstrip("\x00")
+            log.info("autopilot: %s", text)
+            with self.cond:
+                self.statustexts = [(tt, x) for tt, x in self.statustexts if time.monotonic() - tt < 2.0]
+                self.statustexts.append((time.monotonic(), text))
 
     def _on_odometry(self, msg):
         if self.s["vehicle"]["state_source"] == "split":
@@ -552,7 +556,10 @@ class Bridge:
             if result == mavlink.MAV_RESULT_IN_PROGRESS:
                 continue
             rname = mavlink.enums["MAV_RESULT"][result].name if result in mavlink.enums["MAV_RESULT"] else str(result)
-            raise CommandError(f"{name}: autopilot answered {rname}")
+            time.sleep(0.05)  # the STATUSTEXT saying why comes right after the ACK
+            with self.cond:
+                why = "; ".join(x for tt, x in self.statustexts if time.monotonic() - tt < 1.0)
+            raise CommandError(f"{name}: autopilot answered {rname}" + (f" ({why})" if why else ""))
         raise CommandError(f"{name}: no COMMAND_ACK after {m['command_retries']} attempts "
                            f"of {m['command_timeout_s']} s")
 

@@ -10,8 +10,8 @@ A world file (sim/mavlink_vehicle/worlds/*.yaml):
     forest: {spacing, jitter, radius, radius_jitter, x_range, y_range, clear_radius, seed}
     mission: {settle_hold: 1.0, duration: 10.0, settle: 3.0, timeout: 40}
     vehicle_radius: 0.2
-The mission starts once the vehicle has held the hold point (within 0.5 m) for settle_hold
-seconds under offboard control; circle missions then run `duration` s (the RMSE counts
+The mission starts once the vehicle has held the hold point (within 0.5 m; `start: on_hold`)
+or its altitude (`start: on_offboard`) for settle_hold seconds under offboard control; circle missions then run `duration` s (the RMSE counts
 after `settle` s), waypoint missions until the goal (or `timeout`).
 """
 from __future__ import annotations
@@ -32,6 +32,7 @@ def load_world(path) -> dict:
     m.setdefault("duration", 10.0)
     m.setdefault("settle", 3.0)
     m.setdefault("timeout", 40.0)
+    m.setdefault("start", "on_hold")
     w["obstacles"] = make_forest(w["forest"], w) if w.get("forest") else []
     return w
 
@@ -90,7 +91,12 @@ class Mission:
     def update(self, t: float, x, offboard: bool, airborne: bool):
         p = x[0:3]
         if self.phase == "wait":
-            near = math.dist(p, self.hold) < 0.5
+            # on_hold: within 0.5 m of the hold point; on_offboard: at altitude (a forest's
+            # obstacle cost may hold the vehicle off the take-off spot).
+            if self.w["mission"]["start"] == "on_offboard":
+                near = abs(p[2] - self.hold[2]) < 0.5
+            else:
+                near = math.dist(p, self.hold) < 0.5
             if offboard and airborne and near:
                 self.held_since = self.held_since if self.held_since is not None else t
                 if t - self.held_since >= self.w["mission"]["settle_hold"]:
