@@ -34,6 +34,11 @@ def wall_us():
 
 
 class Vehicle:
+    # A rate setpoint is flown for at most this long; later, the vehicle holds level until the
+    # next one or the offboard-loss failsafe (COM_OF_LOSS_T). A tumbling plant would make the
+    # failsafe test about the plant instead of the link.
+    SETPOINT_HOLD_S = 0.1
+
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
                  state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0):
         self.ap = autopilot
@@ -58,6 +63,7 @@ class Vehicle:
         self.setpoint_t = None
         self.takeoff_alt = None
         self.hold_sp = None                # position setpoint of the vehicle's own controller
+        self.stale_hold = None
         self.landed_since = None
         self.counters = {"setpoints": 0, "setpoints_rejected": 0, "nonfinite_rejected": 0, "failsafes": 0,
                          "overruns": 0, "heartbeats_from_companion": 0}
@@ -277,15 +283,19 @@ class Vehicle:
             return [0.0, 0.0, 0.0, 0.0]
         x = self.plant.x
         hover = self.params["MOT_THST_HOVER" if self.ap == "ardupilot" else "MPC_THR_HOVER"]
-        if self.offboard_mode() and self.fresh_setpoint():
+        if self.offboard_mode() and self.fresh_setpoint(self.SETPOINT_HOLD_S):
+            self.stale_hold = None
             th, p, q, r = self.setpoint
             if self.ap == "ardupilot" and not int(self.params["GUID_OPTIONS"]) & 8:
                 # ArduPilot without bit 3: thrust is a climb rate, 0.5 = hold altitude.
                 u = self.position_control([x[0], x[1], x[2]], vz_sp=(th - 0.5) * 5.0)
                 return [u[0], p, -q, -r]
             return [th / hover * self.pp.mass * self.pp.gravity, p, -q, -r]  # FRD -> FLU
-        if self.mode == "OFFBOARD":
-            return self.position_control(self.hold_sp or x[0:3])  # brief gap before the failsafe
+        if self.mode == "OFFBOARD" or (self.mode == "GUIDED" and self.setpoint_t is not None):
+            # Setpoints late: hold level where it is until they return or the failsafe engages.
+            if self.stale_hold is None:
+                self.stale_hold = list(x[0:3])
+            return self.position_control(self.stale_hold)
         if self.mode in ("AUTO.LAND", "LAND"):
             if self.hold_sp is None or len(self.hold_sp) != 3:
                 self.hold_sp = list(x[0:3])

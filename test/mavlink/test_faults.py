@@ -1,0 +1,208 @@
+"""Faults: a killed mppid, a dropped link, a wrong GUID_OPTIONS, NaN in commands, and the
+forwarding gate (seq, health, staleness). MAVLink through a tap that keeps every datagram."""
+import math
+import signal
+import time
+
+import pytest
+
+from conftest import wait_for
+from linktools import StandInController, UdpTap, all_finite
+from mavchain import Chain
+
+pytestmark = pytest.mark.timeout(90)
+TAP_PORT = 14560
+
+
+@pytest.fixture
+def tap(netns):
+    t = UdpTap(TAP_PORT, 14540)
+    yield t
+    t.close()
+
+
+def _chain(procs, tmp_path, **kw):
+    c = Chain(procs, tmp_path, **kw)
+    c.listen_lcm()
+    return c
+
+
+def _start_link(c):
+    c.start_bridge()
+    c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
+    wait_for(lambda: c.status().get("link_up"), 15, "link up")
+
+
+def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, tap):
+    """SIGKILL mppid in flight: the last setpoint reaches the wire within 100 ms of the kill,
+    nothing after; the autopilot's offboard-loss failsafe (0.5 s) lands the vehicle."""
+    c = _chain(procs, tmp_path, world="circle")
+    c.start_mppid()
+    _start_link(c)
+    wait_for(lambda: c.status().get("states_published", 0) >= 60 and c.status().get("streaming"), 10, "stream")
+    c.ok("offboard")
+    c.ok("arm")
+    c.wait_event("mission_start", 20)
+    time.sleep(1.0)
+    t_kill = time.monotonic_ns() // 1000
+    procs.p["mppid"].send_signal(signal.SIGKILL)
+    procs.p["mppid"].wait(5)
+    fs = c.wait_event("failsafe", 5)[0]
+    sp = tap.setpoints()
+    last = max(t for t, _ in sp)
+    after = [t for t, _ in sp if t > t_kill]
+    print(f"last setpoint {(last - t_kill) / 1000:.1f} ms after the kill; {len(after)} after it; failsafe {fs}")
+    assert last - t_kill <= 100_000, f"setpoints still on the wire {(last - t_kill) / 1000:.1f} ms after the kill"
+    assert len(after) <= 5
+    wait_for(lambda: not c.status().get("streaming", True), 2, "the bridge to report the stream stopped")
+    assert any(not m.streaming for _, m in c.link_msgs[-20:])
+    modes = [e["mode"] for e in c.events("mode")]
+    assert modes[-1] == "AUTO.LAND"
+    c.wait_event("landed", 15)
+    s = c.stop_vehicle()
+    assert not [e for e in s["events"] if e["event"] == "collision"]
+    assert s["counters"]["failsafes"] == 1
+
+
+def test_nan_never_reaches_the_wire(netns, procs, tmp_path, tap):
+    """Every third command carries a NaN or an infinity somewhere: none reaches the wire,
+    every finite one does; the link is parsed afresh from the tap's datagrams."""
+    bad = [math.nan, math.inf, -math.inf]
+
+    def make_u(seq):
+        u = [9.81, 0.1, -0.2, 0.3]
+        if seq % 3 == 0:
+            u[(seq // 3) % 4] = bad[(seq // 3) % 3]
+        return u
+
+    ctl = StandInController(make_u)
+    try:
+        c = _chain(procs, tmp_path)
+        _start_link(c)
+        wait_for(lambda: ctl.seq >= 150, 15, "150 commands")
+        ctl.answer = False
+        time.sleep(0.3)
+    finally:
+        ctl.close()
+    sp = tap.setpoints()
+    sent_ok = sum(1 for _, u in ctl.sent if all(math.isfinite(v) for v in u))
+    sent_bad = len(ctl.sent) - sent_ok
+    st = c.status()
+    print(f"commands {len(ctl.sent)} ({sent_bad} non-finite), setpoints on the wire {len(sp)}, bridge {st}")
+    assert sp and all(all_finite(m) for _, m in sp)
+    assert st["dropped_nonfinite"] == sent_bad
+    # Each finite command is forwarded once, except those that came before the link and the
+    # hover parameter were ready.
+    assert sent_ok - 10 <= len(sp) <= sent_ok
+    # What went out: FRD rates, thrust normalised by MPC_THR_HOVER (0.4).
+    m = sp[-1][1]
+    assert m.thrust == pytest.approx(0.4, abs=1e-6)
+    assert (m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate) == pytest.approx((0.1, 0.2, -0.3), abs=1e-6)
+    assert m.type_mask == 128
+    # The autopilot's own record agrees.
+    wire = c.setpoints()
+    assert all(r["finite"] for r in wire)
+
+
+def test_gate_seq_health_staleness(netns, procs, tmp_path, tap):
+    """Only a command whose seq advanced, from a controller whose latest status is healthy,
+    answering a recent state, is forwarded; duplicates, replays and stale answers are not."""
+    ctl = StandInController()
+    ctl.answer = False
+    try:
+        c = _chain(procs, tmp_path)
+        _start_link(c)
+        wait_for(lambda: ctl.last_state_seq > 10, 10, "states")
+
+        def forwarded_after(action, settle=0.15):
+            n0 = len(tap.setpoints())
+            action()
+            time.sleep(settle)
+            return len(tap.setpoints()) - n0
+
+        s = lambda: ctl.last_state_seq  # noqa: E731
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=100)) == 1
+        assert forwarded_after(lambda: [ctl.command(s(), [9.81, 0, 0, 0], seq=100) for _ in range(5)]) == 0
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=99)) == 0      # a replay
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=101)) == 1
+        assert forwarded_after(lambda: ctl.command(s() - 40, [9.81, 0, 0, 0], seq=102)) == 0  # 0.8 s old state
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=103, mode=2)) == 0  # MODE_FAILSAFE
+        ctl.healthy = False
+        time.sleep(0.4)
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=104)) == 0
+        ctl.healthy = True
+        time.sleep(0.4)
+        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=105)) == 1
+        st = c.status()
+        assert st["dropped_not_advanced"] == 6 and st["dropped_stale"] == 1 and st["dropped_unhealthy"] == 2
+    finally:
+        ctl.close()
+
+
+def test_link_dropped_and_restored(netns, procs, tmp_path, tap):
+    """Cut the link for 3 s: the bridge publishes link_up = 0 (and logs it) within
+    1 s past the heartbeat period, forwards nothing meanwhile, and resumes when it returns."""
+    ctl = StandInController()
+    try:
+        c = _chain(procs, tmp_path)
+        _start_link(c)
+        wait_for(lambda: c.status().get("streaming"), 10, "stream")
+        t_cut = time.monotonic()
+        tap.cut = True
+        wait_for(lambda: any(not m.link_up for _, m in c.link_msgs), 4, "link_up = 0 on LCM")
+        t_lost = next(t for t, m in c.link_msgs if not m.link_up)
+        print(f"link loss published {t_lost - t_cut:.2f} s after the cut")
+        assert t_lost - t_cut < 2.5
+        time.sleep(3.0 - (time.monotonic() - t_cut))
+        n_cut = len(tap.setpoints())
+        tap.cut = False
+        wait_for(lambda: c.link_msgs[-1][1].link_up == 1, 5, "link_up = 1 again")
+        wait_for(lambda: len(tap.setpoints()) > n_cut + 20, 5, "setpoints again")
+        last = c.link_msgs[-1][1]
+        assert last.link_losses == 1 and last.streaming == 1 and last.error == ""
+        assert "link lost" in procs.log("bridge") and "link up" in procs.log("bridge")
+    finally:
+        ctl.close()
+
+
+def test_wrong_guid_options_refuses_to_fly(netns, procs, tmp_path, tap):
+    """ArduPilot with GUID_OPTIONS lacking bit 3: the bridge says why, refuses arm, takeoff
+    and offboard, and never puts a setpoint on the wire."""
+    ctl = StandInController()
+    try:
+        c = _chain(procs, tmp_path, autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=1"])
+        _start_link(c)
+        wait_for(lambda: "GUID_OPTIONS" in (c.status().get("refusal") or ""), 10, "the refusal")
+        time.sleep(1.0)
+        for cmd in ("arm", "takeoff", "offboard"):
+            r = c.ctl(cmd)
+            assert not r["ok"] and "GUID_OPTIONS=1" in r["message"] and "bit 3" in r["message"], r
+        assert tap.setpoints() == []
+        assert not any(m.get_type() == "COMMAND_LONG" for _, m in tap.decoded("down"))
+        assert c.status()["dropped_refused"] > 20
+        assert any("GUID_OPTIONS" in m.error for _, m in c.link_msgs)
+        assert "refusing to fly" in procs.log("bridge")
+    finally:
+        ctl.close()
+
+
+def test_ardupilot_guided_arm_takeoff_rates(netns, procs, tmp_path, tap):
+    """The same with GUID_OPTIONS = 8: arm, take off (GUIDED), then rate targets are flown."""
+    ctl = StandInController()
+    try:
+        c = _chain(procs, tmp_path, autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.35"])
+        _start_link(c)
+        wait_for(lambda: c.status().get("hover_source") == "param MOT_THST_HOVER" and not c.status()["refusal"], 10,
+                 "checks passed")
+        wait_for(lambda: c.status().get("states_published", 0) >= 60, 10, "1.2 s of state")
+        r = c.ctl("takeoff")
+        assert not r["ok"] and "disarmed" in r["message"]          # the autopilot's reason, passed on
+        c.ok("offboard")                                             # GUIDED
+        c.ok("arm")
+        c.ok("takeoff 1.5")
+        wait_for(lambda: c.status().get("mode") == "GUIDED", 5, "GUIDED")
+        time.sleep(1.0)
+        sp = tap.setpoints()
+        assert sp and sp[-1][1].thrust == pytest.approx(0.35, abs=1e-6)
+    finally:
+        ctl.close()
