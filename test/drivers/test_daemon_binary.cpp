@@ -17,7 +17,7 @@
 namespace {
 
 const std::string kBin = MPPID_BIN;
-const std::string kConfig = std::string(MPPID_SOURCE_DIR) + "/config/tasks/mppid_quadrotor_forest.yaml";
+const std::string kConfig = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
 
 struct Proc {
   pid_t pid = -1;

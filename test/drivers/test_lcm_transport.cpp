@@ -225,7 +225,7 @@ TEST(LcmTransport, StopReturnsPromptlyOnAQuietBus) {
 }
 
 TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
-  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/mppid_quadrotor_forest.yaml",
+  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"});
   auto controller = app::make_controller(cfg);
   LcmRig r(controller.get());

@@ -47,7 +47,7 @@ class NullTransport final : public transport::Transport {
 }  // namespace
 
 TEST(HotPath, SteadyStateCyclesAllocateNothing) {
-  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/mppid_quadrotor_forest.yaml",
+  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=128", "mppi.horizon=30"});
   auto controller = app::make_controller(cfg);
   test::FakeClock clock;

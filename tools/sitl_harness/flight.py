@@ -181,10 +181,6 @@ class Flight:
             # another file (mppid.config) and overrides (mppid.set: ["mppi.lambda=10", ...]).
             mp = scen.get("mppid") or {}
             cfg = paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{task}.yaml"
-            interim = paths.SCENARIOS / "controllers" / f"{task}.yaml"
-            if not mp.get("config") and not cfg.is_file() and interim.is_file():
-                cfg = interim  # until the task's own settings file exists
-                self.events.append(f"controller config: interim {interim.relative_to(paths.ROOT)}")
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
             ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
