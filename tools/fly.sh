@@ -1,23 +1,32 @@
 #!/usr/bin/env bash
-# Sets up and builds (tools/setup.sh), then flies the quadrotor forest task offline
-# (closed loop, simulated time) and writes the results under results/forest.
+# The main job. Installs what is missing and builds (tools/setup.sh), then flies the
+# 16-state quadrotor through a seeded 4 m forest in SITL: the simulator (mppid-sim) and the
+# daemon (mppid) talk LCM over loopback multicast inside a private network namespace, in
+# lock-step, on the CPU backend (CUDA when a GPU is present). Prints the score and where
+# the log and plots are.
 #
-#   tools/fly.sh [mppid-offline arguments]     e.g. tools/fly.sh --seed 3
+#   tools/fly.sh [tools/sitl run arguments]    e.g. tools/fly.sh --seed 7 --realtime
+#                                              or   tools/fly.sh --scenario rate_track_circle
 #
 # Environment: MPPID_SETUP_ARGS passes arguments to setup.sh (e.g. "--no-apt").
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-BUILD_DIR="${MPPID_BUILD_DIR:-build}"
 
 # shellcheck disable=SC2086  # a list of words on purpose
 bash tools/setup.sh ${MPPID_SETUP_ARGS:-} >&2
 
-OFFLINE="$BUILD_DIR/bin/mppid-offline"
-if [[ ! -x "$OFFLINE" ]]; then
-  echo "fly.sh: $OFFLINE was not built (is drivers/ or sim/ in the build yet?)" >&2
-  exit 1
+out="results/forest_4m"
+args=("$@")
+for ((i = 0; i < ${#args[@]}; i++)); do
+  [[ "${args[i]}" == "--out" ]] && out="${args[i + 1]}"
+done
+rc=0
+tools/sitl run --scenario forest_4m --seed 1 --backend auto --out "$out" "$@" || rc=$?
+if [[ -d "$out" ]]; then
+  echo "plots:"
+  find "$out" -maxdepth 1 -name '*.png' -printf '  %p\n' | sort
+  echo "log:   $out/flight.lcmlog (tools/lcm-spy, or lcm-logplayer)"
 fi
-mkdir -p results/forest
-exec "$OFFLINE" --task quadrotor_forest --out results/forest "$@"
+exit "$rc"

@@ -18,7 +18,7 @@ def main(argv=None) -> int:
     r = sub.add_parser("run", help="fly one scenario; writes a result folder; exit 0 on success, 1 on failure")
     r.add_argument("--scenario", required=True, help="a name from `sitl list` or a YAML file")
     r.add_argument("--seed", type=int, default=1)
-    r.add_argument("--backend", choices=["cpu", "cuda"], default="cpu")
+    r.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     r.add_argument("--out", type=Path, default=None, help="result folder (default results/<scenario>-s<seed>-<time>)")
     r.add_argument("--realtime", action="store_true", help="real-time clock instead of lock-step")
     r.add_argument("--controller", choices=["mppid", "standin"], default="mppid",
@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     c.add_argument("--first-seed", type=int, default=1)
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--jobs", type=int, default=2, help="flights in parallel (lock-step only)")
-    c.add_argument("--backend", choices=["cpu", "cuda"], default="cpu")
+    c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
     c.add_argument("--realtime", action="store_true")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
