@@ -92,8 +92,10 @@ def test_mavproxy_router_and_mavsdk_ground_station(netns, procs, tmp_path):
         assert p_enu[2] > 1.0
         q_enu = frames.q_ned_frd_to_enu_flu((q.w, q.x, q.y, q.z))
         assert abs(sum(a * b for a, b in zip(q_enu, x[6:10]))) > 0.95   # same attitude, within a few degrees
-        c.land_and_finish()
+        c.ok("land")
+        c.wait_event("landed", 20)
         wait_for(lambda: not tele.armed(), 5, "MAVSDK to see the vehicle disarmed")
+        c.stop_vehicle()
         assert c.status()["setpoints_sent"] > 100
     finally:
         gcs.destroy()
