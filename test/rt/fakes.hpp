@@ -120,6 +120,7 @@ class FakeController final : public Controller {
     ++resets;
     std::fill(plan_.begin(), plan_.end(), 3000.0f);
   }
+  int predict(const float*, const float*, float*, int) const override { return 0; }
   const std::vector<float>& plan() const override { return plan_; }
   const MppiSettings& settings() const override { return s_; }
   std::vector<float> rollout_costs() const override { return {}; }

@@ -3,6 +3,7 @@
 // world says each cycle (goals, reference, obstacles) arrives as TaskInputs between cycles.
 #pragma once
 
+#include <algorithm>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -47,6 +48,10 @@ class Controller {
   virtual void fallback(float* u_out) = 0;
   virtual void reset() = 0;
 
+  // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
+  // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
+  virtual int predict(const float* x0, const float* plan, float* xyz, int capacity) const = 0;
+
   virtual const std::vector<float>& plan() const = 0;
   virtual const MppiSettings& settings() const = 0;
   virtual std::vector<float> rollout_costs() const = 0;
@@ -88,6 +93,24 @@ class TaskController final : public Controller {
   const UpdateStats& iterate(const float* x0, float* u_out) override { return mppi_.iterate(x0, params_, u_out); }
   void fallback(float* u_out) override { mppi_.fallback(u_out); }
   void reset() override { mppi_.reset(); }
+
+  int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
+    using V = typename T::Vehicle;
+    const MppiSettings& s = mppi_.settings();
+    const int per = s.horizon + 1;
+    if (capacity < per * T::kVehicles) return 0;
+    float x[T::kNx];
+    std::copy_n(x0, T::kNx, x);
+    auto put = [&](int i) {
+      for (int j = 0; j < T::kVehicles; ++j) V::position(x + j * T::kVehicleNx, xyz + 3 * (j * per + i));
+    };
+    put(0);
+    for (int i = 0; i < s.horizon; ++i) {
+      T::advance(params_, x, plan + i * T::kNu, s.dt, s.substeps, 0u);
+      put(i + 1);
+    }
+    return per * T::kVehicles;
+  }
 
   const std::vector<float>& plan() const override { return mppi_.plan(); }
   const MppiSettings& settings() const override { return mppi_.settings(); }

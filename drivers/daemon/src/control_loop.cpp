@@ -209,7 +209,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
   heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
 
   maybe_status(published != last_status_mode_, lockstep ? start_ns : end);
-  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(state_seq);
+  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(state_seq, x.x);
 }
 
 void ControlLoop::apply_between_cycles(std::int64_t now_state_ns) {
@@ -406,7 +406,7 @@ void ControlLoop::publish_final_status() {
   // The forced status above reports the mode; mark the final one unhealthy explicitly.
 }
 
-void ControlLoop::maybe_plan(std::int64_t state_seq) {
+void ControlLoop::maybe_plan(std::int64_t state_seq, const float* x0) {
   transport::PlanView p;
   p.utime = rt::wall_utime();
   p.seq = counters_.plans_published.load(std::memory_order_relaxed) + 1;
@@ -415,6 +415,9 @@ void ControlLoop::maybe_plan(std::int64_t state_seq) {
   p.nu = nu_;
   p.dt = c_->dt();
   p.u = held_.data();
+  // The path the held plan flies from this cycle's state (a nominal rollout, T model steps).
+  p.npos = c_->predict(x0, held_.data(), plan_pos_.data(), transport::kMaxPlanPositions);
+  p.pos = plan_pos_.data();
   if (tx_->publish_plan(p)) counters_.plans_published.fetch_add(1, std::memory_order_relaxed);
 }
 

@@ -14,13 +14,14 @@ LcmTransport::LcmTransport(const std::string& url, LcmChannels channels, rt::Clo
   if (!lcm_.good()) throw std::runtime_error("lcm_url: cannot open '" + url + "'");
   command_out_.u.reserve(kMaxControls);
   plan_out_.u.reserve(static_cast<std::size_t>(std::max(0, max_plan_floats)));
+  plan_out_.pos.assign(kMaxPlanPositions, std::vector<float>(3, 0.0f));
   state_in_.x.reserve(kMaxStates);
   obstacles_in_.cylinders.reserve(kMaxObstaclesIn);
   reference_in_.goals.reserve(kMaxVehicles);
   status_out_.backend.reserve(16);
   status_out_.task.reserve(64);
   // Largest message out: the plan (header plus floats); commands and status are small.
-  buf_.resize(4096 + static_cast<std::size_t>(std::max(0, max_plan_floats)) * sizeof(float));
+  buf_.resize(4096 + (static_cast<std::size_t>(std::max(0, max_plan_floats)) + 3 * kMaxPlanPositions) * sizeof(float));
 }
 
 LcmTransport::~LcmTransport() { stop(); }
@@ -224,8 +225,11 @@ bool LcmTransport::publish_plan(const PlanView& p) {
   m.dt = p.dt;
   m.n = static_cast<std::int32_t>(n);
   m.u.assign(p.u, p.u + n);
-  m.npos = 0;  // predicted positions need the model's rollout; left to the display side
-  m.pos.clear();
+  // pos keeps its start-up size (inner vectors of 3); only the first npos are encoded.
+  if (static_cast<std::size_t>(p.npos) > m.pos.size()) return false;
+  m.npos = p.npos;
+  for (std::int32_t i = 0; i < p.npos; ++i)
+    for (int d = 0; d < 3; ++d) m.pos[static_cast<std::size_t>(i)][static_cast<std::size_t>(d)] = p.pos[3 * i + d];
   return send(ch_.plan, m);
 }
 

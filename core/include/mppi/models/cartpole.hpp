@@ -36,6 +36,13 @@ struct Cartpole {
   // Keeps the state on its manifold after an integration step (nothing to do here).
   MPPI_HD static void project(float*) {}
 
+  // Where the cart is, for displays: (x, 0, 0).
+  MPPI_HD static void position(const float* x, float* pos) {
+    pos[0] = x[X];
+    pos[1] = 0.0f;
+    pos[2] = 0.0f;
+  }
+
   MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
     float dx[kNx];
     derivative(p, x, u, dx);

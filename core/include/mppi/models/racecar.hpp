@@ -65,6 +65,12 @@ struct Racecar {
   // Keeps the state on its manifold after an integration step (nothing to do here).
   MPPI_HD static void project(float*) {}
 
+  MPPI_HD static void position(const float* x, float* pos) {
+    pos[0] = x[X];
+    pos[1] = x[Y];
+    pos[2] = 0.0f;
+  }
+
   MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
     float dx[kNx];
     derivative(p, x, u, dx);

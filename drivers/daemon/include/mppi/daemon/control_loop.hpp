@@ -124,7 +124,7 @@ class ControlLoop {
   transport::Mode publish_held(std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
   void maybe_status(bool force, std::int64_t now_ns);
-  void maybe_plan(std::int64_t state_seq);
+  void maybe_plan(std::int64_t state_seq, const float* x0);
   void set_mode(transport::Mode m);
   void guard_arm(std::int64_t deadline_ns, std::int64_t state_seq);
   int guard_disarm();  // 0 when the loop kept the cycle, else the guard's command count
@@ -164,6 +164,7 @@ class ControlLoop {
   UpdateStats last_stats_;
   std::int64_t last_state_seq_used_ = -1;
   std::int64_t cycle_index_ = 0;
+  std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
   std::int64_t prev_tick_sim_ns_ = -1;
 

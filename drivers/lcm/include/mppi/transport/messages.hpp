@@ -11,6 +11,7 @@ namespace mppi::transport {
 
 constexpr int kMaxStates = 16 * 32;   // 16 states x 32 vehicles
 constexpr int kMaxControls = 4 * 32;  // 4 controls x 32 vehicles
+constexpr int kMaxPlanPositions = 4096;  // predicted positions in one plan_t
 constexpr int kMaxVehicles = 32;
 constexpr int kMaxObstaclesIn = 1024;  // accepted per message; the nearest 64 are kept
 
@@ -96,6 +97,8 @@ struct PlanView {
   std::int32_t nu = 0;
   float dt = 0;
   const float* u = nullptr;  // horizon * nu, step-major
+  std::int32_t npos = 0;
+  const float* pos = nullptr;  // npos x 3, vehicle-major predicted positions
 };
 
 }  // namespace mppi::transport
