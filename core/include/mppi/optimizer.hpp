@@ -75,7 +75,9 @@ class Mppi {
 
  private:
   // Centred moving average over time, the window shrinking at the ends. Each output is a
-  // convex combination of in-limit controls, so the limits still hold.
+  // convex combination of in-limit controls, so the limits hold mathematically; in float the
+  // average of equal values can round one ulp outside ((2.2f * 3) * (1.0f / 3) > 2.2f), so
+  // it is clamped back.
   void smooth() {
     const int half = settings_.smoothing_window / 2;
     const int t = settings_.horizon;
@@ -85,7 +87,7 @@ class Mppi {
       for (int j = 0; j < kNu; ++j) {
         float acc = 0.0f;
         for (int m = lo; m <= hi; ++m) acc += plan_[m * kNu + j];
-        scratch_[i * kNu + j] = acc * inv;
+        scratch_[i * kNu + j] = std::clamp(acc * inv, settings_.u_min[j], settings_.u_max[j]);
       }
     }
     plan_.swap(scratch_);

@@ -1,0 +1,117 @@
+// No heap allocation per control cycle once started (the backend's interface promises it):
+// the quadrotor forest at K = 256, T = 50 on two threads, through mppi::TaskController and
+// through the config-driven factory. Links mppid_alloc_counter, which replaces the global
+// operator new of this whole executable, hence its own test program.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "alloc_counter.hpp"
+#include "mppi/app/config.hpp"
+#include "mppi/controller.hpp"
+#include "mppi/cpu_backend.hpp"
+#include "mppi/tasks.hpp"
+
+namespace mppi {
+namespace {
+
+constexpr int kWarmup = 2;
+constexpr int kCycles = 100;
+
+TaskInputs forest_inputs() {
+  TaskInputs in;
+  in.goals[0][0] = 20.0f;
+  in.goals[0][2] = 2.0f;
+  in.obstacles.count = 3;
+  in.obstacles.items[0] = Cylinder{4.0f, 0.5f, 0.5f, 0.0f, 0.0f};
+  in.obstacles.items[1] = Cylinder{7.0f, -1.0f, 0.4f, 0.0f, 0.0f};
+  in.obstacles.items[2] = Cylinder{10.0f, 1.0f, 0.6f, 0.0f, 1.0f};
+  return in;
+}
+
+// Runs warm-up cycles, then kCycles closed-loop cycles (with a fallback and an input update
+// between some of them, as the daemon does); returns the operator-new calls during those.
+std::size_t allocations_over_cycles(Controller& c) {
+  EXPECT_EQ(c.nx(), Quadrotor::kNx);
+  EXPECT_EQ(c.nu(), Quadrotor::kNu);
+  const TaskInputs in = forest_inputs();
+  c.set_inputs(in);
+  Quadrotor::Params model;
+  std::vector<float> x(Quadrotor::kNx, 0.0f);
+  x[Quadrotor::PZ] = 2.0f;
+  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
+  std::vector<float> u(Quadrotor::kNu, 0.0f);
+  for (int n = 0; n < kWarmup; ++n) c.iterate(x.data(), u.data());
+
+  bool finite = true;
+  const std::size_t before = testing::allocation_count();
+  for (int n = 0; n < kCycles; ++n) {
+    if (n % 10 == 5) {
+      c.fallback(u.data());
+    } else {
+      const UpdateStats& st = c.iterate(x.data(), u.data());
+      finite = finite && st.finite;
+    }
+    if (n % 25 == 0) c.set_inputs(in);
+    Quadrotor::step(model, x.data(), u.data(), c.dt());
+  }
+  const std::size_t after = testing::allocation_count();
+  EXPECT_TRUE(finite);
+  for (float v : x) EXPECT_TRUE(std::isfinite(v));
+  return after - before;
+}
+
+MppiSettings forest_settings() {
+  MppiSettings s;
+  s.rollouts = 256;
+  s.horizon = 50;
+  s.dt = 0.02f;
+  s.lambda = 1000.0f;
+  s.nu = 2.0f;
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+  s.sigma.assign(4, 60.0f);
+  s.u_min.assign(4, 0.0f);
+  s.u_max.assign(4, 6000.0f);
+  s.u_init.assign(4, hover);
+  s.u_nominal.assign(4, hover);
+  s.control_cost_scale = 0.01f;
+  s.threads = 2;
+  return s;
+}
+
+TEST(NoAlloc, CounterSeesAllocations) {
+  // The counter is live in this program (else the zero below would prove nothing).
+  const std::size_t before = testing::allocation_count();
+  auto p = std::make_unique<std::vector<int>>(100);
+  EXPECT_GE(testing::allocation_count(), before + 2);
+}
+
+TEST(NoAlloc, TaskControllerCyclesAllocateNothing) {
+  for (Weighting wt : {Weighting::kCostToGo, Weighting::kTrajectory}) {
+    MppiSettings s = forest_settings();
+    s.weighting = wt;
+    s.smoothing_window = wt == Weighting::kTrajectory ? 5 : 1;
+    TaskController<QuadrotorForest> c("quadrotor_forest", s, QuadrotorForest::Params{},
+                                      std::make_unique<CpuBackend<QuadrotorForest>>(s));
+    EXPECT_EQ(allocations_over_cycles(c), 0u) << to_string(wt);
+  }
+}
+
+TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
+  const auto config = app::load_config(app::default_config_path("quadrotor_forest"),
+                                       {"mppi.rollouts=256", "mppi.horizon=50", "mppi.threads=2", "backend=cpu"});
+  ASSERT_EQ(config.mppi.rollouts, 256);
+  ASSERT_EQ(config.mppi.horizon, 50);
+  ASSERT_EQ(config.mppi.threads, 2);
+  auto c = app::make_controller(config);
+  ASSERT_NE(c, nullptr);
+  EXPECT_STREQ(c->backend(), "cpu");
+  EXPECT_EQ(c->task(), "quadrotor_forest");
+  EXPECT_EQ(allocations_over_cycles(*c), 0u);
+}
+
+}  // namespace
+}  // namespace mppi
