@@ -1,6 +1,13 @@
 // CudaBackend<T>: device buffers and pinned staging allocated once, one stream, the whole
-// cycle (copy in, roll out, weigh, update, copy out) captured in one CUDA graph, and one
-// synchronisation per update. Included by the per-task instantiation units.
+// cycle (copy in, [obstacle table], [noise pre-pass], roll out, weigh, update, copy out)
+// captured in one CUDA graph, and one synchronisation per update. Included by the per-task
+// instantiation units.
+//
+// Chosen at construction: where the noise is drawn (kernels.cuh, NoiseMode: the pre-pass for
+// teams when its buffer fits in the noise budget) and, for single vehicles, the lanes per
+// rollout G (1 to 8: about 8 warps per multiprocessor while the rollouts alone leave it
+// idle). MPPID_CUDA_NOISE=prepass|inline and MPPID_CUDA_LANES=1|2|4|8 override them (for
+// measurements); the plan is the same either way (rollout costs bit for bit).
 #pragma once
 
 #include <cuda_runtime.h>
@@ -11,6 +18,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "cuda_check.cuh"
@@ -62,21 +70,47 @@ class CudaBackend final : public RolloutBackend<T> {
     trajectory_ = s.weighting == Weighting::kTrajectory;
     plan_floats_ = static_cast<std::size_t>(t_) * kNu;
 
+    // Where the noise is drawn.
+    const std::size_t kt_floats = static_cast<std::size_t>(k_) * static_cast<std::size_t>(t_);
+    const std::size_t u_bytes = kt_floats * kNu * sizeof(float), cc_bytes = kt_floats * sizeof(float);
+    std::size_t free_bytes = 0, total_bytes = 0;
+    check(cudaMemGetInfo(&free_bytes, &total_bytes), "cudaMemGetInfo");
+    const std::size_t budget = std::min<std::size_t>(free_bytes / 4, kNoiseBudgetMax);
+    mode_ = kTeam && u_bytes + cc_bytes <= budget ? NoiseMode::kPrepass : NoiseMode::kInline;
+    if (const char* m = std::getenv("MPPID_CUDA_NOISE")) {
+      const std::string v(m);
+      if (v == "prepass" && u_bytes + cc_bytes <= budget) mode_ = NoiseMode::kPrepass;
+      else if (v == "inline") mode_ = NoiseMode::kInline;
+    }
+
     // Launch shapes.
     const int sms = prop.multiProcessorCount;
     if constexpr (kTeam) {
       constexpr int per_warp = team_rollouts_per_warp<T>();
-      warps_per_block_ = 2;
+      // One warp per block while that spreads the warps over more multiprocessors.
+      warps_per_block_ = (static_cast<long long>(k_) + per_warp - 1) / per_warp <= 2LL * sms ? 1 : 2;
       rollout_block_ = 32 * warps_per_block_;
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
       rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
+      // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
+      // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
+      // 380/290/240/240 us: past ~8 warps the G-fold repeated dynamics cost more issue slots
+      // than the shorter obstacle loop saves.
+      lanes_ = 1;
+      if constexpr (kForestTask<T>) {
+        while (lanes_ < 8 && static_cast<long long>(k_) * lanes_ * 2 <= 256LL * sms) lanes_ *= 2;
+        if (const char* l = std::getenv("MPPID_CUDA_LANES")) {
+          const int v = std::atoi(l);
+          if (v == 1 || v == 2 || v == 4 || v == 8) lanes_ = v;
+        }
+      }
+      const long long threads = static_cast<long long>(k_) * lanes_;
       // Small blocks while that spreads the rollouts over more multiprocessors: each
       // thread runs the whole horizon, so the latency of one rollout sets the time.
       rollout_block_ = 128;
-      while (rollout_block_ > 32 && (static_cast<long long>(k_) + rollout_block_ - 1) / rollout_block_ < 4LL * sms)
-        rollout_block_ /= 2;
-      rollout_grid_ = (static_cast<long long>(k_) + rollout_block_ - 1) / rollout_block_;
+      while (rollout_block_ > 32 && (threads + rollout_block_ - 1) / rollout_block_ < 4LL * sms) rollout_block_ /= 2;
+      rollout_grid_ = (threads + rollout_block_ - 1) / rollout_block_;
       rollout_smem_ = align16(sizeof(Params));
     }
     // Chunks of rollouts per block of the weighting kernels: enough blocks to fill the
@@ -91,6 +125,10 @@ class CudaBackend final : public RolloutBackend<T> {
     d_cost_ = DeviceBuffer(kt * sizeof(float), "the cost-to-go S~ (K x T = " + std::to_string(k_) + " x " +
                                                    std::to_string(t_) + " floats)");
     d_crashed_ = DeviceBuffer(static_cast<std::size_t>(k_), "the crash flags (K bytes)");
+    if (mode_ == NoiseMode::kPrepass) {
+      d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
+      d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
+    }
     d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * sizeof(float), "the per-chunk minima");
     d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * (kNu + 1) * sizeof(float), "the per-chunk sums");
     d_stats_part_ = DeviceBuffer(static_cast<std::size_t>(chunks_) * sizeof(StatsPart), "the per-chunk statistics");
@@ -107,13 +145,10 @@ class CudaBackend final : public RolloutBackend<T> {
     stream_.reset(stream);
     if (rollout_smem_ > 48 * 1024) {
       const std::string what = "cudaFuncSetAttribute (dynamic shared memory " + std::to_string(rollout_smem_) + " bytes)";
-      if constexpr (kTeam) {
-        check(cudaFuncSetAttribute(rollout_team<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                   static_cast<int>(rollout_smem_)), what);
-      } else {
-        check(cudaFuncSetAttribute(rollout_single<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                   static_cast<int>(rollout_smem_)), what);
-      }
+      with_rollout_kernel([&](auto kernel) {
+        check(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize, static_cast<int>(rollout_smem_)),
+              what);
+      });
     }
 
     const char* env = std::getenv("MPPID_CUDA_GRAPH");
@@ -169,12 +204,33 @@ class CudaBackend final : public RolloutBackend<T> {
 
   std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
   std::size_t device_bytes() const override {
-    return d_cost_.bytes() + d_crashed_.bytes() + d_pmin_.bytes() + d_part_.bytes() + d_stats_part_.bytes() +
-           d_in_.bytes() + d_out_.bytes();
+    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() +
+           d_pmin_.bytes() + d_part_.bytes() + d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
   }
 
  private:
+  // At most this much device memory for the stored controls (and at most 1/4 of the free).
+  static constexpr std::size_t kNoiseBudgetMax = std::size_t{16} << 30;
   static constexpr int kReduceBlock = 256;
+  static constexpr int kSampleBlock = 256;
+
+  // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
+  template <class F>
+  void with_rollout_kernel(F&& f) const {
+    if constexpr (kTeam) {
+      if (mode_ == NoiseMode::kPrepass) f(rollout_team<T, NoiseMode::kPrepass>);
+      else f(rollout_team<T, NoiseMode::kInline>);
+    } else if constexpr (kForestTask<T>) {
+      switch (lanes_) {
+        case 8: f(rollout_single<T, 8>); break;
+        case 4: f(rollout_single<T, 4>); break;
+        case 2: f(rollout_single<T, 2>); break;
+        default: f(rollout_single<T, 1>); break;
+      }
+    } else {
+      f(rollout_single<T, 1>);
+    }
+  }
   static constexpr int kFinalBlock = 128;
 
   template <class F>
@@ -197,6 +253,7 @@ class CudaBackend final : public RolloutBackend<T> {
     if (rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
                                                 std::to_string(prop.maxGridSize[0]));
     if (t_ > prop.maxGridSize[0] || chunks_ > prop.maxGridSize[1]) bad("weighting grid exceeds the device limits");
+    if (mode_ == NoiseMode::kPrepass && t_ > prop.maxGridSize[1]) bad("noise pre-pass grid exceeds the device limits");
     if (rollout_smem_ > prop.sharedMemPerBlockOptin)
       bad("rollout kernel needs " + std::to_string(rollout_smem_) + " bytes of shared memory, the device allows " +
           std::to_string(prop.sharedMemPerBlockOptin));
@@ -211,16 +268,19 @@ class CudaBackend final : public RolloutBackend<T> {
     auto* d_stats = reinterpret_cast<DeviceStats*>(d_out_.as<unsigned char>() + align16(plan_floats_ * sizeof(float)));
     lazy_check(cudaMemcpyAsync(d_in_.as<void>(), h_in_.as<void>(), in_bytes_, cudaMemcpyHostToDevice, st),
                [&] { return what("cudaMemcpyAsync of the input"); });
-    const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
-    if constexpr (kTeam) {
-      rollout_team<T><<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, d_cost_.as<float>(),
-                                                                     d_crashed_.as<unsigned char>(), k_, t_, dt_,
-                                                                     substeps_, c_);
-    } else {
-      rollout_single<T><<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, d_cost_.as<float>(),
-                                                                       d_crashed_.as<unsigned char>(), k_, t_, dt_,
-                                                                       substeps_, c_);
+    RolloutIo<kNu> io{nullptr, nullptr};
+    if (mode_ == NoiseMode::kPrepass) {
+      io.u_in = d_u_.as<float>();
+      io.cc_in = d_cc_.as<float>();
+      const dim3 sgrid(static_cast<unsigned>((k_ + kSampleBlock - 1) / kSampleBlock), static_cast<unsigned>(t_));
+      sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_in, d_plan, k_, d_u_.as<float>(), d_cc_.as<float>(), c_);
+      lazy_check(cudaGetLastError(), [&] { return what("launching the noise pre-pass"); });
     }
+    const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
+    with_rollout_kernel([&](auto kernel) {
+      kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
+                                                           d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
+    });
     lazy_check(cudaGetLastError(), [&] {
       return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
                   std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
@@ -229,7 +289,8 @@ class CudaBackend final : public RolloutBackend<T> {
                   st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
     lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
     weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-        d_in, d_plan, d_cost_.as<float>(), d_pmin_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_,
+        d_in, d_plan, mode_ == NoiseMode::kInline ? nullptr : d_u_.as<float>(), d_cost_.as<float>(),
+        d_pmin_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_,
         inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
     finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
@@ -271,7 +332,9 @@ class CudaBackend final : public RolloutBackend<T> {
   int chunk_ = 0, chunks_ = 0;
 
   std::size_t in_bytes_ = 0, out_bytes_ = 0;
-  DeviceBuffer d_cost_, d_crashed_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
+  NoiseMode mode_ = NoiseMode::kInline;
+  int lanes_ = 1;
+  DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
   PinnedBuffer h_in_, h_out_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;

@@ -3,12 +3,22 @@
 // differs. Every reduction has a fixed shape (no float atomics), so a run is bit-for-bit
 // repeatable.
 //
-//   rollout_single  one thread per rollout, state in registers (single vehicles)
+//   sample          teams: one thread per (rollout k, step i), the perturbed control u
+//                   (K x T x NU, kept for the update) and its control cost (K x T)
+//   rollout_single  G lanes per rollout, state in registers (single vehicles; forest.cuh)
 //   rollout_team    M consecutive lanes of a warp per rollout, vehicle j on lane j
 //   partial_min     min over a chunk of rollouts of S~(tau_i,k), per step i
 //   weigh           per (step i, chunk): w = exp(-(S - min)/lambda), sum w and w du, with
-//                   du regenerated from the same counter-based noise (no K x T x NU buffer)
+//                   du = u - plan from the pre-pass's controls, or regenerated from the same
+//                   counter-based noise
 //   finalize        per step i: sum the chunks, u_i = clamp(u_i + sum w du / sum w); stats
+//
+// Where the noise is drawn (NoiseMode). Teams: in the pre-pass when its K x T x NU buffer
+// fits, which takes a chunk of noise draws off every team rollout's serial chain (-10 % at
+// team3 K=1200 on an H100). Single vehicles: inside the rollout, and again in the update;
+// measured on an H100, a pre-pass or keeping the controls from the rollout for the update
+// was 2-20 % slower at every K from 16k to 1M (the extra K x T x NU traffic costs more than
+// the second draw, and at small K the noise is not what bounds a step).
 #pragma once
 
 #include <cuda_runtime.h>
@@ -18,6 +28,7 @@
 #include "mppi/backend.hpp"
 #include "mppi/rng.hpp"
 #include "mppi/sampling.hpp"
+#include "forest.cuh"
 
 namespace mppi::cuda_detail {
 
@@ -49,6 +60,38 @@ struct DeviceStats {
 constexpr unsigned kFullMask = 0xffffffffu;
 
 __host__ __device__ constexpr std::size_t align16(std::size_t n) { return (n + 15) / 16 * 16; }
+
+enum class NoiseMode { kPrepass, kInline };
+
+// N consecutive floats, 16 bytes at a time when N is a multiple of 4 (the caller's pointer
+// is then 16-byte aligned: it points at a multiple of N floats into a 16-aligned buffer).
+template <int N>
+__device__ __forceinline__ void load_floats(const float* __restrict__ src, float* dst) {
+  if constexpr (N % 4 == 0) {
+#pragma unroll
+    for (int n = 0; n < N; n += 4) {
+      const float4 v = __ldg(reinterpret_cast<const float4*>(src + n));
+      dst[n] = v.x;
+      dst[n + 1] = v.y;
+      dst[n + 2] = v.z;
+      dst[n + 3] = v.w;
+    }
+  } else {
+#pragma unroll
+    for (int n = 0; n < N; ++n) dst[n] = __ldg(src + n);
+  }
+}
+template <int N>
+__device__ __forceinline__ void store_floats(float* dst, const float* src) {
+  if constexpr (N % 4 == 0) {
+#pragma unroll
+    for (int n = 0; n < N; n += 4)
+      *reinterpret_cast<float4*>(dst + n) = make_float4(src[n], src[n + 1], src[n + 2], src[n + 3]);
+  } else {
+#pragma unroll
+    for (int n = 0; n < N; ++n) dst[n] = src[n];
+  }
+}
 
 // Copies the task parameters into shared memory (read by every thread at every step).
 template <class Params>
@@ -95,25 +138,78 @@ __device__ inline float block_min(float v) {
 }
 
 // S~ of one rollout: q was written per step (row-major over steps, S[i * K + k]); turn it
-// into the cost-to-go in place, summed from the end as CpuBackend does.
+// into the cost-to-go in place, summed from the end as CpuBackend does. The loads of a batch
+// of steps are issued together (one memory round trip per batch, not per step).
 __device__ inline void suffix_sums(float* S, int K, int horizon, int k, float last) {
+  constexpr int kBatch = 16;
   float acc = last;
-  for (int i = horizon - 2; i >= 0; --i) {
+  int i = horizon - 2;
+  for (; i >= kBatch - 1; i -= kBatch) {
+    float v[kBatch];
+#pragma unroll
+    for (int b = 0; b < kBatch; ++b) v[b] = S[static_cast<std::size_t>(i - b) * K + k];
+#pragma unroll
+    for (int b = 0; b < kBatch; ++b) {
+      acc = sanitize_cost(v[b] + acc);
+      S[static_cast<std::size_t>(i - b) * K + k] = acc;
+    }
+  }
+  for (; i >= 0; --i) {
     float* s = S + static_cast<std::size_t>(i) * K + k;
     acc = sanitize_cost(*s + acc);
     *s = acc;
   }
 }
 
-// ---- single vehicle: one thread per rollout, the state in registers -------------------
+// ---- the noise pre-pass --------------------------------------------------------------------
+// Thread (k, i): u = clamp(plan_i + noise) into u_out[(i K + k) NU ...] and its control cost
+// into cc_out[i K + k], both exactly as the rollout would compute them.
 template <class T>
-__global__ void rollout_single(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out, int K,
-                               int horizon, float dt, int substeps, SamplerConstants<T::kNu> c) {
+__global__ void sample(const Input<T>* in, const float* plan, int K, float* u_out, float* cc_out,
+                       SamplerConstants<T::kNu> c) {
+  constexpr int NU = T::kNu;
+  const int k = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  const int i = static_cast<int>(blockIdx.y);
+  if (k >= K) return;
+  const float* pu = plan + i * NU;
+  float u[NU], du[NU];
+  perturb<NU>(c, in->key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+  const std::size_t at = static_cast<std::size_t>(i) * K + k;
+  store_floats<NU>(u_out + at * NU, u);
+  cc_out[at] = control_cost<NU>(c, pu, du);
+}
+
+// Where the rollout kernels find the noise of the pre-pass (null without one).
+template <int NU>
+struct RolloutIo {
+  const float* u_in;   // K x T x NU controls
+  const float* cc_in;  // K x T control costs
+};
+
+// ---- single vehicle: G lanes per rollout, the state in registers --------------------
+// The G lanes of a rollout run the same dynamics on the same numbers (so they agree bit for
+// bit) and split the obstacle loop (forest.cuh). With few rollouts the GPU is mostly idle and
+// a rollout's serial chain of steps sets the time; G > 1 shortens each step's link of it.
+template <class T, int G>
+__global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
+                               unsigned char* crashed_out, int K, int horizon, float dt, int substeps,
+                               SamplerConstants<T::kNu> c) {
   constexpr int NX = T::kNx, NU = T::kNu;
+  static_assert(G == 1 || G == 2 || G == 4 || G == 8, "lanes per rollout: 1, 2, 4 or 8");
+  (void)io;
   extern __shared__ __align__(16) unsigned char smem[];
   const typename T::Params& p = *stage_params(in->params, smem);
-  const int k = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
-  if (k >= K) return;
+  const int thread = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+  const int lane = thread % G;
+  int k = thread / G;
+  const bool active = k < K;
+  if constexpr (G == 1) {
+    if (!active) return;
+  } else {
+    // Every lane of the warp takes part in the shuffles: the spare ones repeat rollout K-1.
+    if (!active) k = K - 1;
+  }
+  const bool writer = active && lane == 0;
   const NoiseKey key = in->key;
   float x[NX], u[NU], du[NU];
   for (int n = 0; n < NX; ++n) x[n] = in->x0[n];
@@ -124,9 +220,10 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, float* S, 
     perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
     T::advance(p, x, u, dt, substeps, crashed);
     const float t = static_cast<float>(i + 1) * dt;
-    q = sanitize_cost(T::running(p, x, t, &crashed) + control_cost<NU>(c, pu, du));
-    if (i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q;
+    q = sanitize_cost(running_cost<T, G>(p, x, t, lane, &crashed) + control_cost<NU>(c, pu, du));
+    if (writer && i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q;
   }
+  if (!writer) return;
   q = sanitize_cost(q + T::terminal(p, x));
   S[static_cast<std::size_t>(horizon - 1) * K + k] = q;
   suffix_sums(S, K, horizon, k, q);
@@ -150,9 +247,10 @@ struct TeamRollout {
 template <class T>
 __host__ __device__ constexpr int team_rollouts_per_warp() { return 32 / T::kVehicles; }
 
-template <class T>
-__global__ void rollout_team(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out, int K,
-                             int horizon, float dt, int substeps, SamplerConstants<T::kNu> c) {
+template <class T, NoiseMode kMode>
+__global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
+                             unsigned char* crashed_out, int K, int horizon, float dt, int substeps,
+                             SamplerConstants<T::kNu> c) {
   constexpr int M = T::kVehicles, VNX = T::kVehicleNx, VNU = T::kVehicleNu, NU = T::kNu;
   constexpr int G = team_rollouts_per_warp<T>();
   using Vehicle = typename T::Vehicle;
@@ -180,7 +278,7 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, float* S, un
   int buf = 0;
   for (int i0 = 0; i0 < horizon; i0 += M) {
     const int steps = horizon - i0 < M ? horizon - i0 : M;
-    if (active && j < steps) {
+    if (kMode != NoiseMode::kPrepass && active && j < steps) {
       const int i = i0 + j;
       const float* pu = plan + i * NU;
       float u[NU], du[NU];
@@ -192,12 +290,22 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, float* S, un
     for (int s = 0; s < steps; ++s) {
       const int i = i0 + s;
       std::uint32_t bits = 0u;
+      const std::size_t at = static_cast<std::size_t>(i) * K + k;
+      float qc = 0.0f;
       if (active) {
+        float uj[VNU];
+        if constexpr (kMode == NoiseMode::kPrepass) {
+          load_floats<VNU>(io.u_in + at * NU + j * VNU, uj);
+          if (j == 0) qc = __ldg(io.cc_in + at);
+        } else {
+          for (int n = 0; n < VNU; ++n) uj[n] = r.u[s][j * VNU + n];
+          qc = r.control_cost[s];
+        }
         if (((mask >> j) & 1u) == 0u)
-          for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, &r.u[s][j * VNU], h);
+          for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, uj, h);
         for (int n = 0; n < VNX; ++n) r.x[buf][j][n] = x[n];
         bool hit = false;
-        r.q[buf][j] = Cost::vehicle(p.cost, j, x, static_cast<float>(i + 1) * dt, &hit);
+        r.q[buf][j] = vehicle_cost<T>(p, j, x, static_cast<float>(i + 1) * dt, 0, &hit);
         if (hit) bits |= 1u << j;
       }
       __syncwarp();
@@ -222,8 +330,8 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, float* S, un
           // Summed in Task::running's order (vehicles, then pairs), so the sum rounds alike.
           float run = 0.0f;
           for (int v = 0; v < M + TeamRollout<T>::kPairs; ++v) run += r.q[buf][v];
-          q_last = sanitize_cost(run + r.control_cost[s]);
-          if (i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q_last;
+          q_last = sanitize_cost(run + qc);
+          if (i < horizon - 1) S[at] = q_last;
         }
       }
       buf ^= 1;
@@ -257,9 +365,10 @@ __global__ void partial_min(const float* S, int K, int chunk, float* pmin) {
 }
 
 // Block (i, c): sum w and w du over chunk c at step i, w from S~(tau_i,k) (cost-to-go) or
-// S~(tau_0,k) (trajectory). Block (0, c) also sums the step-0 statistics.
+// S~(tau_0,k) (trajectory). Block (0, c) also sums the step-0 statistics. u_stored: the
+// controls of every (k, i), or null to draw them again.
 template <class T>
-__global__ void weigh(const Input<T>* in, const float* plan, const float* S, const float* pmin,
+__global__ void weigh(const Input<T>* in, const float* plan, const float* u_stored, const float* S, const float* pmin,
                       const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory, float* part,
                       StatsPart* stats_part, SamplerConstants<T::kNu> c) {
   constexpr int NU = T::kNu;
@@ -281,7 +390,13 @@ __global__ void weigh(const Input<T>* in, const float* plan, const float* S, con
   for (int k = begin + static_cast<int>(threadIdx.x); k < end; k += static_cast<int>(blockDim.x)) {
     const float s = row[k];
     const float w = unnormalised_weight(s - m, inv_lambda);
-    perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+    if (u_stored != nullptr) {
+      // du = u - plan, as perturb computes it
+      load_floats<NU>(u_stored + (static_cast<std::size_t>(i) * K + k) * NU, u);
+      for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
+    } else {
+      perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+    }
     acc[0] += w;
     for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
     if (i == 0) {

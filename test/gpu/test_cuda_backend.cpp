@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -141,6 +142,18 @@ TEST(CudaParity, QuadrotorForestTrajectoryWeighting) {
 TEST(CudaParity, Team3ForestTrajectoryWeighting) {
   SKIP_WITHOUT_CUDA();
   check_parity<Team3Forest>("team3_forest", Weighting::kTrajectory);
+}
+
+// The single-vehicle kernel splits the obstacle loop over G lanes per rollout (chosen from K);
+// every G must give the CPU's costs.
+TEST(CudaParity, QuadrotorForestEveryLaneCount) {
+  SKIP_WITHOUT_CUDA();
+  for (const char* lanes : {"1", "2", "4", "8"}) {
+    setenv("MPPID_CUDA_LANES", lanes, 1);
+    std::printf("[parity] lanes per rollout %s\n", lanes);
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo);
+  }
+  unsetenv("MPPID_CUDA_LANES");
 }
 
 // Several cycles through the optimizer (update, shift) on a fresh backend each run.

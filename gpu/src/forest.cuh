@@ -1,0 +1,125 @@
+// The forest cost on the GPU. The obstacle loop dominates a rollout step (32 square roots
+// against ~10 for the dynamics), and in ObstacleSet::nearest_surface it runs as one dependent
+// chain over the cylinders. Here the cylinders (in shared memory with the parameters) are
+// read eight at a time, so eight square roots are in flight at once, and may be split over
+// G lanes of a warp that hold the same rollout (lane l takes cylinders l, l + G, ...), their
+// minima combined by shuffles. Each cylinder's distance is computed with nearest_surface's
+// operations; the running minimum uses its comparison, in cylinder order within a lane, so
+// G = 1 is bit-identical to it, and G > 1 differs at most in the sign of a zero distance,
+// which no term of the cost can see (d^2, d < radius).
+// forest_vehicle() below is ForestCost::vehicle (costs/forest.hpp) with that distance; it
+// must stay term for term the same (the CPU-GPU parity test checks it).
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+#include <type_traits>
+
+#include "mppi/costs/forest.hpp"
+#include "mppi/hd.hpp"
+
+namespace mppi::cuda_detail {
+
+template <class Cost>
+struct IsForestCost : std::false_type {};
+template <class V>
+struct IsForestCost<ForestCost<V>> : std::true_type {};
+
+template <class T>
+constexpr bool kForestTask = IsForestCost<typename T::Cost>::value;
+
+constexpr unsigned kAllLanes = 0xffffffffu;
+
+// ObstacleSet::nearest_surface over lane `lane`'s share of the cylinders, then the minimum
+// over the G lanes of its group (G a power of two, groups aligned in the warp; every lane of
+// the warp must call this when G > 1).
+template <int G>
+__device__ __forceinline__ float nearest_surface(const ObstacleSet& set, float px, float py, float t, int lane) {
+  constexpr int kUnroll = G >= 4 ? 4 : 8;
+  constexpr float kInf = __builtin_huge_valf();
+  const int count = set.count < ObstacleSet::kCapacity ? set.count : ObstacleSet::kCapacity;
+  float best = 1e9f;
+  for (int base = 0; base < count; base += kUnroll * G) {
+    float d[kUnroll];
+#pragma unroll
+    for (int u = 0; u < kUnroll; ++u) {
+      const int n = base + u * G + lane;
+      const Cylinder& c = set.items[n < ObstacleSet::kCapacity ? n : ObstacleSet::kCapacity - 1];
+      const float dx = px - (c.x + c.vx * t);
+      const float dy = py - (c.y + c.vy * t);
+      const float v = fsqrt(dx * dx + dy * dy) - c.radius;
+      d[u] = n < count ? v : kInf;  // past the count: never picked
+    }
+#pragma unroll
+    for (int u = 0; u < kUnroll; ++u) best = d[u] < best ? d[u] : best;
+  }
+#pragma unroll
+  for (int off = 1; off < G; off <<= 1) {
+    const float o = __shfl_xor_sync(kAllLanes, best, off);
+    best = o < best ? o : best;
+  }
+  return best;
+}
+
+// ForestCost<Vehicle>::vehicle with the obstacle distance from the table row.
+template <class Vehicle, int G>
+__device__ __forceinline__ float forest_vehicle(const typename ForestCost<Vehicle>::Params& p, int j, const float* x,
+                                                float t, int lane, bool* crash) {
+  float pos[3];
+  Vehicle::position(x, pos);
+  const float* g = p.goal[j];
+  const float yaw = Vehicle::yaw(x);
+  float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
+            p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
+  const float d = nearest_surface<G>(p.obstacles, pos[0], pos[1], t, lane);
+  if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
+  const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z;
+  if (hit) {
+    q += p.w_crash;
+    *crash = true;
+  }
+  return q;
+}
+
+// Cost::vehicle; for forest tasks through forest_vehicle, the cylinders split over G lanes.
+template <class T, int G = 1>
+__device__ __forceinline__ float vehicle_cost(const typename T::Params& p, int j, const float* x, float t, int lane,
+                                              bool* hit) {
+  if constexpr (kForestTask<T>) {
+    return forest_vehicle<typename T::Vehicle, G>(p.cost, j, x, t, lane, hit);
+  } else {
+    static_assert(G == 1, "only the forest cost splits over lanes");
+    (void)lane;
+    return T::Cost::vehicle(p.cost, j, x, t, hit);
+  }
+}
+
+// Task::running (task.hpp), through vehicle_cost.
+template <class T, int G = 1>
+__device__ __forceinline__ float running_cost(const typename T::Params& p, const float* x, float t, int lane,
+                                              std::uint32_t* crashed) {
+  if constexpr (kForestTask<T>) {
+    constexpr int M = T::kVehicles, VNX = T::kVehicleNx;
+    float q = 0.0f;
+    for (int j = 0; j < M; ++j) {
+      bool hit = false;
+      q += vehicle_cost<T, G>(p, j, x + j * VNX, t, lane, &hit);
+      if (hit) *crashed |= (1u << j);
+    }
+    for (int i = 0; i < M; ++i) {
+      for (int j = i + 1; j < M; ++j) {
+        bool hit = false;
+        q += T::Cost::pair(p.cost, x + i * VNX, x + j * VNX, &hit);
+        if (hit) *crashed |= (1u << i) | (1u << j);
+      }
+    }
+    return q;
+  } else {
+    static_assert(G == 1, "only the forest cost splits over lanes");
+    (void)lane;
+    return T::running(p, x, t, crashed);
+  }
+}
+
+}  // namespace mppi::cuda_detail
