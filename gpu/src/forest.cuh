@@ -7,8 +7,8 @@
 // operations; the running minimum uses its comparison, in cylinder order within a lane, so
 // G = 1 is bit-identical to it, and G > 1 differs at most in the sign of a zero distance,
 // which no term of the cost can see (d^2, d < radius).
-// forest_vehicle() below is ForestCost::vehicle (costs/forest.hpp) with that distance; it
-// must stay term for term the same (the CPU-GPU parity test checks it).
+// forest_vehicle() below is ForestCost::vehicle_at_distance (costs/forest.hpp) with that
+// distance: the terms themselves are core's.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -39,16 +39,14 @@ __device__ __forceinline__ float nearest_surface(const ObstacleSet& set, float p
   constexpr int kUnroll = G >= 4 ? 4 : 8;
   constexpr float kInf = __builtin_huge_valf();
   const int count = set.count < ObstacleSet::kCapacity ? set.count : ObstacleSet::kCapacity;
-  float best = 1e9f;
+  float best = ObstacleSet::kFar;
   for (int base = 0; base < count; base += kUnroll * G) {
     float d[kUnroll];
 #pragma unroll
     for (int u = 0; u < kUnroll; ++u) {
       const int n = base + u * G + lane;
       const Cylinder& c = set.items[n < ObstacleSet::kCapacity ? n : ObstacleSet::kCapacity - 1];
-      const float dx = px - (c.x + c.vx * t);
-      const float dy = py - (c.y + c.vy * t);
-      const float v = fsqrt(dx * dx + dy * dy) - c.radius;
+      const float v = ObstacleSet::surface_distance(c, px, py, t);
       d[u] = n < count ? v : kInf;  // past the count: never picked
     }
 #pragma unroll
@@ -62,24 +60,14 @@ __device__ __forceinline__ float nearest_surface(const ObstacleSet& set, float p
   return best;
 }
 
-// ForestCost<Vehicle>::vehicle with the obstacle distance from the table row.
+// ForestCost<Vehicle>::vehicle, the obstacle search split over G lanes.
 template <class Vehicle, int G>
 __device__ __forceinline__ float forest_vehicle(const typename ForestCost<Vehicle>::Params& p, int j, const float* x,
                                                 float t, int lane, bool* crash) {
   float pos[3];
   Vehicle::position(x, pos);
-  const float* g = p.goal[j];
-  const float yaw = Vehicle::yaw(x);
-  float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
-            p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
   const float d = nearest_surface<G>(p.obstacles, pos[0], pos[1], t, lane);
-  if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
-  const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z;
-  if (hit) {
-    q += p.w_crash;
-    *crash = true;
-  }
-  return q;
+  return ForestCost<Vehicle>::vehicle_at_distance(p, j, x, d, crash);
 }
 
 // Cost::vehicle; for forest tasks through forest_vehicle, the cylinders split over G lanes.
@@ -95,31 +83,13 @@ __device__ __forceinline__ float vehicle_cost(const typename T::Params& p, int j
   }
 }
 
-// Task::running (task.hpp), through vehicle_cost.
+// Task::running (task.hpp), the vehicle terms through vehicle_cost.
 template <class T, int G = 1>
 __device__ __forceinline__ float running_cost(const typename T::Params& p, const float* x, float t, int lane,
                                               std::uint32_t* crashed) {
-  if constexpr (kForestTask<T>) {
-    constexpr int M = T::kVehicles, VNX = T::kVehicleNx;
-    float q = 0.0f;
-    for (int j = 0; j < M; ++j) {
-      bool hit = false;
-      q += vehicle_cost<T, G>(p, j, x + j * VNX, t, lane, &hit);
-      if (hit) *crashed |= (1u << j);
-    }
-    for (int i = 0; i < M; ++i) {
-      for (int j = i + 1; j < M; ++j) {
-        bool hit = false;
-        q += T::Cost::pair(p.cost, x + i * VNX, x + j * VNX, &hit);
-        if (hit) *crashed |= (1u << i) | (1u << j);
-      }
-    }
-    return q;
-  } else {
-    static_assert(G == 1, "only the forest cost splits over lanes");
-    (void)lane;
-    return T::running(p, x, t, crashed);
-  }
+  return T::running_with(p, x, crashed, [&](int j, const float* xj, bool* hit) {
+    return vehicle_cost<T, G>(p, j, xj, t, lane, hit);
+  });
 }
 
 }  // namespace mppi::cuda_detail

@@ -39,10 +39,20 @@ struct Task {
   // State cost q(x) at time t (seconds from the plan's start), summed over vehicles and
   // vehicle pairs; sets the crash bit of each vehicle found in collision.
   MPPI_HD static float running(const Params& p, const float* x, float t, std::uint32_t* crashed) {
+    return running_with(p, x, crashed, [&](int j, const float* xj, bool* hit) {
+      return Cost::vehicle(p.cost, j, xj, t, hit);
+    });
+  }
+
+  // running() with the per-vehicle term computed by vehicle_cost(j, x_j, &hit): a backend
+  // may evaluate Cost::vehicle its own way (same terms, same order of the sum).
+  template <class VehicleCost>
+  MPPI_HD static float running_with(const Params& p, const float* x, std::uint32_t* crashed,
+                                    VehicleCost&& vehicle_cost) {
     float q = 0.0f;
     for (int j = 0; j < M; ++j) {
       bool hit = false;
-      q += Cost::vehicle(p.cost, j, x + j * kVehicleNx, t, &hit);
+      q += vehicle_cost(j, x + j * kVehicleNx, &hit);
       if (hit) *crashed |= (1u << j);
     }
     for (int i = 0; i < M; ++i) {

@@ -17,15 +17,23 @@ struct ObstacleSet {
   int count = 0;
   Cylinder items[kCapacity];
 
+  // What nearest_surface returns when there are no obstacles.
+  static constexpr float kFar = 1e9f;
+
+  // Distance from (px, py) at time t to cylinder c's surface (negative inside), the
+  // cylinder predicted at constant velocity. Every search over the set uses this.
+  MPPI_HD static float surface_distance(const Cylinder& c, float px, float py, float t) {
+    const float dx = px - (c.x + c.vx * t);
+    const float dy = py - (c.y + c.vy * t);
+    return fsqrt(dx * dx + dy * dy) - c.radius;
+  }
+
   // Distance from (px, py) at time t to the nearest cylinder surface (negative inside);
-  // a large number when there are no obstacles.
+  // kFar when there are no obstacles.
   MPPI_HD float nearest_surface(float px, float py, float t) const {
-    float best = 1e9f;
+    float best = kFar;
     for (int i = 0; i < count; ++i) {
-      const Cylinder& c = items[i];
-      const float dx = px - (c.x + c.vx * t);
-      const float dy = py - (c.y + c.vy * t);
-      const float d = fsqrt(dx * dx + dy * dy) - c.radius;
+      const float d = surface_distance(items[i], px, py, t);
       best = d < best ? d : best;
     }
     return best;
