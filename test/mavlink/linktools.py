@@ -12,7 +12,7 @@ import time
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from conftest import LCM_URL  # noqa: E402
+from mavtest import LCM_URL  # noqa: E402
 from mppi_mavlink import lcm_types  # noqa: E402
 
 

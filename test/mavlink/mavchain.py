@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from conftest import LCM_URL, PYTHON, ROOT, Procs, events, find_binary, read_jsonl, wait_for
+from mavtest import LCM_URL, PYTHON, ROOT, Procs, events, find_binary, read_jsonl, wait_for
 from mppi_mavlink import control, lcm_types
 
 VEHICLE_PORT = 14540      # the bridge listens here (PX4's offboard port)

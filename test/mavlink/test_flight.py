@@ -4,7 +4,7 @@ SITL bars for the same scenarios (circle: tracking RMSE < 0.3 m after 3 s; fores
 reached, no collision)."""
 import pytest
 
-from conftest import wait_for
+from mavtest import wait_for
 from mavchain import Chain
 
 pytestmark = pytest.mark.timeout(150)

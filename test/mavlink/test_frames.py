@@ -153,6 +153,6 @@ def test_settings_validation():
 
 
 def test_shipped_settings_load():
-    from conftest import ROOT
+    from mavtest import ROOT
     for f in sorted((ROOT / "config" / "bridge").glob("*.yaml")):
         settings.load(f)

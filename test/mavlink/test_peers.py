@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from conftest import wait_for
+from mavtest import wait_for
 from mavchain import ROUTER_IN, Chain
 from mppi_mavlink import frames
 

@@ -60,9 +60,11 @@ def test_hover_standin_flight_holds_position(sim_binary, tmp_path):
     sitl("run", "--scenario", "track_circle", "--controller", "standin", "--out", out, "--timeout", 60)
     score = json.loads((out / "score.json").read_text())
     assert score["sim_outcome"] == "duration"
-    # Lock-step answered every one of the 1000 states (else the sim times out, not "duration");
-    # the logger is one more UDP listener and may miss a few on a loaded 2-core machine.
-    assert score["commands"] >= 950
+    # Lock-step: the simulator stepped only on an answer, so its truth log has one line per
+    # answered state (the logger, one more UDP listener, may miss some on a loaded machine).
+    answered = (out / "truth.jsonl").read_text().splitlines()
+    assert len(answered) >= 1000  # 20 s at 50 Hz
+    assert score["commands"] > 0
     last = json.loads((out / "truth.jsonl").read_text().splitlines()[-1])
     assert abs(last["x"][2] - 2.0) < 0.05 and abs(last["x"][0] - 3.0) < 0.05
     for f in ("flight.lcmlog", "path.png", "traces.png", "timing.png", "world.json", "sim_summary.json"):
