@@ -12,7 +12,7 @@
 #include "mppi/models/quadrotor_rate.hpp"
 #include "mppi/models/racecar.hpp"
 #include "mppi/params.hpp"
-#include "sim/rk4.hpp"
+#include "mppi/rk4.hpp"
 
 namespace sim {
 namespace {
@@ -64,7 +64,7 @@ class ModelPlant : public Plant {
       const float* uv = u + v * Model::kNu;
       float accel[3] = {0.0f, 0.0f, 0.0f};
       const int vel = wind_accel(wind, accel);
-      rk4_model<Model>(p_, xv, uv, hf, accel, vel);
+      mppi::rk4_model<Model>(p_, xv, uv, hf, accel, vel);
       post_step(xv);
     }
   }
@@ -281,7 +281,7 @@ class RateBodyPlant : public Plant {
       float* b = body_.data() + v * Quadrotor::kNx;
       float motors[4];
       autopilot(b, u + v * QuadrotorRate::kNu, motors);
-      rk4_model<Quadrotor>(p_, b, motors, static_cast<float>(h), accel, Quadrotor::VX);
+      mppi::rk4_model<Quadrotor>(p_, b, motors, static_cast<float>(h), accel, Quadrotor::VX);
     }
     publish_view();
   }

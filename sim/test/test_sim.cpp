@@ -6,7 +6,7 @@
 
 #include "mppi/models/quadrotor.hpp"
 #include "sim/plant.hpp"
-#include "sim/rk4.hpp"
+#include "mppi/rk4.hpp"
 #include "sim/scenario.hpp"
 
 namespace {
@@ -27,7 +27,7 @@ TEST(Rk4, FourthOrderOnExponentialDecay) {
     const int n = 10 << k;
     float x = 1.0f;
     const float u = 0.0f;
-    for (int i = 0; i < n; ++i) sim::rk4_model<Decay>(Decay::Params{2.0f}, &x, &u, 1.0f / static_cast<float>(n));
+    for (int i = 0; i < n; ++i) mppi::rk4_model<Decay>(Decay::Params{2.0f}, &x, &u, 1.0f / static_cast<float>(n));
     err[k] = std::fabs(static_cast<double>(x) - std::exp(-2.0));
   }
   EXPECT_GT(err[0] / err[1], 10.0);
@@ -39,7 +39,7 @@ TEST(Rk4, FreeFallMatchesClosedForm) {
   float x[mppi::Quadrotor::kNx] = {};
   x[mppi::Quadrotor::PZ] = 10.0f;
   const float u[4] = {0, 0, 0, 0};
-  for (int i = 0; i < 1000; ++i) sim::rk4_model<mppi::Quadrotor>(p, x, u, 1e-3f);
+  for (int i = 0; i < 1000; ++i) mppi::rk4_model<mppi::Quadrotor>(p, x, u, 1e-3f);
   EXPECT_NEAR(x[mppi::Quadrotor::PZ], 10.0f - 0.5f * 9.81f, 1e-3f);
   EXPECT_NEAR(x[mppi::Quadrotor::VZ], -9.81f, 1e-3f);
 }

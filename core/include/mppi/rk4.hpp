@@ -1,10 +1,10 @@
-// Classic fourth-order Runge-Kutta, written once and generic over the model: the plant
-// reuses the controller's HD derivative() but integrates it far more finely and accurately
-// than the controller's Euler rollouts, so model mismatch comes from parameters, not from
-// the integrator.
+// Classic fourth-order Runge-Kutta, written once and generic over the model: the plants
+// (the simulator's and the offline closed loop's) reuse the controller's HD derivative()
+// but integrate it far more finely and accurately than the controller's Euler rollouts, so
+// model mismatch comes from parameters, not from the integrator.
 #pragma once
 
-namespace sim {
+namespace mppi {
 
 // One RK4 step of length h for x' = f(x), f called as f(const float* x, float* dx).
 template <int N, class F>
@@ -34,4 +34,4 @@ void rk4_model(const typename Model::Params& p, float* x, const float* u, float 
       x, h);
 }
 
-}  // namespace sim
+}  // namespace mppi
