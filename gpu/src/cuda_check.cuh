@@ -23,62 +23,31 @@ inline void check(cudaError_t e, const std::string& what) {
   if (e != cudaSuccess) fail(e, what);
 }
 
-// Device memory, freed on destruction.
-class DeviceBuffer {
+// Memory from one CUDA allocator, freed on destruction. A failed allocation is not sticky:
+// the error is cleared so nothing is left behind for the next launch.
+template <class Allocator>
+class CudaBuffer {
  public:
-  DeviceBuffer() = default;
-  DeviceBuffer(std::size_t bytes, const std::string& what) : bytes_(bytes) {
+  CudaBuffer() = default;
+  CudaBuffer(std::size_t bytes, const std::string& what) : bytes_(bytes) {
     if (bytes == 0) return;
-    const cudaError_t e = cudaMalloc(&ptr_, bytes);
-    if (e != cudaSuccess) {
-      ptr_ = nullptr;
-      cudaGetLastError();  // a failed allocation is not sticky: leave no error behind
-      fail(e, "cudaMalloc of " + std::to_string(bytes) + " bytes for " + what);
-    }
-  }
-  DeviceBuffer(const DeviceBuffer&) = delete;
-  DeviceBuffer& operator=(const DeviceBuffer&) = delete;
-  DeviceBuffer(DeviceBuffer&& o) noexcept : ptr_(o.ptr_), bytes_(o.bytes_) { o.ptr_ = nullptr; o.bytes_ = 0; }
-  DeviceBuffer& operator=(DeviceBuffer&& o) noexcept {
-    std::swap(ptr_, o.ptr_);
-    std::swap(bytes_, o.bytes_);
-    return *this;
-  }
-  ~DeviceBuffer() {
-    if (ptr_ != nullptr) cudaFree(ptr_);
-  }
-  template <class U>
-  U* as() const { return static_cast<U*>(ptr_); }
-  std::size_t bytes() const { return bytes_; }
-
- private:
-  void* ptr_ = nullptr;
-  std::size_t bytes_ = 0;
-};
-
-// Page-locked host memory (the staging area of the per-cycle copies), freed on destruction.
-class PinnedBuffer {
- public:
-  PinnedBuffer() = default;
-  PinnedBuffer(std::size_t bytes, const std::string& what) : bytes_(bytes) {
-    if (bytes == 0) return;
-    const cudaError_t e = cudaMallocHost(&ptr_, bytes);
+    const cudaError_t e = Allocator::allocate(&ptr_, bytes);
     if (e != cudaSuccess) {
       ptr_ = nullptr;
       cudaGetLastError();
-      fail(e, "cudaMallocHost of " + std::to_string(bytes) + " bytes for " + what);
+      fail(e, std::string(Allocator::kName) + " of " + std::to_string(bytes) + " bytes for " + what);
     }
   }
-  PinnedBuffer(const PinnedBuffer&) = delete;
-  PinnedBuffer& operator=(const PinnedBuffer&) = delete;
-  PinnedBuffer(PinnedBuffer&& o) noexcept : ptr_(o.ptr_), bytes_(o.bytes_) { o.ptr_ = nullptr; o.bytes_ = 0; }
-  PinnedBuffer& operator=(PinnedBuffer&& o) noexcept {
+  CudaBuffer(const CudaBuffer&) = delete;
+  CudaBuffer& operator=(const CudaBuffer&) = delete;
+  CudaBuffer(CudaBuffer&& o) noexcept : ptr_(o.ptr_), bytes_(o.bytes_) { o.ptr_ = nullptr; o.bytes_ = 0; }
+  CudaBuffer& operator=(CudaBuffer&& o) noexcept {
     std::swap(ptr_, o.ptr_);
     std::swap(bytes_, o.bytes_);
     return *this;
   }
-  ~PinnedBuffer() {
-    if (ptr_ != nullptr) cudaFreeHost(ptr_);
+  ~CudaBuffer() {
+    if (ptr_ != nullptr) Allocator::release(ptr_);
   }
   template <class U>
   U* as() const { return static_cast<U*>(ptr_); }
@@ -88,5 +57,20 @@ class PinnedBuffer {
   void* ptr_ = nullptr;
   std::size_t bytes_ = 0;
 };
+
+struct DeviceAllocator {
+  static constexpr const char* kName = "cudaMalloc";
+  static cudaError_t allocate(void** p, std::size_t n) { return cudaMalloc(p, n); }
+  static void release(void* p) { cudaFree(p); }
+};
+struct PinnedAllocator {
+  static constexpr const char* kName = "cudaMallocHost";
+  static cudaError_t allocate(void** p, std::size_t n) { return cudaMallocHost(p, n); }
+  static void release(void* p) { cudaFreeHost(p); }
+};
+
+// Device memory; page-locked host memory (the staging area of the per-cycle copies).
+using DeviceBuffer = CudaBuffer<DeviceAllocator>;
+using PinnedBuffer = CudaBuffer<PinnedAllocator>;
 
 }  // namespace mppi::cuda_detail
