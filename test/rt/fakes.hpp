@@ -120,6 +120,10 @@ class FakeController final : public Controller {
     ++resets;
     std::fill(plan_.begin(), plan_.end(), 3000.0f);
   }
+  void set_plan(const float* plan) override {
+    std::copy(plan, plan + plan_.size(), plan_.begin());
+    ++restores;
+  }
   int predict(const float*, const float*, float*, int) const override { return 0; }
   const std::vector<float>& plan() const override { return plan_; }
   const MppiSettings& settings() const override { return s_; }
@@ -132,6 +136,7 @@ class FakeController final : public Controller {
   // Iteration n may corrupt the plan/stats; return true to throw instead.
   std::function<bool(int, std::vector<float>*, UpdateStats*)> fault;
   int iterations = 0, resets = 0, inputs_set = 0, mid_cycle_changes = 0;
+  int restores = 0;  // set_plan calls (the loop restoring its last good plan)
   std::vector<float> last_x0;
   std::vector<std::pair<std::string, double>> params_set;
   TaskInputs inputs;

@@ -231,7 +231,10 @@ TEST(ControlLoop, NonFiniteOptimizerOutputPublishesHeldPlan) {
   EXPECT_FLOAT_EQ(r.tx.commands[2].u[0], 1021.0f);
   EXPECT_EQ(r.tx.commands[3].mode, Mode::kNormal);
   EXPECT_EQ(r.loop.counters().optimizer_nonfinite.load(), 1);
-  EXPECT_EQ(r.ctl.resets, 1);  // the NaN plan is not kept as a warm start
+  // The NaN plan is not kept as a warm start: the last good plan (shifted) replaces it.
+  EXPECT_EQ(r.ctl.resets, 0);
+  EXPECT_EQ(r.ctl.restores, 1);
+  for (float v : r.ctl.plan()) EXPECT_TRUE(std::isfinite(v));
   EXPECT_FALSE(r.tx.any_nonfinite());
 }
 

@@ -47,6 +47,8 @@ class Controller {
   // Shifted previous plan, for a missed deadline or a rejected update.
   virtual void fallback(float* u_out) = 0;
   virtual void reset() = 0;
+  // Replace the plan (horizon x nu, clamped into the limits): e.g. restore the last good one.
+  virtual void set_plan(const float* plan) = 0;
 
   // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
@@ -93,6 +95,7 @@ class TaskController final : public Controller {
   const UpdateStats& iterate(const float* x0, float* u_out) override { return mppi_.iterate(x0, params_, u_out); }
   void fallback(float* u_out) override { mppi_.fallback(u_out); }
   void reset() override { mppi_.reset(); }
+  void set_plan(const float* plan) override { mppi_.set_plan(plan); }
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     using V = typename T::Vehicle;

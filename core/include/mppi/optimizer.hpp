@@ -59,7 +59,8 @@ class Mppi {
   }
 
   // Replace the plan (tests; a restored plan). Values are clamped into the limits.
-  void set_plan(const std::vector<float>& plan) {
+  void set_plan(const std::vector<float>& plan) { set_plan(plan.data()); }
+  void set_plan(const float* plan) {
     for (std::size_t n = 0; n < plan_.size(); ++n) {
       const int j = static_cast<int>(n % kNu);
       plan_[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);

@@ -169,10 +169,11 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       }
       published = Mode::kHoldPlan;
     } else if (!good) {
-      // The optimizer's plan may hold NaN: restart it from u_init, fly the held plan.
-      c_->reset();
+      // The optimizer's plan may hold NaN: fly the held plan and warm-start the optimizer
+      // from it (the last good plan, shifted in step with what went out).
       ++consecutive_bad_updates_;
       published = publish_held(state_seq);
+      c_->set_plan(held_.data());
     } else if (missed_deadline) {
       counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
       consecutive_bad_updates_ = 0;
