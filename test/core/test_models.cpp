@@ -3,6 +3,7 @@
 // independently of the model code), never copied from the code's output.
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -21,39 +22,6 @@
 
 namespace mppi {
 namespace {
-
-using Mat3 = std::array<std::array<double, 3>, 3>;
-using Vec3 = std::array<double, 3>;
-
-Mat3 matmul(const Mat3& a, const Mat3& b) {
-  Mat3 c{};
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j)
-      for (int k = 0; k < 3; ++k) c[i][j] += a[i][k] * b[k][j];
-  return c;
-}
-Mat3 rot_x(double a) { return {{{1, 0, 0}, {0, std::cos(a), -std::sin(a)}, {0, std::sin(a), std::cos(a)}}}; }
-Mat3 rot_y(double a) { return {{{std::cos(a), 0, std::sin(a)}, {0, 1, 0}, {-std::sin(a), 0, std::cos(a)}}}; }
-Mat3 rot_z(double a) { return {{{std::cos(a), -std::sin(a), 0}, {std::sin(a), std::cos(a), 0}, {0, 0, 1}}}; }
-
-double det3(const Mat3& m) {
-  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
-         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-}
-// Solves m x = b by Cramer's rule.
-Vec3 solve3(const Mat3& m, const Vec3& b) {
-  const double d = det3(m);
-  Vec3 x{};
-  for (int c = 0; c < 3; ++c) {
-    Mat3 mc = m;
-    for (int r = 0; r < 3; ++r) mc[r][c] = b[r];
-    x[c] = det3(mc) / d;
-  }
-  return x;
-}
-Vec3 cross(const Vec3& a, const Vec3& b) {
-  return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
 
 template <class Model>
 std::vector<float> derivative_of(const typename Model::Params& p, const std::vector<float>& x,
@@ -98,15 +66,15 @@ TEST(Quadrotor, HoverIsAnEquilibrium) {
 // Body torque of the four thrusts and drag moments, from the motor positions (motor 1 on
 // +x, 2 on +y, 3 on -x, 4 on -y, thrust along body +z) as r x F, plus the reaction
 // moments (1 and 3 spin one way, 2 and 4 the other).
-Vec3 torque_from_geometry(const Q::Params& p, const std::array<double, 4>& w) {
+Eigen::Vector3d torque_from_geometry(const Q::Params& p, const std::array<double, 4>& w) {
   const double L = p.arm;
-  const std::array<Vec3, 4> pos = {{{L, 0, 0}, {0, L, 0}, {-L, 0, 0}, {0, -L, 0}}};
-  Vec3 tau{0, 0, 0};
+  const std::array<Eigen::Vector3d, 4> pos = {Eigen::Vector3d(L, 0.0, 0.0), Eigen::Vector3d(0.0, L, 0.0),
+                                              Eigen::Vector3d(-L, 0.0, 0.0), Eigen::Vector3d(0.0, -L, 0.0)};
+  Eigen::Vector3d tau = Eigen::Vector3d::Zero();
   for (int i = 0; i < 4; ++i) {
-    const Vec3 f{0, 0, static_cast<double>(p.k_force) * w[i] * w[i]};
-    const Vec3 t = cross(pos[i], f);
-    for (int d = 0; d < 3; ++d) tau[d] += t[d];
-    tau[2] += (i % 2 == 0 ? 1.0 : -1.0) * static_cast<double>(p.k_moment) * w[i] * w[i];
+    const Eigen::Vector3d f(0.0, 0.0, static_cast<double>(p.k_force) * w[i] * w[i]);
+    tau += pos[i].cross(f);
+    tau.z() += (i % 2 == 0 ? 1.0 : -1.0) * static_cast<double>(p.k_moment) * w[i] * w[i];
   }
   return tau;
 }
@@ -124,13 +92,13 @@ TEST(Quadrotor, DifferentialThrustGivesRollPitchYawTorques) {
       {{h - e, h, h + e, h}, 1},          // motor 3 vs 1: pitch
       {{h + e, h - e, h + e, h - e}, 2},  // M1 - M2 + M3 - M4: yaw
   };
-  const double inertia[3] = {p.ixx, p.iyy, p.izz};
+  const Eigen::Vector3d inertia(p.ixx, p.iyy, p.izz);
   for (const auto& c : cases) {
     auto x = quad_hover_state(p);
     for (int i = 0; i < 4; ++i) x[Q::M1 + i] = static_cast<float>(c.w[i]);
     const std::vector<float> u(x.begin() + Q::M1, x.end());
     const auto dx = derivative_of<Q>(p, x, u);
-    const Vec3 tau = torque_from_geometry(p, c.w);
+    const Eigen::Vector3d tau = torque_from_geometry(p, c.w);
     for (int a = 0; a < 3; ++a) {
       const double expected = tau[a] / inertia[a];  // body at rest: no gyroscopic term
       if (a == c.axis) {
@@ -163,10 +131,9 @@ TEST(Quadrotor, GyroscopicTermIsOmegaCrossIOmega) {
   x[Q::WZ] = 0.7f;
   const std::vector<float> u(x.begin() + Q::M1, x.end());
   const auto dx = derivative_of<Q>(p, x, u);
-  const Vec3 w{1.5, -2.0, 0.7};
-  const Vec3 iw{p.ixx * w[0], p.iyy * w[1], p.izz * w[2]};
-  const Vec3 g = cross(w, iw);
-  const double inertia[3] = {p.ixx, p.iyy, p.izz};
+  const Eigen::Vector3d w(1.5, -2.0, 0.7);
+  const Eigen::Vector3d inertia(p.ixx, p.iyy, p.izz);
+  const Eigen::Vector3d g = w.cross(inertia.asDiagonal() * w);
   for (int a = 0; a < 3; ++a) {
     const double expected = -g[a] / inertia[a];  // equal motors: no torque
     EXPECT_NEAR(dx[Q::WX + a], expected, 1e-3 * (1.0 + std::fabs(expected))) << a;
@@ -190,10 +157,12 @@ TEST(Quadrotor, TiltedThrustAcceleratesAlongBodyZ) {
     const std::vector<float> u(x.begin() + Q::M1, x.end());
     const auto dx = derivative_of<Q>(p, x, u);
     // ZXY Euler angles: R_WB = Rz(psi) Rx(phi) Ry(theta), built by matrix products here.
-    const Mat3 r = matmul(matmul(rot_z(a[2]), rot_x(a[0])), rot_y(a[1]));
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(a[2], Eigen::Vector3d::UnitZ()).toRotationMatrix() *
+                              Eigen::AngleAxisd(a[0], Eigen::Vector3d::UnitX()).toRotationMatrix() *
+                              Eigen::AngleAxisd(a[1], Eigen::Vector3d::UnitY()).toRotationMatrix();
     const double thrust = 4.0 * p.k_force * w * w;
     for (int d = 0; d < 3; ++d) {
-      const double expected = r[d][2] * thrust / p.mass - (d == 2 ? p.gravity : 0.0);
+      const double expected = r(d, 2) * thrust / p.mass - (d == 2 ? p.gravity : 0.0);
       EXPECT_NEAR(dx[Q::VX + d], expected, 1e-4 * (1.0 + std::fabs(expected)))
           << "axis " << d << " at (" << a[0] << ", " << a[1] << ", " << a[2] << ")";
     }
@@ -211,7 +180,7 @@ TEST(Quadrotor, TiltedThrustAcceleratesAlongBodyZ) {
 
 TEST(Quadrotor, EulerRatesInvertTheBodyRateMap) {
   // omega = W(phi, theta) Phi_dot with W = [[c0, 0, -cf s0], [0, 1, sf], [s0, 0, cf c0]]
-  // (paper, Appendix E); solve it for Phi_dot by Cramer's rule.
+  // (paper, Appendix E); solve it for Phi_dot (LU with partial pivoting; det W = cos phi).
   const Q::Params p;
   const double cases[][6] = {
       // phi, theta, psi, p, q, r
@@ -231,8 +200,11 @@ TEST(Quadrotor, EulerRatesInvertTheBodyRateMap) {
     const std::vector<float> u(x.begin() + Q::M1, x.end());
     const auto dx = derivative_of<Q>(p, x, u);
     const double cf = std::cos(c[0]), sf = std::sin(c[0]), c0 = std::cos(c[1]), s0 = std::sin(c[1]);
-    const Mat3 W = {{{c0, 0, -cf * s0}, {0, 1, sf}, {s0, 0, cf * c0}}};
-    const Vec3 rates = solve3(W, {c[3], c[4], c[5]});
+    Eigen::Matrix3d W;
+    W << c0, 0.0, -cf * s0,  //
+        0.0, 1.0, sf,        //
+        s0, 0.0, cf * c0;
+    const Eigen::Vector3d rates = W.partialPivLu().solve(Eigen::Vector3d(c[3], c[4], c[5]));
     for (int a = 0; a < 3; ++a)
       EXPECT_NEAR(dx[Q::ROLL + a], rates[a], 1e-5 * (1.0 + std::fabs(rates[a]))) << "angle " << a << " case phi=" << c[0];
   }
@@ -300,8 +272,7 @@ TEST(QuadrotorRate, QuaternionStaysUnit) {
   x[QR::WZ] = 3.0f;
   const std::vector<float> u = {9.81f, 1.0f, -2.0f, 3.0f};
   for (int n = 0; n < 5000; ++n) QR::step(p, x.data(), u.data(), 0.01f);
-  const double norm = std::sqrt(x[QR::QW] * x[QR::QW] + x[QR::QX] * x[QR::QX] + x[QR::QY] * x[QR::QY] +
-                                x[QR::QZ] * x[QR::QZ]);
+  const double norm = Eigen::Quaterniond(x[QR::QW], x[QR::QX], x[QR::QY], x[QR::QZ]).norm();
   EXPECT_NEAR(norm, 1.0, 1e-5);
   for (float v : x) EXPECT_TRUE(std::isfinite(v));
 }
@@ -352,20 +323,19 @@ TEST(QuadrotorRate, RateLoopIsFirstOrderWithTimeConstantTau) {
 TEST(QuadrotorRate, ThrustAlongRotatedBodyZ) {
   QR::Params p;
   p.mass = 1.3f;
-  // Rotation by angle a about the unit axis n: q = (cos a/2, sin a/2 n).
+  // Rotation by angle a about the unit axis n: q = (cos a/2, sin a/2 n), built by Eigen::AngleAxisd.
   const double axes[][3] = {{1, 0, 0}, {0, 1, 0}, {1, 2, -0.5}, {-0.3, 0.4, 0.9}};
   const double angle = 0.6;
   for (const auto& ax : axes) {
-    const double len = std::sqrt(ax[0] * ax[0] + ax[1] * ax[1] + ax[2] * ax[2]);
-    const Vec3 nvec{ax[0] / len, ax[1] / len, ax[2] / len};
-    const double s = std::sin(angle / 2), c = std::cos(angle / 2);
-    auto x = rate_state(static_cast<float>(c), static_cast<float>(s * nvec[0]), static_cast<float>(s * nvec[1]),
-                        static_cast<float>(s * nvec[2]));
+    const Eigen::Vector3d nvec = Eigen::Vector3d(ax[0], ax[1], ax[2]).normalized();
+    const Eigen::Quaterniond q(Eigen::AngleAxisd(angle, nvec));
+    auto x = rate_state(static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
+                        static_cast<float>(q.z()));
     const std::vector<float> u = {15.0f, 0.0f, 0.0f, 0.0f};
     const auto dx = derivative_of<QR>(p, x, u);
     // Rodrigues: R e3 = e3 cos a + (n x e3) sin a + n (n . e3)(1 - cos a).
-    const Vec3 e3{0, 0, 1};
-    const Vec3 nxe = cross(nvec, e3);
+    const Eigen::Vector3d e3 = Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d nxe = nvec.cross(e3);
     for (int d = 0; d < 3; ++d) {
       const double bz = e3[d] * std::cos(angle) + nxe[d] * std::sin(angle) + nvec[d] * nvec[2] * (1 - std::cos(angle));
       const double expected = 15.0 / 1.3 * bz - (d == 2 ? 9.81 : 0.0);
@@ -616,9 +586,9 @@ TEST(Integration, EulerConvergesToRk4Quadrotor) {
 
 TEST(Integration, EulerConvergesToRk4QuadrotorRate) {
   const QR::Params p;
-  const double n = std::sqrt(0.9 * 0.9 + 0.1 * 0.1 + 0.3 * 0.3 + 0.2 * 0.2);
-  auto x = rate_state(static_cast<float>(0.9 / n), static_cast<float>(0.1 / n), static_cast<float>(-0.3 / n),
-                      static_cast<float>(0.2 / n));
+  const Eigen::Quaterniond q = Eigen::Quaterniond(0.9, 0.1, -0.3, 0.2).normalized();
+  auto x = rate_state(static_cast<float>(q.w()), static_cast<float>(q.x()), static_cast<float>(q.y()),
+                      static_cast<float>(q.z()));
   x[QR::VY] = 0.5f;
   x[QR::WX] = 0.5f;
   x[QR::WY] = -0.3f;
