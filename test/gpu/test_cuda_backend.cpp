@@ -84,7 +84,10 @@ Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cp
   EXPECT_EQ(sc_stats.finite, sg_stats.finite);
   EXPECT_NEAR(sg_stats.min_cost, sc_stats.min_cost, kCostTolerance * std::max(1.0f, std::fabs(sc_stats.min_cost)));
   // The mean and the crash count include the few divergent rollouts (see kDivergentFraction).
-  EXPECT_NEAR(sg_stats.mean_cost, sc_stats.mean_cost, 2e-3f * std::max(1.0f, std::fabs(sc_stats.mean_cost)));
+  // A divergent rollout's cost can differ by its whole crash penalty, so the mean is held to
+  // the divergent fraction rather than to the per-rollout tolerance.
+  EXPECT_NEAR(sg_stats.mean_cost, sc_stats.mean_cost,
+              static_cast<float>(kDivergentFraction) * std::max(1.0f, std::fabs(sc_stats.mean_cost)));
   EXPECT_NEAR(sg_stats.ess, sc_stats.ess, 1e-3f * std::max(1.0f, sc_stats.ess));
   EXPECT_NEAR(sg_stats.crashed, sc_stats.crashed, kDivergentFraction * sc.settings.rollouts);
   *plan = pc;
