@@ -4,6 +4,8 @@
 // operator new of this whole executable, hence its own test program.
 #include <gtest/gtest.h>
 
+#include "fixtures.hpp"
+
 #include <cmath>
 #include <memory>
 #include <string>
@@ -64,23 +66,7 @@ std::size_t allocations_over_cycles(Controller& c) {
   return after - before;
 }
 
-MppiSettings forest_settings() {
-  MppiSettings s;
-  s.rollouts = 256;
-  s.horizon = 50;
-  s.dt = 0.02f;
-  s.lambda = 1000.0f;
-  s.nu = 2.0f;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  s.sigma.assign(4, 60.0f);
-  s.u_min.assign(4, 0.0f);
-  s.u_max.assign(4, 6000.0f);
-  s.u_init.assign(4, hover);
-  s.u_nominal.assign(4, hover);
-  s.control_cost_scale = 0.01f;
-  s.threads = 2;
-  return s;
-}
+MppiSettings forest_settings() { return testing::quadrotor_settings(256, 50, 1000.0f, 60.0f, 2); }
 
 TEST(NoAlloc, CounterSeesAllocations) {
   // The counter is live in this program (else the zero below would prove nothing).

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "fixtures.hpp"
+
 #include <cmath>
 #include <memory>
 #include <numeric>
@@ -12,21 +14,7 @@
 namespace mppi {
 namespace {
 
-MppiSettings quad_settings(int k = 256, int t = 50) {
-  MppiSettings s;
-  s.rollouts = k;
-  s.horizon = t;
-  s.lambda = 10.0f;
-  s.nu = 2.0f;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  s.sigma.assign(4, 150.0f);
-  s.u_min.assign(4, 0.0f);
-  s.u_max.assign(4, 6000.0f);
-  s.u_init.assign(4, hover);
-  s.u_nominal.assign(4, hover);
-  s.control_cost_scale = 0.01f;
-  return s;
-}
+MppiSettings quad_settings(int k = 256, int t = 50) { return testing::quadrotor_settings(k, t, 10.0f, 150.0f); }
 
 QuadrotorForest::Params forest_params() {
   QuadrotorForest::Params p{};

@@ -4,6 +4,8 @@
 // and robustness when every sample crashes. Small K and T keep every test fast.
 #include <gtest/gtest.h>
 
+#include "fixtures.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -59,22 +61,7 @@ std::vector<float> rate_state_at(float z) {
   return x;
 }
 
-MppiSettings forest_settings(int k = 128, int t = 30) {
-  MppiSettings s;
-  s.rollouts = k;
-  s.horizon = t;
-  s.lambda = 10.0f;
-  s.nu = 2.0f;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  s.sigma.assign(4, 150.0f);
-  s.u_min.assign(4, 0.0f);
-  s.u_max.assign(4, 6000.0f);
-  s.u_init.assign(4, hover);
-  s.u_nominal.assign(4, hover);
-  s.control_cost_scale = 0.01f;
-  s.threads = 2;
-  return s;
-}
+MppiSettings forest_settings(int k = 128, int t = 30) { return testing::quadrotor_settings(k, t, 10.0f, 150.0f, 2); }
 
 QuadrotorForest::Params forest_params() {
   QuadrotorForest::Params p{};
