@@ -4,14 +4,6 @@
 //       + 350 exp(-d^2 / 12) + 1000 C
 // with d the distance to the nearest obstacle surface and C = 1 on a crash (ground,
 // obstacle, or, in a team, another vehicle).
-//
-// Optional, off by default (the paper's cost, bit-identical): goal_lookahead L > 0 makes
-// the horizontal goal term quadratic only within L of the goal and linear beyond it,
-// w_xy (2 L r - L^2) at distance r (value and slope continuous). The paper's quadratic pull
-// from 50 m away (2.5 * 50^2 = 6250 per step, slope 250 per m) dwarfs the altitude term,
-// so the optimizer trades altitude and attitude for forward progress; its sample-to-sample
-// spread (noise in forward progress) swamps every other term. The team tasks use it
-// (config/tasks/team*_forest.yaml).
 #pragma once
 
 #include "mppi/costs/obstacles.hpp"
@@ -36,18 +28,8 @@ struct ForestCost {
     float w_separation = 350.0f;    // team only: exp barrier on vehicle-vehicle distance
     float separation_scale = 1.0f;  // m^2
     float w_terminal = 0.0f;        // multiplies the goal terms at the horizon's end
-    float goal_lookahead = 0.0f;    // m; > 0: horizontal goal term linear beyond it (0 = paper)
     ObstacleSet obstacles;
   };
-
-  // Horizontal goal error as the goal term sees it: dx^2 + dy^2, or, with goal_lookahead
-  // L > 0 and the goal farther than L, L (2 r - L) (same value and slope at r = L).
-  MPPI_HD static float goal_xy(const Params& p, float dx, float dy) {
-    const float e2 = fsq(dx) + fsq(dy);
-    const float l = p.goal_lookahead;
-    if (l > 0.0f && e2 > l * l) return l * (2.0f * fsqrt(e2) - l);
-    return e2;
-  }
 
   MPPI_HD static float vehicle(const Params& p, int j, const float* x, float t, bool* crash) {
     float pos[3];
@@ -62,7 +44,7 @@ struct ForestCost {
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
     const float yaw = Vehicle::yaw(x);
-    float q = p.w_xy * goal_xy(p, pos[0] - g[0], pos[1] - g[1]) + p.w_z * fsq(pos[2] - g[2]) +
+    float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
               p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
     if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z;
@@ -91,7 +73,7 @@ struct ForestCost {
     float pos[3];
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
-    return p.w_terminal * (p.w_xy * goal_xy(p, pos[0] - g[0], pos[1] - g[1]) + p.w_z * fsq(pos[2] - g[2]));
+    return p.w_terminal * (p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]));
   }
 };
 
