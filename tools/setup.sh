@@ -51,6 +51,8 @@ APT_PACKAGES=(
   openjdk-17-jdk-headless openjdk-17-jre-headless openjdk-17-jre
   # lcm-spy without a display (ps: tools/lcm-spy); network namespaces for multicast tests
   xvfb xauth iproute2 util-linux procps
+  # daemon tests: capsh makes the OS refuse real-time, systemd-analyze verifies the unit
+  libcap2-bin systemd
 )
 
 missing_packages() {

@@ -53,8 +53,8 @@ def test_campaign_ctrl_c(tmp_path):
     """Ctrl-C on a campaign stops its running flights at once, each cleaned up."""
     from sitl_harness import paths
     if paths.find_binary("mppid-sim") is None:
-        import pytest
-        pytest.skip("mppid-sim not built")
+        from conftest import missing
+        missing("mppid-sim not built")
     out = tmp_path / "camp"
     p = subprocess.Popen([str(SITL), "campaign", "--scenarios", "forest_4m", "--seeds", "4", "--out", str(out),
                           "--controller", "standin", "--realtime"], cwd=ROOT, stdout=subprocess.PIPE,
