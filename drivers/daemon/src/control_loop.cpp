@@ -317,20 +317,26 @@ void ControlLoop::select_obstacles(const transport::StateSample& x) {
 
 bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
   if (!gate_.pass(u, nu_)) return false;
-  cmd_.utime = rt::wall_utime();
-  cmd_.seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
-  cmd_.state_seq = state_seq;
-  cmd_.mode = mode;
-  cmd_.kind = s_.command_kind;
-  cmd_.n = nu_;
-  std::copy_n(u, nu_, cmd_.u);
-  if (!tx_->publish_command(cmd_)) counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
+  send_command(&cmd_, mode, u, state_seq);
+  return true;
+}
+
+// Fills `msg` (the loop's or the guard's own buffer: they run on different threads), sends
+// it and counts it by mode. The caller has passed u through the gate.
+void ControlLoop::send_command(transport::Command* msg, Mode mode, const float* u, std::int64_t state_seq) {
+  msg->utime = rt::wall_utime();
+  msg->seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
+  msg->state_seq = state_seq;
+  msg->mode = mode;
+  msg->kind = s_.command_kind;
+  msg->n = nu_;
+  std::copy_n(u, nu_, msg->u);
+  if (!tx_->publish_command(*msg)) counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
   switch (mode) {
     case Mode::kNormal: counters_.commands_normal.fetch_add(1, std::memory_order_relaxed); break;
     case Mode::kHoldPlan: counters_.commands_hold.fetch_add(1, std::memory_order_relaxed); break;
     case Mode::kFailsafe: counters_.commands_failsafe.fetch_add(1, std::memory_order_relaxed); break;
   }
-  return true;
 }
 
 // The held plan's next step, then the held plan shifted (u_init appended). Returns the
@@ -459,16 +465,7 @@ void ControlLoop::guard_publish(int step) {
       return;
     }
   }
-  guard_cmd_.utime = rt::wall_utime();
-  guard_cmd_.seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
-  guard_cmd_.state_seq = guard_state_seq_;
-  guard_cmd_.mode = mode;
-  guard_cmd_.kind = s_.command_kind;
-  guard_cmd_.n = nu_;
-  std::copy_n(u, nu_, guard_cmd_.u);
-  if (!tx_->publish_command(guard_cmd_)) counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
-  (mode == Mode::kHoldPlan ? counters_.commands_hold : counters_.commands_failsafe)
-      .fetch_add(1, std::memory_order_relaxed);
+  send_command(&guard_cmd_, mode, u, guard_state_seq_);
   counters_.guard_commands.fetch_add(1, std::memory_order_relaxed);
 }
 

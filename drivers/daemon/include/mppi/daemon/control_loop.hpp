@@ -121,6 +121,7 @@ class ControlLoop {
   void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
   void select_obstacles(const transport::StateSample& x);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
+  void send_command(transport::Command* msg, transport::Mode mode, const float* u, std::int64_t state_seq);
   transport::Mode publish_held(std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
   void maybe_status(bool force, std::int64_t now_ns);
