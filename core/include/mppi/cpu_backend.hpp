@@ -50,7 +50,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     if (weighting_ == Weighting::kTrajectory) {
       normalised_weights(0);
 #pragma omp parallel for schedule(static) num_threads(threads_)
-      for (int i = 0; i < t_; ++i) apply_update(i, plan);
+      for (int i = 0; i < t_; ++i) weighted_update(i, weights_.data(), plan);
     } else {
 #pragma omp parallel for schedule(static) num_threads(threads_)
       for (int i = 0; i < t_; ++i) {
@@ -124,8 +124,6 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     }
     for (int j = 0; j < kNu; ++j) plan[i * kNu + j] = fclamp(plan[i * kNu + j] + acc[j] / sum, c_.u_min[j], c_.u_max[j]);
   }
-
-  void apply_update(int i, float* plan) const { weighted_update(i, weights_.data(), plan); }
 
   void summarise(UpdateStats* stats, const float* plan) const {
     if (stats == nullptr) return;
