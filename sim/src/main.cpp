@@ -19,7 +19,11 @@ int usage(const char* why) {
   std::fprintf(stderr,
                "usage: mppid-sim --scenario FILE [--seed S] [--lockstep | --realtime] [--lcm-url URL]\n"
                "                 [--out DIR] [--channel-prefix P] [--duration S] [--quiet]\n"
-               "  --lockstep   wait for the command answering each state (deterministic, fast)\n"
+               "                 [--ideal | --latency measured|SECONDS]\n"
+               "  --lockstep   wait for the command answering each state (deterministic, fast); the\n"
+               "               command acts after the controller's measured latency + the delay\n"
+               "  --ideal      lock-step without the controller's latency (algorithm studies)\n"
+               "  --latency    lock-step latency charged: measured (default) or fixed seconds\n"
                "  --realtime   pace the physics to the wall clock (the default)\n"
                "  --out DIR    where world.json, truth.jsonl and sim_summary.json go (default .)\n"
                "exit status: 0 run completed (see sim_summary.json for its outcome), 1 error,\n"
@@ -71,6 +75,19 @@ int main(int argc, char** argv) {
       const char* v = value();
       if (v == nullptr) return usage("--duration needs seconds");
       duration = std::atof(v);
+    } else if (a == "--ideal") {
+      opt.ideal = true;
+    } else if (a == "--latency") {
+      const char* v = value();
+      if (v == nullptr) return usage("--latency needs 'measured' or seconds");
+      if (std::strcmp(v, "measured") == 0) {
+        opt.controller_latency = -1.0;
+      } else {
+        char* end = nullptr;
+        opt.controller_latency = std::strtod(v, &end);
+        if (*end != '\0' || !(opt.controller_latency >= 0.0 && opt.controller_latency < 10.0))
+          return usage("--latency needs 'measured' or seconds in [0, 10)");
+      }
     } else if (a == "--quiet") {
       opt.quiet = true;
     } else if (a == "-h" || a == "--help") {
@@ -82,6 +99,7 @@ int main(int argc, char** argv) {
   }
   if (scenario_path.empty()) return usage("--scenario is required");
   if (lockstep && realtime) return usage("--lockstep and --realtime exclude each other");
+  if (opt.ideal && opt.controller_latency > -2.0) return usage("--ideal and --latency exclude each other");
   opt.lockstep = lockstep;
   if (!prefix.empty()) {
     auto& c = opt.channels;
@@ -93,6 +111,7 @@ int main(int argc, char** argv) {
   try {
     sim::Scenario s = sim::load_scenario(scenario_path, seed);
     if (duration > 0.0) s.duration = duration;
+    if (opt.controller_latency > -2.0) s.controller_latency = opt.controller_latency;
     return sim::run_simulation(s, opt);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mppid-sim: %s\n", e.what());

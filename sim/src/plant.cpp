@@ -83,7 +83,8 @@ class ModelPlant : public Plant {
  private:
   void init(int v, float* x) const;
   int wind_accel(const double* wind, float* accel) const;
-  void post_step(float*) const {}
+  // Back onto the model's manifold (unit quaternion) after a step: core's own projection.
+  void post_step(float* x) const { Model::project(x); }
   void clamp(float* u) const;
 
   typename Model::Params p_;
@@ -145,13 +146,6 @@ template <> void ModelPlant<QuadrotorRate>::init(int v, float* x) const {
 template <> int ModelPlant<QuadrotorRate>::wind_accel(const double* wind, float* accel) const {
   for (int i = 0; i < 3; ++i) accel[i] = static_cast<float>(p_.drag / p_.mass * wind[i]);
   return QuadrotorRate::VX;
-}
-template <> void ModelPlant<QuadrotorRate>::post_step(float* x) const {
-  float n = 0.0f;
-  for (int i = QuadrotorRate::QW; i <= QuadrotorRate::QZ; ++i) n += x[i] * x[i];
-  n = std::sqrt(n);
-  if (n > 0.0f)
-    for (int i = QuadrotorRate::QW; i <= QuadrotorRate::QZ; ++i) x[i] /= n;
 }
 template <> void ModelPlant<QuadrotorRate>::clamp(float* u) const {
   u[0] = clampf(u[0], 0.0f, static_cast<float>(s_.max_thrust));

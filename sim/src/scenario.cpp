@@ -112,11 +112,21 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
 
   const auto timing = root["timing"];
   check_keys(c, timing, "timing",
-             {"physics_hz", "state_hz", "actuation_delay", "duration", "lockstep_timeout", "startup_timeout",
-              "obstacles_hz"});
+             {"physics_hz", "state_hz", "actuation_delay", "controller_latency", "duration", "lockstep_timeout",
+              "startup_timeout", "obstacles_hz"});
   read(c, timing, "timing", "physics_hz", s.physics_hz);
   read(c, timing, "timing", "state_hz", s.state_hz);
   read(c, timing, "timing", "actuation_delay", s.actuation_delay);
+  if (timing && timing["controller_latency"]) {
+    const auto n = timing["controller_latency"];
+    if (n.IsScalar() && n.Scalar() == "measured") {
+      s.controller_latency = -1.0;
+    } else {
+      read(c, timing, "timing", "controller_latency", s.controller_latency);
+      if (!(s.controller_latency >= 0.0 && s.controller_latency < 10.0))
+        c.fail("timing.controller_latency", "must be 'measured' or seconds in [0, 10)");
+    }
+  }
   read(c, timing, "timing", "duration", s.duration);
   read(c, timing, "timing", "lockstep_timeout", s.lockstep_timeout);
   read(c, timing, "timing", "startup_timeout", s.startup_timeout);

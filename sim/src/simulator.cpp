@@ -134,7 +134,10 @@ class Simulation {
   std::int64_t waiting_for_ = -1;
   bool answered_ = false;
   Clock::time_point published_at_;
+  std::int64_t published_wall_us_ = 0;
   double last_latency_ms_ = std::numeric_limits<double>::quiet_NaN();
+  double last_charged_ms_ = std::numeric_limits<double>::quiet_NaN();
+  std::int64_t run_start_wall_us_ = 0;
   Clock::time_point run_start_;
 
   // Truth.
@@ -176,17 +179,30 @@ void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const
     ++rejected_commands_;
     return;
   }
+  double reaches = now_;  // when the command reaches the plant, in simulated time
   if (o_.lockstep) {
     last_latency_ms_ = 1e3 * std::chrono::duration<double>(Clock::now() - published_at_).count();
+    // Charged as in real time: the state's time plus the controller's latency, from the
+    // tick's publish to the command's (its utime, on this host's wall clock), so the
+    // simulator's own delays are not charged; its receipt time if utime is implausible.
+    const double sent_ms = 1e-3 * static_cast<double>(msg->utime - published_wall_us_);
+    const double measured = (sent_ms >= 0.0 && sent_ms <= last_latency_ms_) ? sent_ms : last_latency_ms_;
+    last_charged_ms_ = o_.ideal ? 0.0 : (s_.controller_latency >= 0.0 ? 1e3 * s_.controller_latency : measured);
+    reaches = now_ + 1e-3 * last_charged_ms_;
+  } else {
+    // Real time: its arrival on the wall clock (later than now_ if the physics lags).
+    reaches = std::max(now_, seconds_since(run_start_));
   }
-  pending_.push_back({now_ + s_.actuation_delay, std::move(u), msg->mode, msg->seq, msg->state_seq});
+  pending_.push_back({reaches + s_.actuation_delay, std::move(u), msg->mode, msg->seq, msg->state_seq});
 }
 
 void Simulation::publish_state(std::int64_t seq, double t, bool republish) {
   mppi_lcm::vehicle_state_t m;
   m.utime = stamp(t);
   m.seq = seq;
-  m.sample_utime = m.utime;
+  // The state's own time: simulated time in lock-step; in real time the wall time at which
+  // the physics was at t (the publish may come later when the process was held up).
+  m.sample_utime = o_.lockstep ? to_us(t) : run_start_wall_us_ + to_us(t);
   m.model = plant_->model_id();
   m.vehicle_count = static_cast<std::int16_t>(plant_->vehicles());
   m.nx = static_cast<std::int16_t>(plant_->nx());
@@ -209,6 +225,7 @@ void Simulation::publish_state(std::int64_t seq, double t, bool republish) {
   }
   m.x = published_state_;
   published_at_ = Clock::now();
+  published_wall_us_ = wall_utime();
   lcm_.publish(o_.channels.state, &m);
   ++states_;
   // The tick goes after the state: a lock-step controller runs its cycle on the tick and
@@ -220,6 +237,8 @@ void Simulation::publish_state(std::int64_t seq, double t, bool republish) {
     clk.sim_utime = to_us(t);
     clk.step = seq;
     lcm_.publish(o_.channels.clock, &clk);
+    // The controller's cycle starts on the tick: its latency is counted from here.
+    published_wall_us_ = clk.utime;
   }
 }
 
@@ -286,8 +305,8 @@ void Simulation::pump_until(Clock::time_point deadline) {
   const int fd = lcm_.getFileno();
   for (;;) {
     const auto left = deadline - Clock::now();
-    const auto us = std::chrono::duration_cast<std::chrono::microseconds>(left).count();
-    if (us <= 0 || g_stop) return;
+    const auto us = std::max<std::int64_t>(0, std::chrono::duration_cast<std::chrono::microseconds>(left).count());
+    if (g_stop) return;
     fd_set fds;
     FD_ZERO(&fds);
     FD_SET(fd, &fds);
@@ -295,6 +314,8 @@ void Simulation::pump_until(Clock::time_point deadline) {
     const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
     if (r > 0) lcm_.handle();
     if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+    // Late (the physics lags the wall clock): take what has arrived, then step on.
+    if (us == 0 && r <= 0) return;
   }
 }
 
@@ -411,6 +432,15 @@ void Simulation::write_world() {
                plant_->nu(), o_.lockstep ? "true" : "false");
   std::fprintf(f, "\"physics_hz\":%g,\"state_hz\":%g,\"actuation_delay\":%g,\"duration\":%g,", s_.physics_hz,
                s_.state_hz, s_.actuation_delay, s_.duration);
+  // Lock-step latency charge: "ideal" (none), "measured", or fixed seconds.
+  if (!o_.lockstep)
+    std::fputs("\"latency_charge\":\"realtime\",", f);
+  else if (o_.ideal)
+    std::fputs("\"latency_charge\":\"ideal\",", f);
+  else if (s_.controller_latency < 0.0)
+    std::fputs("\"latency_charge\":\"measured\",", f);
+  else
+    std::fprintf(f, "\"latency_charge\":%g,", s_.controller_latency);
   std::fprintf(f, "\"ground_z\":%g,\"vehicle_radius\":%g,\"goal_radius\":%g,", s_.ground_z, s_.vehicle_radius,
                s_.goal_radius);
   std::fputs("\"starts\":[", f);
@@ -445,6 +475,8 @@ void Simulation::write_tick(std::int64_t seq, double t) {
   put_array(f, u_applied_.data(), u_applied_.size());
   std::fprintf(f, ",\"mode\":%d,\"cmd_seq\":%lld,\"lat_ms\":", applied_mode_, static_cast<long long>(applied_seq_));
   put_num(f, last_latency_ms_);
+  std::fputs(",\"charged_ms\":", f);
+  put_num(f, last_charged_ms_);
   std::fputs(",\"clear\":", f);
   put_num(f, clearance_now_);
   std::fputs(",\"wind\":", f);
@@ -488,6 +520,7 @@ void Simulation::write_summary(Outcome outcome, double t_end) {
 
 int Simulation::run() {
   run_start_ = Clock::now();
+  run_start_wall_us_ = wall_utime();
   write_world();
   truth_ = std::make_unique<JsonWriter>(o_.out_dir + "/truth.jsonl");
   ref_t0_ = o_.lockstep ? 0 : wall_utime();

@@ -61,7 +61,9 @@ struct Listener {
 
 mppi_lcm::vehicle_state_t state_msg(std::int64_t seq, float fill = 0.0f) {
   mppi_lcm::vehicle_state_t m{};
-  m.utime = m.sample_utime = 1;
+  // Sampled now on this host's wall clock, as the simulator and the bridge stamp it (the
+  // loop measures a state's age from it).
+  m.utime = m.sample_utime = rt::wall_utime();
   m.seq = seq;
   m.model = mppi_lcm::vehicle_state_t::MODEL_QUADROTOR;
   m.vehicle_count = 1;

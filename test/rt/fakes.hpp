@@ -124,6 +124,15 @@ class FakeController final : public Controller {
     std::copy(plan, plan + plan_.size(), plan_.begin());
     ++restores;
   }
+  void shift(int steps) override {
+    for (int i = 0; i < steps; ++i) shift();
+    shifts += steps;
+  }
+  // A model the tests can follow by hand: x[0] moves at the speed u[0] (u in units/s).
+  void propagate(float* x, const float* u, float seconds) const override {
+    x[0] += u[0] * seconds;
+    ++propagations;
+  }
   int predict(const float*, const float*, float*, int) const override { return 0; }
   const std::vector<float>& plan() const override { return plan_; }
   const MppiSettings& settings() const override { return s_; }
@@ -137,6 +146,8 @@ class FakeController final : public Controller {
   std::function<bool(int, std::vector<float>*, UpdateStats*)> fault;
   int iterations = 0, resets = 0, inputs_set = 0, mid_cycle_changes = 0;
   int restores = 0;  // set_plan calls (the loop restoring its last good plan)
+  int shifts = 0;    // extra steps the loop shifted the plan by (time moved on)
+  mutable int propagations = 0;
   std::vector<float> last_x0;
   std::vector<std::pair<std::string, double>> params_set;
   TaskInputs inputs;

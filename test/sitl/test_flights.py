@@ -11,33 +11,43 @@ from sitl_harness import logs, paths
 
 @pytest.fixture(scope="module")
 def forest_runs(mppid_binary, tmp_path_factory):
-    """forest_4m seed 3, flown twice: one flight for success, both for determinism."""
+    """forest_4m seed 3: once as the harness flies it by default (lock-step charging the
+    controller's measured latency), twice with a fixed latency charged (the controller is
+    told it), which must repeat bit for bit."""
     base = tmp_path_factory.mktemp("forest")
-    outs = []
-    for k in range(2):
-        out = base / f"run{k}"
-        sitl("run", "--scenario", "forest_4m", "--seed", 3, "--out", out, timeout=300)
-        outs.append(out)
+    outs = {}
+    for name, extra in (("measured", []), ("fixed0", ["--latency", 0.012]), ("fixed1", ["--latency", 0.012])):
+        out = base / name
+        sitl("run", "--scenario", "forest_4m", "--seed", 3, "--out", out, *extra, timeout=300)
+        outs[name] = out
     return outs
 
 
 def test_forest_flight_succeeds(forest_runs):
-    score = json.loads((forest_runs[0] / "score.json").read_text())
+    score = json.loads((forest_runs["measured"] / "score.json").read_text())
     assert score["success"] is True, score
     assert score["min_clearance"] > 0
     assert score["time_to_goal"] < 30
+    world = json.loads((forest_runs["measured"] / "world.json").read_text())
+    assert world["latency_charge"] == "measured"
+    # The latency was charged: every answered state's command acted after it.
+    ticks = [json.loads(ln) for ln in (forest_runs["measured"] / "truth.jsonl").read_text().splitlines()]
+    charged = [t["charged_ms"] for t in ticks if t.get("charged_ms") is not None]
+    assert len(charged) > 100 and min(charged) > 0
 
 
-def test_lockstep_runs_are_deterministic(forest_runs):
-    a = logs.command_payloads(forest_runs[0] / "flight.lcmlog")
-    b = logs.command_payloads(forest_runs[1] / "flight.lcmlog")
+def test_lockstep_runs_with_a_fixed_latency_are_deterministic(forest_runs):
+    a = logs.command_payloads(forest_runs["fixed0"] / "flight.lcmlog")
+    b = logs.command_payloads(forest_runs["fixed1"] / "flight.lcmlog")
     assert len(a) > 100
     assert a == b
     # And the plant followed the same path.
-    ta = (forest_runs[0] / "truth.jsonl").read_text()
-    tb = (forest_runs[1] / "truth.jsonl").read_text()
+    ta = (forest_runs["fixed0"] / "truth.jsonl").read_text()
+    tb = (forest_runs["fixed1"] / "truth.jsonl").read_text()
     strip = lambda s: [ln.split(',"lat_ms"')[0] for ln in s.splitlines()]
     assert strip(ta) == strip(tb)
+    world = json.loads((forest_runs["fixed0"] / "world.json").read_text())
+    assert world["latency_charge"] == 0.012
 
 
 def test_cartpole_swingup_succeeds(mppid_binary, tmp_path):

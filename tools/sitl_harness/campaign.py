@@ -51,13 +51,17 @@ class Progress:
             sys.stderr.flush()
 
 
-def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu", first_seed: int = 1,
-                 controller: str = "mppid", realtime: bool = False, sets=()) -> dict:
+def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: str = "cpu", first_seed: int = 1,
+                 controller: str = "mppid", realtime: bool = False, sets=(), ideal: bool = False,
+                 latency: float | None = None) -> dict:
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     runs = [(s, first_seed + k) for s in scenarios for k in range(seeds)]
     if realtime:
         jobs = 1  # real-time flights compete for the CPU: one at a time
+    elif jobs is None:
+        # The measured latency is charged: a second flight would lengthen it.
+        jobs = 2 if (ideal or latency is not None or controller != "mppid") else 1
     prog = Progress(len(runs))
     children: set[subprocess.Popen] = set()
     lock = threading.Lock()
@@ -67,6 +71,10 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
         d = out / scen / f"seed_{seed:04d}"
         cmd = [sys.executable, "-m", "sitl_harness", "run", "--scenario", scen, "--seed", str(seed), "--out", str(d),
                "--backend", backend, "--controller", controller, "--quiet"] + (["--realtime"] if realtime else [])
+        if ideal:
+            cmd.append("--ideal")
+        elif latency is not None:
+            cmd += ["--latency", str(latency)]
         for kv in sets:
             cmd += ["--set", kv]
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))

@@ -21,6 +21,11 @@ def main(argv=None) -> int:
     r.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     r.add_argument("--out", type=Path, default=None, help="result folder (default results/<scenario>-s<seed>-<time>)")
     r.add_argument("--realtime", action="store_true", help="real-time clock instead of lock-step")
+    lat = r.add_mutually_exclusive_group()
+    lat.add_argument("--ideal", action="store_true",
+                     help="lock-step without charging the controller's latency (algorithm studies only)")
+    lat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
+                     help="lock-step: charge this fixed latency instead of the measured one (repeatable runs)")
     r.add_argument("--controller", choices=["mppid", "standin"], default="mppid",
                    help="standin: a hover stand-in (tests the simulator without the daemon)")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
@@ -33,10 +38,16 @@ def main(argv=None) -> int:
     c.add_argument("--seeds", type=int, default=10)
     c.add_argument("--first-seed", type=int, default=1)
     c.add_argument("--out", type=Path, required=True)
-    c.add_argument("--jobs", type=int, default=2, help="flights in parallel (lock-step only)")
+    c.add_argument("--jobs", type=int, default=None,
+                   help="flights in parallel (default: 1 in real time and in lock-step with the measured "
+                        "latency, whose timings the flights would disturb; 2 with --ideal or --latency)")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
     c.add_argument("--realtime", action="store_true")
+    clat = c.add_mutually_exclusive_group()
+    clat.add_argument("--ideal", action="store_true", help="lock-step without charging the controller's latency")
+    clat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
+                      help="lock-step: charge this fixed latency instead of the measured one")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
 
     p = sub.add_parser("plot", help="re-make the plots of a result folder")
@@ -49,8 +60,11 @@ def main(argv=None) -> int:
     if a.cmd == "run":
         from .flight import FlightSpec, fly
         out = a.out or paths.ROOT / "results" / f"{Path(a.scenario).stem}-s{a.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+        if (a.ideal or a.latency is not None) and a.realtime:
+            print("sitl: --ideal and --latency are lock-step options", file=sys.stderr)
+            return 2
         spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
-                          controller=a.controller, wall_timeout=a.timeout, sets=a.set,
+                          ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
                           kill_controller_after=a.kill_controller_after)
         try:
             paths.scenario_path(a.scenario)
@@ -79,7 +93,8 @@ def main(argv=None) -> int:
                 return 2
         try:
             summary = run_campaign(names, a.seeds, a.out, jobs=a.jobs, backend=a.backend, first_seed=a.first_seed,
-                                   controller=a.controller, realtime=a.realtime, sets=a.set)
+                                   controller=a.controller, realtime=a.realtime, sets=a.set, ideal=a.ideal,
+                                   latency=a.latency)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130

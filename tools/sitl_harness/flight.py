@@ -29,6 +29,7 @@ LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 # A lock-step flight bursts thousands of datagrams a second; the logger must not drop any
 # while the CPU is busy (the kernel caps this at net.core.rmem_max).
 LOGGER_RECV_BUF = 4 * 1024 * 1024
+SIM_FIFO_PRIORITY = 90
 _NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
 
 
@@ -53,6 +54,8 @@ class FlightSpec:
     out: Path = Path("results/run")
     backend: str = "cpu"
     realtime: bool = False
+    ideal: bool = False              # lock-step without charging the controller's latency
+    latency: float | None = None     # lock-step: charge this fixed latency [s] (and tell mppid)
     controller: str = "mppid"        # mppid | standin
     wall_timeout: float = 0.0        # 0: from the scenario's duration
     sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
@@ -184,8 +187,16 @@ class Flight:
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
             ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
+            # As the systemd unit runs it (SCHED_FIFO, locked memory; it runs on with a
+            # warning where the OS refuses), in lock-step too: there its measured latency is
+            # what the simulator charges, and it must be the service's, not a busy machine's.
+            ctrl_cmd.append("--realtime")
             if lockstep:
                 ctrl_cmd.append("--lockstep")
+                if spec.latency is not None:
+                    # The controller is told the fixed latency charged: the run repeats exactly.
+                    ms = f"{1e3 * spec.latency:g}"
+                    ctrl_cmd += ["--set", f"daemon.latency.floor_ms={ms}", "--set", f"daemon.latency.ceiling_ms={ms}"]
             ctrl_cmd += ["--backend", spec.backend]
             # The flight's seed also seeds the controller's sampling (a campaign over seeds
             # varies both the world and the noise); --set can still override it.
@@ -196,6 +207,15 @@ class Flight:
             ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
         sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
                    "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
+        if lockstep and spec.ideal:
+            sim_cmd.append("--ideal")
+        elif lockstep and spec.latency is not None:
+            sim_cmd += ["--latency", f"{spec.latency:g}"]
+        if _fifo_allowed():
+            # The simulator stands in for the physical world: the controller's CPU load must
+            # not slow its physics down, nor other load its clock and the latency it measures
+            # (the daemon runs SCHED_FIFO 80, the simulator above).
+            sim_cmd = ["chrt", "-f", str(SIM_FIFO_PRIORITY)] + sim_cmd
         logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}&recv_buf_size={LOGGER_RECV_BUF}", str(self.out / "flight.lcmlog")]
 
         t0 = time.monotonic()
@@ -246,10 +266,20 @@ class Flight:
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
                 "controller_config": str(cfg) if spec.controller == "mppid" else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
-                         "realtime": spec.realtime, "controller": spec.controller},
+                         "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
+                         "controller": spec.controller},
             }
             (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
+
+
+def _fifo_allowed() -> bool:
+    """Whether this process may start SCHED_FIFO children (root, or CAP_SYS_NICE)."""
+    try:
+        return subprocess.run(["chrt", "-f", "1", "true"], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL).returncode == 0
+    except OSError:
+        return False
 
 
 def _lcm_logger() -> Path:

@@ -14,6 +14,7 @@
 #include "mppi/costs/reference.hpp"
 #include "mppi/optimizer.hpp"
 #include "mppi/params.hpp"
+#include "mppi/rk4.hpp"
 #include "mppi/tasks.hpp"
 
 namespace mppi {
@@ -49,6 +50,11 @@ class Controller {
   virtual void reset() = 0;
   // Replace the plan (horizon x nu, clamped into the limits): e.g. restore the last good one.
   virtual void set_plan(const float* plan) = 0;
+  // Drop the plan's first `steps` controls (time moved on by that many control steps).
+  virtual void shift(int steps) = 0;
+  // Advance state x (nx floats) in place by `seconds` under the control u (nu floats) held
+  // constant, with RK4 on the task's model and parameters: latency prediction.
+  virtual void propagate(float* x, const float* u, float seconds) const = 0;
 
   // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
@@ -96,6 +102,8 @@ class TaskController final : public Controller {
   void fallback(float* u_out) override { mppi_.fallback(u_out); }
   void reset() override { mppi_.reset(); }
   void set_plan(const float* plan) override { mppi_.set_plan(plan); }
+  void shift(int steps) override { mppi_.shift(steps); }
+  void propagate(float* x, const float* u, float seconds) const override { rk4_task<T>(params_, x, u, seconds); }
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     using V = typename T::Vehicle;

@@ -48,10 +48,14 @@ class Mppi {
     shift();
   }
 
-  // Drop u_0 and append u_init (warm start).
-  void shift() {
-    std::copy(plan_.begin() + kNu, plan_.end(), plan_.begin());
-    std::copy_n(settings_.u_init.data(), kNu, plan_.end() - kNu);
+  // Drop the first `steps` controls and append u_init as often (warm start; one step per
+  // cycle, more when time moved on further: skipped cycles, an older state).
+  void shift(int steps = 1) {
+    const int t = settings_.horizon;
+    steps = std::clamp(steps, 0, t);
+    if (steps == 0) return;
+    std::copy(plan_.begin() + static_cast<std::ptrdiff_t>(steps) * kNu, plan_.end(), plan_.begin());
+    for (int i = t - steps; i < t; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
   }
 
   void reset() {

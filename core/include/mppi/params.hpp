@@ -67,6 +67,11 @@ void visit_fields(typename ForestCost<Vehicle>::Params& p, V&& v) {
   v("w_separation", p.w_separation, 0.0f, 1e6f);
   v("separation_scale", p.separation_scale, 1e-3f, 1e3f);
   v("w_terminal", p.w_terminal, 0.0f, 1e6f);
+  v("ground_margin", p.ground_margin, 0.0f, 100.0f);
+  v("tilt_cos_min", p.tilt_cos_min, -1.0f, 1.0f);
+  v("floor_z", p.floor_z, -1e3f, 1e3f);
+  v("floor_lookahead", p.floor_lookahead, 0.0f, 10.0f);
+  v("w_floor", p.w_floor, 0.0f, 1e9f);
 }
 template <class Vehicle, class V>
 void visit_fields(typename TrackingCost<Vehicle>::Params& p, V&& v) {

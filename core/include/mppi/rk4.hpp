@@ -4,6 +4,8 @@
 // model mismatch comes from parameters, not from the integrator.
 #pragma once
 
+#include <cmath>
+
 namespace mppi {
 
 // One RK4 step of length h for x' = f(x), f called as f(const float* x, float* dx).
@@ -32,6 +34,24 @@ void rk4_model(const typename Model::Params& p, float* x, const float* u, float 
           for (int i = 0; i < 3; ++i) ds[vel + i] += accel[i];
       },
       x, h);
+}
+
+// Every vehicle of a task advanced by `seconds` under the control u held constant, with RK4
+// in steps of at most max_step and each vehicle put back on its manifold after each step:
+// what the daemon uses to predict a measured state to the time its command will act.
+template <class TaskT>
+void rk4_task(const typename TaskT::Params& p, float* x, const float* u, float seconds, float max_step = 0.002f) {
+  if (!(seconds > 0.0f) || !(max_step > 0.0f)) return;
+  using V = typename TaskT::Vehicle;
+  const int n = static_cast<int>(std::ceil(seconds / max_step));
+  const float h = seconds / static_cast<float>(n);
+  for (int j = 0; j < TaskT::kVehicles; ++j) {
+    float* xj = x + j * TaskT::kVehicleNx;
+    for (int s = 0; s < n; ++s) {
+      rk4_model<V>(p.vehicle, xj, u + j * TaskT::kVehicleNu, h);
+      V::project(xj);
+    }
+  }
 }
 
 }  // namespace mppi

@@ -41,7 +41,11 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       distances_(transport::kMaxObstaclesIn),
       held_(controller->plan()),
       u_(static_cast<std::size_t>(nu_)),
-      u_init_(controller->settings().u_init) {
+      u_init_(controller->settings().u_init),
+      latency_(s_.latency.estimator),
+      history_(nu_, controller->settings().u_init),
+      dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
+      x_pred_(static_cast<std::size_t>(controller->nx())) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
@@ -49,6 +53,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
   status_.task = c_->task().c_str();
   status_.rollouts = c_->settings().rollouts;
   status_.horizon = horizon_;
+  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
 }
 
 bool ControlLoop::is_loop_param(const std::string& key) { return key.rfind("daemon.", 0) == 0; }
@@ -102,9 +107,57 @@ bool ControlLoop::step_lockstep(const std::atomic<bool>& stop) {
     if (stop.load(std::memory_order_relaxed)) return false;
     in_->wake.wait_for(s_.lockstep_poll_ns);
   }
+  // A tick the simulator repeated (it republishes a state and its tick when no answer
+  // came in time) was answered already: a second cycle on it would run the optimizer one
+  // cycle ahead of the simulator and the run would no longer repeat. The answer is sent
+  // again instead, in case it was the one lost. (A sequence far behind the last one is a
+  // new simulator run, and is followed.)
+  if (last_tick_seq_ >= 0 && tick.seq <= last_tick_seq_ && tick.seq > last_tick_seq_ - 100) {
+    counters_.repeated_ticks.fetch_add(1, std::memory_order_relaxed);
+    if (tick.seq == last_tick_seq_ && cmd_.seq > 0 && !tx_->publish_command(cmd_))
+      counters_.publish_failures.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  last_tick_seq_ = tick.seq;
   const std::int64_t sim_ns = tick.sim_utime * rt::kNsPerUs;
   cycle(sim_ns, INT64_MAX, sim_ns, true);
   return true;
+}
+
+std::int64_t ControlLoop::state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const {
+  // Lock-step: sample_utime is on the simulator's clock, as is now_state_ns.
+  std::int64_t t = x.sample_utime * rt::kNsPerUs;
+  std::int64_t ahead = 0;
+  if (!lockstep) {
+    // Real time: the loop's timeline is CLOCK_MONOTONIC. The state arrived at recv_ns; it
+    // was (recv_utime - sample_utime) old then, both on this host's wall clock.
+    std::int64_t in_flight = 0;
+    if (s_.latency.use_sample_time && x.recv_utime != 0) in_flight = (x.recv_utime - x.sample_utime) * rt::kNsPerUs;
+    ahead = -in_flight;
+    t = x.recv_ns - std::max<std::int64_t>(0, in_flight);
+  }
+  *future = ahead > s_.latency.future_tolerance_ns;
+  return t;
+}
+
+void ControlLoop::align_plan(std::int64_t t_act_ns) {
+  if (plan_timed_ && dt_ns_ > 0) {
+    const double steps = static_cast<double>(t_act_ns - plan_t0_ns_) / static_cast<double>(dt_ns_);
+    const auto n = static_cast<int>(std::min<double>(std::floor(steps + 0.5), horizon_));
+    if (n > 0) {
+      c_->shift(n);
+      const std::size_t used = static_cast<std::size_t>(n) * static_cast<std::size_t>(nu_);
+      std::copy(held_.begin() + static_cast<std::ptrdiff_t>(used), held_.end(), held_.begin());
+      for (std::size_t i = held_.size() - used; i < held_.size(); ++i) held_[i] = u_init_[i % nu_];
+      counters_.plan_skips.fetch_add(n, std::memory_order_relaxed);
+    }
+  }
+  plan_t0_ns_ = t_act_ns;
+  plan_timed_ = true;
+}
+
+void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
+  history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
 void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
@@ -113,11 +166,16 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
 
   const bool have_state = in_->state.writes() > 0;
   const transport::StateSample& x = in_->state.front();
-  // Staleness: receive time on our monotonic clock in real time; the simulator's sample
-  // time against its clock in lock-step (both in the sim's time base).
-  const std::int64_t age =
-      !have_state ? INT64_MAX : (lockstep ? now_state_ns - x.sample_utime * rt::kNsPerUs : now_state_ns - x.recv_ns);
+  // Staleness from the state's sample time (see state_time_ns): a state older than the
+  // timeouts, or stamped in the future, is not predicted from.
+  bool future = false;
+  const std::int64_t t_state = have_state ? state_time_ns(x, lockstep, &future) : 0;
+  const std::int64_t age = !have_state ? INT64_MAX : std::max<std::int64_t>(0, now_state_ns - t_state);
   const std::int64_t state_seq = have_state ? x.seq : -1;
+  const LatencySettings& ls = s_.latency;
+  // Expected latency of this cycle (start -> command out), then when its command acts.
+  const std::int64_t expected = latency_.estimate_ns();
+  const std::int64_t t_act = now_state_ns + expected + ls.transport_ns + ls.actuation_delay_ns;
 
   Mode published = Mode::kFailsafe;
   bool missed_deadline = false;
@@ -126,19 +184,41 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       // The plan is too old to mean anything when the state comes back: start over.
       c_->reset();
       held_ = c_->plan();
+      history_.reset();
+      plan_timed_ = false;
     }
-    publish_failsafe(state_seq);
+    stamp_timing(have_state ? age : 0, clock_->now_ns() - t0, 0);
+    if (publish_failsafe(state_seq)) remember(sent_ns(now_state_ns, t0), failsafe_.data());
     published = Mode::kFailsafe;
-  } else if (age > s_.state_timeout_ns) {
+  } else if (future || age > s_.state_timeout_ns) {
     counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
+    if (future) counters_.future_states.fetch_add(1, std::memory_order_relaxed);
+    if (ls.compensate) align_plan(t_act);
+    stamp_timing(age, clock_->now_ns() - t0, 0);
     published = publish_held(state_seq);
+    remember(sent_ns(now_state_ns, t0), u_.data());
     c_->fallback(u_.data());  // keep the warm start aligned with time
+    plan_t0_ns_ += dt_ns_;
   } else {
+    // Latency compensation: optimise from the state as it will be when this command acts.
+    const float* x0 = x.x;
+    std::int64_t lead = 0;
+    if (ls.compensate) {
+      align_plan(t_act);
+      std::copy_n(x.x, x_pred_.size(), x_pred_.data());
+      history_.predict(*c_, x_pred_.data(), t_state, t_act);
+      x0 = x_pred_.data();
+      lead = t_act - t_state;
+      monitor_.record_lead(lead);
+    } else {
+      plan_timed_ = false;
+    }
+    monitor_.record_age(age);
     bool good = false;
     const bool guarded = guard_thread_.joinable() && !lockstep;
     if (guarded) guard_arm(deadline_ns, state_seq);
     try {
-      last_stats_ = c_->iterate(x.x, u_.data());
+      last_stats_ = c_->iterate(x0, u_.data());
       if (!last_stats_.finite) {
         counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
       } else if (!gate_.pass(u_.data(), nu_)) {
@@ -158,6 +238,10 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       // result is not published. Keep the held plan in step with what went out.
       counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
       const std::size_t used = std::min<std::size_t>(static_cast<std::size_t>(guard_steps) * nu_, held_.size());
+      for (int i = 0; i < guard_steps; ++i) {
+        const std::size_t k = static_cast<std::size_t>(i) * nu_;
+        remember(deadline_ns + i * period_ns_, k < held_.size() ? held_.data() + k : u_init_.data());
+      }
       std::copy(held_.begin() + static_cast<std::ptrdiff_t>(used), held_.end(), held_.begin());
       for (std::size_t i = held_.size() - used; i < held_.size(); ++i) held_[i] = u_init_[i % nu_];
       if (good) {
@@ -167,25 +251,41 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
         c_->reset();
         ++consecutive_bad_updates_;
       }
+      plan_timed_ = false;  // the next fresh cycle starts the plan's timeline again
       published = Mode::kHoldPlan;
     } else if (!good) {
       // The optimizer's plan may hold NaN: fly the held plan and warm-start the optimizer
       // from it (the last good plan, shifted in step with what went out).
       ++consecutive_bad_updates_;
+      stamp_timing(age, clock_->now_ns() - t0, 0);
       published = publish_held(state_seq);
+      remember(sent_ns(now_state_ns, t0), u_.data());
       c_->set_plan(held_.data());
     } else if (missed_deadline) {
       counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
       consecutive_bad_updates_ = 0;
+      stamp_timing(age, clock_->now_ns() - t0, 0);
       published = publish_held(state_seq);
+      remember(sent_ns(now_state_ns, t0), u_.data());
       held_ = c_->plan();  // same size: copies, no allocation
     } else {
       consecutive_bad_updates_ = 0;
+      const std::int64_t compute = clock_->now_ns() - t0;
+      stamp_timing(age, compute, lead);
       published = publish(Mode::kNormal, u_.data(), state_seq) ? Mode::kNormal : Mode::kFailsafe;
+      const std::int64_t sent = sent_ns(now_state_ns, t0);
+      // In lock-step the plant's clock stands still while the controller computes, and the
+      // simulator charges its latency: the command acts when the controller expected it
+      // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
+      // the run repeats bit for bit). In real time it acts after the measured latency.
+      remember(lockstep ? t_act - ls.transport_ns - ls.actuation_delay_ns : sent, u_.data());
       held_ = c_->plan();
-      if (!lockstep && state_seq != last_state_seq_used_)
-        monitor_.record_latency(clock_->now_ns() - x.recv_ns);
+      // What the estimator learns: this cycle's start to its command out.
+      if (!latency_.add(sent - now_state_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
+      latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
+      if (state_seq != last_state_seq_used_) monitor_.record_latency(sent - t_state);
     }
+    if (plan_timed_) plan_t0_ns_ += dt_ns_;
     last_state_seq_used_ = state_seq;
   }
   set_mode(published);
@@ -323,6 +423,15 @@ bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
 
 // Fills `msg` (the loop's or the guard's own buffer: they run on different threads), sends
 // it and counts it by mode. The caller has passed u through the gate.
+void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns) {
+  auto us = [](std::int64_t ns) {
+    return static_cast<std::int32_t>(std::clamp<std::int64_t>(ns / rt::kNsPerUs, 0, INT32_MAX));
+  };
+  cmd_.age_us = us(age_ns);
+  cmd_.compute_us = us(compute_ns);
+  cmd_.lead_us = us(lead_ns);
+}
+
 void ControlLoop::send_command(transport::Command* msg, Mode mode, const float* u, std::int64_t state_seq) {
   msg->utime = rt::wall_utime();
   msg->seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
@@ -391,6 +500,11 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.cycles = w.cycles;
   status_.misses = w.misses;
   status_.consecutive_misses = w.consecutive_misses;
+  status_.state_to_command_ms_p99 = f(w.latency.p99_ms);
+  status_.state_age_ms_p99 = f(w.age.p99_ms);
+  status_.latency_expected_ms = f(static_cast<double>(latency_.estimate_ns()) * 1e-6);
+  status_.lead_ms_mean = f(w.lead.mean_ms);
+  status_.lead_ms_p99 = f(w.lead.p99_ms);
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;
@@ -400,6 +514,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.rejected_out_of_order = ld(ic.rejected_out_of_order) + ld(ic.rejected_duplicate);
   status_.rejected_undecodable = ld(ic.rejected_undecodable) + ld(ic.rejected_shape) + ld(ic.rejected_inputs);
   status_.rejected_params = ld(counters_.params_rejected) + ld(ic.params_dropped);
+  status_.rejected_future = ld(counters_.future_states);
   status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);
   tx_->publish_status(status_);
   counters_.status_published.fetch_add(1, std::memory_order_relaxed);

@@ -82,7 +82,8 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   check_known(section, "",
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
-               "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard"});
+               "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
+               "latency"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -124,6 +125,31 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     ch.obstacles = text(c, "obstacles", ch.obstacles, "channels.");
     ch.params = text(c, "params", ch.params, "channels.");
     ch.clock = text(c, "clock", ch.clock, "channels.");
+  }
+  // The default ceiling of the expected latency is one period: a cycle that needs longer
+  // misses its deadline anyway (and the deadline guard covers it).
+  LatencySettings& lat = l.latency;
+  lat.estimator.ceiling_ns = std::llround(1e9 / l.rate_hz);
+  if (const YAML::Node n = section["latency"]) {
+    if (!n.IsMap()) fail("latency", "expected a map");
+    check_known(n, "latency.",
+                {"compensate", "quantile", "window", "floor_ms", "ceiling_ms", "transport_ms", "actuation_delay_ms",
+                 "state_time", "future_tolerance_ms"});
+    const std::string p = "latency.";
+    if (n["compensate"]) lat.compensate = scalar<bool>(n["compensate"], p + "compensate");
+    lat.estimator.quantile = number(n, "quantile", lat.estimator.quantile, 0.01, 1.0, p);
+    lat.estimator.window = static_cast<int>(number(n, "window", lat.estimator.window, 1, 10000, p));
+    const double floor_ms = number(n, "floor_ms", 1.0, 0.0, 1000.0, p);
+    const double ceiling_ms = number(n, "ceiling_ms", 1000.0 / l.rate_hz, 0.0, 1000.0, p);
+    if (ceiling_ms < floor_ms) fail("latency.ceiling_ms", "must be >= daemon.latency.floor_ms");
+    lat.estimator.floor_ns = std::llround(floor_ms * 1e6);
+    lat.estimator.ceiling_ns = std::llround(ceiling_ms * 1e6);
+    lat.transport_ns = std::llround(number(n, "transport_ms", 0.2, 0.0, 1000.0, p) * 1e6);
+    lat.actuation_delay_ns = std::llround(number(n, "actuation_delay_ms", 0.0, 0.0, 1000.0, p) * 1e6);
+    lat.future_tolerance_ns = std::llround(number(n, "future_tolerance_ms", 2.0, 0.0, 60000.0, p) * 1e6);
+    const std::string st = text(n, "state_time", "sample", p);
+    if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
+    lat.use_sample_time = st == "sample";
   }
   if (const YAML::Node r = section["realtime"]) {
     if (!r.IsMap()) fail("realtime", "expected a map");

@@ -28,7 +28,13 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   out += line("compute", t.compute);
   out += line("period", t.period);
   out += line("jitter |period-nominal|", t.jitter);
-  out += line("state-in -> command-out", t.latency);
+  out += line("state sampled -> command-out", t.latency);
+  out += line("state age at cycle start", t.age);
+  out += line("lead (sample -> expected actuation)", t.lead);
+  out += fmt::format("  latency expected={:.3f} ms (estimator rejected {}), future states={}, plan skips={}, "
+                     "repeated ticks={}\n",
+                     static_cast<double>(loop.latency_estimate_ns()) * 1e-6, v(c.latency_rejected), v(c.future_states),
+                     v(c.plan_skips), v(c.repeated_ticks));
   out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} send_failures={} (failsafe entries {})\n",
                      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
                      v(c.publish_failures), v(c.failsafe_entries));
@@ -52,7 +58,10 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       f.task, f.backend, f.rollouts, f.horizon, f.rate_hz, f.seconds, f.lockstep, f.realtime, t.cycles, t.misses,
       t.max_consecutive_misses, loop.skipped_periods());
   out += json("compute", t.compute) + "," + json("period", t.period) + "," + json("jitter", t.jitter) + "," +
-         json("latency", t.latency) + ",";
+         json("latency", t.latency) + "," + json("age", t.age) + "," + json("lead", t.lead) + ",";
+  out += fmt::format("\"latency_expected_ms\":{:.3f},\"future_states\":{},\"plan_skips\":{},\"repeated_ticks\":{},",
+                     static_cast<double>(loop.latency_estimate_ns()) * 1e-6, v(c.future_states), v(c.plan_skips),
+                     v(c.repeated_ticks));
   out += fmt::format(
       "\"commands_normal\":{},\"commands_hold\":{},\"commands_failsafe\":{},\"commands_blocked\":{},"
       "\"optimizer_nonfinite\":{},\"optimizer_errors\":{},\"late_holds\":{},\"stale_cycles\":{},"

@@ -1,5 +1,7 @@
 #include "mppi/transport/lcm_transport.hpp"
 
+#include <pthread.h>
+#include <sched.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -60,6 +62,11 @@ void LcmTransport::start(Inbox* inbox) {
   lcm_.subscribe(ch_.clock, &LcmTransport::on_clock, this);
   running_ = true;
   thread_ = std::thread([this] {
+    if (receive_fifo_ > 0) {
+      sched_param sp{};
+      sp.sched_priority = receive_fifo_;
+      receive_fifo_ok_.store(pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0);
+    }
     while (running_.load(std::memory_order_relaxed)) {
       if (lcm_.handleTimeout(timeout_ms_) < 0) break;
     }
@@ -95,6 +102,7 @@ void LcmTransport::on_state(const lcm::ReceiveBuffer* rb, const std::string&) {
   s.seq = m.seq;
   s.sample_utime = m.sample_utime;
   s.recv_ns = now;
+  s.recv_utime = rt::wall_utime();
   s.model = m.model;
   s.vehicle_count = m.vehicle_count;
   s.nx = m.nx;
@@ -175,6 +183,9 @@ bool LcmTransport::publish_command(const Command& c) {
   m.state_seq = c.state_seq;
   m.mode = static_cast<std::int8_t>(c.mode);
   m.kind = c.kind;
+  m.age_us = c.age_us;
+  m.compute_us = c.compute_us;
+  m.lead_us = c.lead_us;
   m.n = c.n;
   m.u.assign(c.u, c.u + c.n);  // within the reserved capacity
   return send(ch_.command, m);
@@ -202,6 +213,11 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.cycles = s.cycles;
   m.misses = s.misses;
   m.consecutive_misses = s.consecutive_misses;
+  m.state_to_command_ms_p99 = s.state_to_command_ms_p99;
+  m.state_age_ms_p99 = s.state_age_ms_p99;
+  m.latency_expected_ms = s.latency_expected_ms;
+  m.lead_ms_mean = s.lead_ms_mean;
+  m.lead_ms_p99 = s.lead_ms_p99;
   m.ess = s.ess;
   m.min_cost = s.min_cost;
   m.rejected_nan = s.rejected_nan;
@@ -209,6 +225,7 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.rejected_out_of_order = s.rejected_out_of_order;
   m.rejected_undecodable = s.rejected_undecodable;
   m.rejected_params = s.rejected_params;
+  m.rejected_future = s.rejected_future;
   m.healthy = s.healthy ? 1 : 0;
   return send(ch_.status, m);
 }

@@ -41,11 +41,18 @@ void DeadlineMonitor::record_latency(std::int64_t ns) {
   t_.latency.add(ns);
 }
 
+void DeadlineMonitor::record_age(std::int64_t ns) {
+  w_.age.add(ns);
+  t_.age.add(ns);
+}
+
+void DeadlineMonitor::record_lead(std::int64_t ns) {
+  w_.lead.add(ns);
+  t_.lead.add(ns);
+}
+
 void DeadlineMonitor::reset_window() {
-  w_.compute.clear();
-  w_.period.clear();
-  w_.jitter.clear();
-  w_.latency.clear();
+  for (Histogram* h : {&w_.compute, &w_.period, &w_.jitter, &w_.latency, &w_.age, &w_.lead}) h->clear();
 }
 
 TimingSummary DeadlineMonitor::summarise(const Set& s) const {
@@ -54,6 +61,8 @@ TimingSummary DeadlineMonitor::summarise(const Set& s) const {
   out.period = s.period.summary();
   out.jitter = s.jitter.summary();
   out.latency = s.latency.summary();
+  out.age = s.age.summary();
+  out.lead = s.lead.summary();
   out.cycles = cycles_;
   out.misses = misses_;
   out.consecutive_misses = consecutive_;

@@ -74,7 +74,11 @@ struct Scenario {
   // Timing.
   double physics_hz = 1000.0;
   double state_hz = 50.0;
-  double actuation_delay = 0.0;     // s, command applied this long after its state's time
+  double actuation_delay = 0.0;     // s, command applied this long after it reaches the plant
+  // Lock-step: what a command pays before it reaches the plant, counted from its state's
+  // time: < 0 "measured" (the wall time from the state's publish to the command's receipt,
+  // as in real time), else these seconds. --ideal charges nothing.
+  double controller_latency = -1.0;
   double duration = 30.0;           // s of simulated time
   double lockstep_timeout = 5.0;    // s wall clock for one command
   double startup_timeout = 30.0;    // s wall clock for the first command

@@ -4,8 +4,12 @@
 // its truth log. Two clocks:
 //  - real time: physics paced to the wall clock; commands apply when they arrive (+ delay);
 //  - lock-step: after each state the simulator waits for the command answering it
-//    (command.state_seq == state.seq), so a run is deterministic and as fast as the
-//    controller; a missing answer past the timeout ends the run as a failure.
+//    (command.state_seq == state.seq), so a run is repeatable and as fast as the
+//    controller; a missing answer past the timeout ends the run as a failure. The command
+//    for the state of time t acts at t + the controller's latency + the actuation delay,
+//    as in real time: the latency is the measured wall time from the state's publish to
+//    the command's receipt (or the scenario's timing.controller_latency); `ideal` charges
+//    none (the zero-latency lock-step, for algorithm studies).
 #pragma once
 
 #include <cstdint>
@@ -29,6 +33,8 @@ struct RunOptions {
   std::string out_dir = ".";
   Channels channels;
   bool quiet = false;
+  bool ideal = false;             // lock-step: charge no controller latency
+  double controller_latency = -2.0;  // >= 0: seconds charged; -1: measured; -2: the scenario's
 };
 
 // Outcome of a run, as written to summary.json.

@@ -4,6 +4,15 @@
 //       + 350 exp(-d^2 / 12) + 1000 C
 // with d the distance to the nearest obstacle surface and C = 1 on a crash (ground,
 // obstacle, or, in a team, another vehicle).
+//
+// Flight-envelope terms, off by default (the paper's cost), on in the task files: a fast
+// quadrotor flown with latency otherwise trades altitude for speed until it meets the
+// ground. A rollout counts as crashed below ground_z + ground_margin or tilted beyond
+// the tilt whose cosine is tilt_cos_min (the world-z component of the body z axis;
+// 0.5 = 60 deg; the controller keeps margins the plant does not have), and pays
+//   w_floor * max(0, floor_z - (pz + floor_lookahead * min(vz, 0)))^2
+// when its altitude, predicted floor_lookahead seconds ahead at its sink rate, is below
+// floor_z (a sink-rate limit that tightens near the ground).
 #pragma once
 
 #include "mppi/costs/obstacles.hpp"
@@ -28,6 +37,11 @@ struct ForestCost {
     float w_separation = 350.0f;    // team only: exp barrier on vehicle-vehicle distance
     float separation_scale = 1.0f;  // m^2
     float w_terminal = 0.0f;        // multiplies the goal terms at the horizon's end
+    float ground_margin = 0.0f;     // m above ground_z that a rollout treats as the ground
+    float tilt_cos_min = -1.0f;     // a rollout tilted further is a crash (-1: no limit)
+    float floor_z = 0.0f;           // m, the floor of the predicted altitude
+    float floor_lookahead = 0.0f;   // s
+    float w_floor = 0.0f;
     ObstacleSet obstacles;
   };
 
@@ -47,7 +61,11 @@ struct ForestCost {
     float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
               p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
     if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
-    const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z;
+    const float z_ahead = pos[2] + p.floor_lookahead * fmin_(x[5], 0.0f);
+    const float below = fmax_(p.floor_z - z_ahead, 0.0f);
+    q += p.w_floor * below * below;
+    const bool tilted = p.tilt_cos_min > -1.0f && Vehicle::tilt_cos(x) < p.tilt_cos_min;
+    const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z + p.ground_margin || tilted;
     if (hit) {
       q += p.w_crash;
       *crash = true;

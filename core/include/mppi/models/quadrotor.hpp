@@ -89,6 +89,8 @@ struct Quadrotor {
     pos[2] = x[PZ];
   }
   MPPI_HD static float yaw(const float* x) { return x[YAW]; }
+  // Cosine of the tilt: the world-z component of the body z axis (ZXY Euler angles).
+  MPPI_HD static float tilt_cos(const float* x) { return fcos(x[ROLL]) * fcos(x[PITCH]); }
 };
 
 }  // namespace mppi

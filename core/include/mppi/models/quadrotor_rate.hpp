@@ -71,6 +71,8 @@ struct QuadrotorRate {
     pos[1] = x[PY];
     pos[2] = x[PZ];
   }
+  // Cosine of the tilt: the world-z component of the body z axis.
+  MPPI_HD static float tilt_cos(const float* x) { return 1.0f - 2.0f * (x[QX] * x[QX] + x[QY] * x[QY]); }
   // Heading (yaw about world z) of the body x axis.
   MPPI_HD static float yaw(const float* x) {
     const float qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];

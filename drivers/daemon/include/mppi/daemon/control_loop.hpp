@@ -17,14 +17,32 @@
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/command_gate.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
+#include "mppi/rt/latency_estimator.hpp"
 #include "mppi/rt/schedule.hpp"
 #include "mppi/rt/wakeup.hpp"
 #include "mppi/transport/transport.hpp"
 
 namespace mppi::daemon {
+
+// Latency compensation: each fresh cycle optimises from the state predicted to the time
+// its command will act, t_act = cycle start + expected latency + transport + actuation
+// delay, through the commands already sent (they act meanwhile), and the plan is shifted
+// by the control steps that really elapsed (skipped cycles, older states).
+struct LatencySettings {
+  bool compensate = true;
+  rt::LatencyEstimatorSettings estimator;   // expected cycle start -> command sent
+  std::int64_t transport_ns = 200'000;      // command sent -> the plant has it
+  std::int64_t actuation_delay_ns = 0;      // the plant has it -> it acts (ESCs, autopilot)
+  // The state's age from its sample_utime, stamped on this host's wall clock (the
+  // simulator and the MAVLink bridge do); false: from its receipt (a publisher whose clock
+  // is not ours; the transport delay is then not seen).
+  bool use_sample_time = true;
+  std::int64_t future_tolerance_ns = 2'000'000;  // a sample time further ahead is refused
+};
 
 struct LoopSettings {
   double rate_hz = 50.0;
@@ -44,6 +62,7 @@ struct LoopSettings {
   // through a stall. It always sleeps on CLOCK_MONOTONIC (off with a fake clock).
   bool deadline_guard = false;
   int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
+  LatencySettings latency;
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -65,6 +84,10 @@ struct LoopCounters {
   std::atomic<std::int64_t> publish_failures{0};  // the transport could not send a command
   std::atomic<std::int64_t> guard_takeovers{0};   // stalls the deadline guard covered
   std::atomic<std::int64_t> guard_commands{0};    // held-plan commands it published
+  std::atomic<std::int64_t> future_states{0};     // sample time ahead of now: handled as stale
+  std::atomic<std::int64_t> plan_skips{0};        // extra control steps the plan was shifted by
+  std::atomic<std::int64_t> latency_rejected{0};  // cycle durations the estimator refused
+  std::atomic<std::int64_t> repeated_ticks{0};    // lock-step ticks already answered, dropped
 };
 
 class ControlLoop {
@@ -94,6 +117,7 @@ class ControlLoop {
   const LoopCounters& counters() const { return counters_; }
   rt::TimingSummary timing_total() const { return monitor_.total(); }
   rt::TimingSummary timing_window() const { return monitor_.window(); }
+  std::int64_t latency_estimate_ns() const { return latency_estimate_ns_.load(std::memory_order_relaxed); }
   std::int64_t skipped_periods() const { return schedule_.skipped_periods(); }
   transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
   // For other threads while the loop runs (the histograms are the loop thread's alone).
@@ -116,12 +140,23 @@ class ControlLoop {
  private:
   enum class Outcome { kFresh, kHeld, kFailsafe };
   void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
+  // The state's sample time on the loop's timeline (now_state_ns's), and whether it lies
+  // further in the future than the tolerance.
+  std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
+  // Shift the optimizer's and the held plan by the control steps between the plan's first
+  // step and t_act, so step 0 is what acts at t_act.
+  void align_plan(std::int64_t t_act_ns);
+  // The cycle's elapsed time on the loop's timeline when a command leaves.
+  std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
+  void remember(std::int64_t sent_ns, const float* u);
   void apply_between_cycles(std::int64_t now_state_ns);
   std::string apply_param(const transport::ParamUpdate& p);
   void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
   void select_obstacles(const transport::StateSample& x);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
   void send_command(transport::Command* msg, transport::Mode mode, const float* u, std::int64_t state_seq);
+  // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
+  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
   transport::Mode publish_held(std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
   void maybe_status(bool force, std::int64_t now_ns);
@@ -168,6 +203,16 @@ class ControlLoop {
   std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
   std::int64_t prev_tick_sim_ns_ = -1;
+  std::int64_t last_tick_seq_ = -1;
+
+  // Latency compensation (loop thread only).
+  rt::LatencyEstimator latency_;
+  CommandHistory history_;
+  std::int64_t plan_t0_ns_ = 0;   // when the plan's step 0 acts, on the loop's timeline
+  bool plan_timed_ = false;       // plan_t0_ns_ is meaningful
+  std::int64_t dt_ns_;
+  std::vector<float> x_pred_;
+  std::atomic<std::int64_t> latency_estimate_ns_{0};
 
   std::atomic<std::int64_t> cmd_seq_{0};  // shared by the loop and the guard
 

@@ -45,6 +45,11 @@ class LcmTransport final : public Transport {
 
   std::string self_test() override;
   void start(Inbox* inbox) override;
+  // Before start(): run the receive thread SCHED_FIFO at this priority (0: inherit), so
+  // states and ticks are taken in as they arrive even while the optimizer fills the cores.
+  // A refusal leaves it at its policy; receive_priority_ok() says which happened.
+  void set_receive_fifo_priority(int priority) { receive_fifo_ = priority; }
+  bool receive_priority_ok() const { return receive_fifo_ok_.load(); }
   void stop() override;
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
@@ -70,6 +75,8 @@ class LcmTransport final : public Transport {
   int timeout_ms_;
   Inbox* inbox_ = nullptr;
   std::thread thread_;
+  int receive_fifo_ = 0;
+  std::atomic<bool> receive_fifo_ok_{false};
   std::atomic<bool> running_{false};
 
   // Receive-thread scratch, reused (their vectors keep their capacity).

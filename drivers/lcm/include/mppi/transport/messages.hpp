@@ -24,6 +24,9 @@ struct StateSample {
   std::int64_t seq = -1;
   std::int64_t sample_utime = 0;  // publisher's sample time, us
   std::int64_t recv_ns = 0;       // our CLOCK_MONOTONIC at receipt
+  std::int64_t recv_utime = 0;    // our wall clock at receipt, us (0: unknown); with
+                                  // sample_utime on the same host clock it gives the
+                                  // state's age on arrival
   std::int8_t model = 0;
   std::int16_t vehicle_count = 0;
   std::int16_t nx = 0;
@@ -37,6 +40,7 @@ struct Command {
   std::int64_t state_seq = -1;
   Mode mode = Mode::kFailsafe;
   std::int8_t kind = 3;  // command_t::KIND_*
+  std::int32_t age_us = 0, compute_us = 0, lead_us = 0;  // see command_t
   std::int32_t n = 0;
   float u[kMaxControls] = {};
 };
@@ -82,9 +86,11 @@ struct StatusReport {
   float period_ms_min = 0, period_ms_mean = 0, period_ms_max = 0, period_ms_p99 = 0;
   float jitter_ms_p99 = 0;
   std::int64_t cycles = 0, misses = 0, consecutive_misses = 0;
+  float state_to_command_ms_p99 = 0, state_age_ms_p99 = 0, latency_expected_ms = 0, lead_ms_mean = 0,
+        lead_ms_p99 = 0;
   float ess = 0, min_cost = 0;
   std::int64_t rejected_nan = 0, rejected_stale = 0, rejected_out_of_order = 0, rejected_undecodable = 0,
-               rejected_params = 0;
+               rejected_params = 0, rejected_future = 0;
   bool healthy = false;
 };
 

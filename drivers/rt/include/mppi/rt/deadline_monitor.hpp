@@ -1,6 +1,7 @@
 // Timing of the control loop: compute time, period between cycle starts, jitter
-// (|period - nominal|), state-to-command latency, deadline misses and the current run of
-// consecutive misses. Two views: a window, reset each time the status is published, and
+// (|period - nominal|), state-to-command latency, the state's age at the cycle's start, the
+// lead the state was predicted over, deadline misses and the current run of consecutive
+// misses. Two views: a window, reset each time the status is published, and
 // totals since start for the --stats summary. Nothing allocates after construction.
 #pragma once
 
@@ -11,7 +12,7 @@
 namespace mppi::rt {
 
 struct TimingSummary {
-  DurationSummary compute, period, jitter, latency;
+  DurationSummary compute, period, jitter, latency, age, lead;
   std::int64_t cycles = 0;
   std::int64_t misses = 0;
   std::int64_t consecutive_misses = 0;
@@ -27,8 +28,12 @@ class DeadlineMonitor {
   // One cycle: it started at start_ns, its work ended at end_ns; missed says whether it
   // ended after its deadline. The first cycle has no period.
   void record(std::int64_t start_ns, std::int64_t end_ns, bool missed);
-  // Time from the state's arrival to the command leaving, when a fresh command went out.
+  // Time from the state's sample to the command leaving, when a fresh command went out.
   void record_latency(std::int64_t ns);
+  // The state's age at the start of a cycle that optimised from it, and the span it was
+  // predicted over (sample time -> expected actuation).
+  void record_age(std::int64_t ns);
+  void record_lead(std::int64_t ns);
 
   TimingSummary window() const { return summarise(w_); }
   TimingSummary total() const { return summarise(t_); }
@@ -41,8 +46,9 @@ class DeadlineMonitor {
 
  private:
   struct Set {
-    Set(std::int64_t bin, int bins) : compute(bin, bins), period(bin, bins), jitter(bin, bins), latency(bin, bins) {}
-    Histogram compute, period, jitter, latency;
+    Set(std::int64_t bin, int bins)
+        : compute(bin, bins), period(bin, bins), jitter(bin, bins), latency(bin, bins), age(bin, bins), lead(bin, bins) {}
+    Histogram compute, period, jitter, latency, age, lead;
   };
   TimingSummary summarise(const Set& s) const;
 

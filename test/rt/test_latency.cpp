@@ -1,0 +1,265 @@
+// Latency compensation: the estimator of the controller's own latency, the history of sent
+// commands the state is predicted through, and the loop using both (fake clock, scripted
+// controller whose model the tests follow by hand: x[0] moves at u[0] units per second).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "fakes.hpp"
+#include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/state_predictor.hpp"
+#include "mppi/rt/latency_estimator.hpp"
+
+using namespace mppi;
+using mppi::test::FakeClock;
+using mppi::test::FakeController;
+using mppi::test::RecordingTransport;
+using transport::Mode;
+
+namespace {
+constexpr std::int64_t kMs = rt::kNsPerMs;
+
+rt::LatencyEstimatorSettings est(double q, int window, std::int64_t lo, std::int64_t hi) {
+  rt::LatencyEstimatorSettings s;
+  s.quantile = q;
+  s.window = window;
+  s.floor_ns = lo;
+  s.ceiling_ns = hi;
+  return s;
+}
+}  // namespace
+
+TEST(LatencyEstimator, HighQuantileOfTheWindowInsideFloorAndCeiling) {
+  rt::LatencyEstimator e(est(0.9, 10, 1 * kMs, 20 * kMs));
+  EXPECT_EQ(e.estimate_ns(), 1 * kMs + 19 * kMs / 2);  // before any measurement: the middle
+  for (int k = 1; k <= 10; ++k) EXPECT_TRUE(e.add(k * kMs));  // 1..10 ms
+  EXPECT_EQ(e.estimate_ns(), 9 * kMs);                         // rank ceil(0.9 * 10) = 9th
+  // The window slides: ten cycles of 3 ms forget the old ones.
+  for (int k = 0; k < 10; ++k) e.add(3 * kMs);
+  EXPECT_EQ(e.estimate_ns(), 3 * kMs);
+  // One outlier in ten does not move a 0.9 quantile; two do.
+  e.add(50 * kMs);
+  EXPECT_EQ(e.estimate_ns(), 3 * kMs);
+  e.add(15 * kMs);
+  EXPECT_EQ(e.estimate_ns(), 15 * kMs);
+  // Clamped: below the floor and above the ceiling.
+  for (int k = 0; k < 10; ++k) e.add(100'000);
+  EXPECT_EQ(e.estimate_ns(), 1 * kMs);
+  for (int k = 0; k < 10; ++k) e.add(40 * kMs);
+  EXPECT_EQ(e.estimate_ns(), 20 * kMs);
+}
+
+TEST(LatencyEstimator, ClockJumpsAreRefusedAndCountedNeverNegative) {
+  rt::LatencyEstimator e(est(0.95, 50, 1 * kMs, 20 * kMs));
+  for (int k = 0; k < 50; ++k) e.add(4 * kMs);
+  EXPECT_FALSE(e.add(-5 * kMs));            // the clock stepped back
+  EXPECT_FALSE(e.add(10'000 * kMs));        // a stopped process, not a latency
+  EXPECT_EQ(e.rejected(), 2);
+  EXPECT_EQ(e.samples(), 50);
+  EXPECT_EQ(e.estimate_ns(), 4 * kMs);
+  // Settings out of order still give a finite estimate inside a sane range.
+  rt::LatencyEstimator odd(est(7.0, 0, 5 * kMs, 1 * kMs));
+  EXPECT_TRUE(odd.add(2 * kMs));
+  EXPECT_EQ(odd.estimate_ns(), 5 * kMs);
+}
+
+TEST(CommandHistory, PredictsThroughEachCommandInEffect) {
+  FakeClock clock;
+  FakeController c(&clock);
+  daemon::CommandHistory h(4, {100, 0, 0, 0});
+  const float u1[4] = {200, 0, 0, 0}, u2[4] = {-50, 0, 0, 0};
+  h.add(10 * kMs, u1);
+  h.add(30 * kMs, u2);
+  float x[16] = {};
+  // [0, 10) at 100, [10, 30) at 200, [30, 40) at -50: 1 + 4 - 0.5.
+  EXPECT_EQ(h.predict(c, x, 0, 40 * kMs), 3);
+  EXPECT_NEAR(x[0], 4.5f, 1e-5f);
+  // From inside a segment, and nothing for an empty or reversed span.
+  float y[16] = {};
+  EXPECT_EQ(h.predict(c, y, 20 * kMs, 25 * kMs), 1);
+  EXPECT_NEAR(y[0], 1.0f, 1e-5f);
+  EXPECT_EQ(h.predict(c, y, 25 * kMs, 25 * kMs), 0);
+  EXPECT_EQ(h.predict(c, y, 30 * kMs, 20 * kMs), 0);
+  EXPECT_NEAR(y[0], 1.0f, 1e-5f);
+  // A command stamped before the last one acts after it (plants apply in arrival order).
+  const float u3[4] = {7, 0, 0, 0};
+  h.add(5 * kMs, u3);
+  EXPECT_FLOAT_EQ(h.at(29 * kMs)[0], 200.0f);
+  EXPECT_FLOAT_EQ(h.at(30 * kMs)[0], 7.0f);
+}
+
+TEST(CommandHistory, KeepsTheNewestAndWhatActedBeforeThem) {
+  FakeClock clock;
+  FakeController c(&clock);
+  daemon::CommandHistory h(4, {1, 0, 0, 0});
+  for (int k = 0; k < daemon::CommandHistory::kCapacity + 5; ++k) {
+    const float u[4] = {static_cast<float>(10 + k), 0, 0, 0};
+    h.add(k * kMs, u);
+  }
+  EXPECT_EQ(h.size(), daemon::CommandHistory::kCapacity);
+  EXPECT_FLOAT_EQ(h.at(-1)[0], 14.0f);  // the last command dropped acts before the kept ones
+  EXPECT_FLOAT_EQ(h.at(100 * kMs)[0], static_cast<float>(10 + daemon::CommandHistory::kCapacity + 4));
+  h.reset();
+  EXPECT_EQ(h.size(), 0);
+  EXPECT_FLOAT_EQ(h.at(0)[0], 1.0f);
+}
+
+namespace {
+struct LoopRig {
+  explicit LoopRig(daemon::LoopSettings s) : inbox(expect()), loop(&ctl, &clock, &tx, &inbox, s) {}
+  static transport::Inbox::Expect expect() {
+    transport::Inbox::Expect e;
+    e.nx = 16;
+    e.model = 1;
+    return e;
+  }
+  // A state sampled `age_ns` before now, received now; x[0] = 0.
+  void state(std::int64_t age_ns, std::int64_t wall_ahead_ns = 0) {
+    auto& s = inbox.state_buffer();
+    s.seq = ++seq;
+    s.nx = 16;
+    s.vehicle_count = 1;
+    s.n = 16;
+    s.model = 1;
+    s.recv_ns = clock.now_ns();
+    // A wall clock 1000 s ahead of the monotonic one: only differences matter.
+    s.recv_utime = (clock.now_ns() + 1000 * rt::kNsPerS) / 1000;
+    s.sample_utime = s.recv_utime - age_ns / 1000 + wall_ahead_ns / 1000;
+    for (float& v : s.x) v = 0.0f;
+    ASSERT_EQ(inbox.offer_state(), transport::Reject::kNone);
+  }
+  FakeClock clock;
+  RecordingTransport tx;
+  FakeController ctl{&clock};
+  transport::Inbox inbox;
+  daemon::ControlLoop loop;
+  std::atomic<bool> run{false};
+  std::int64_t seq = 0;
+};
+
+daemon::LoopSettings fixed_latency(std::int64_t latency, std::int64_t actuation) {
+  daemon::LoopSettings s;
+  s.latency.estimator.floor_ns = s.latency.estimator.ceiling_ns = latency;
+  s.latency.transport_ns = 0;
+  s.latency.actuation_delay_ns = actuation;
+  return s;
+}
+}  // namespace
+
+TEST(LatencyCompensation, OptimisesFromTheStatePredictedToTheActuationTime) {
+  LoopRig r(fixed_latency(5 * kMs, 10 * kMs));
+  r.ctl.compute_ns = [](int) { return 5 * kMs; };
+  // Cycle 1: the state is 3 ms old at the start; nothing was sent yet, u_init (3000/s) acts.
+  r.state(3 * kMs);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  const std::int64_t t1 = r.clock.now_ns() - 5 * kMs;  // its start
+  // lead = 3 (age) + 5 (latency) + 10 (actuation) = 18 ms.
+  EXPECT_NEAR(r.ctl.last_x0[0], 3000.0f * 0.018f, 1e-3f);
+  EXPECT_EQ(r.tx.commands.back().lead_us, 18000);
+  EXPECT_EQ(r.tx.commands.back().age_us, 3000);
+  EXPECT_EQ(r.tx.commands.back().compute_us, 5000);
+  // It sent u = 1010 at t1 + 5 ms; it acts from t1 + 15 ms.
+  ASSERT_FLOAT_EQ(r.tx.commands.back().u[0], 1010.0f);
+  // Cycle 2 starts at t1 + 20 ms from a state sampled at t1 + 8 ms: predicted over
+  // [t1+8, t1+15) at 3000 and [t1+15, t1+35) at 1010.
+  r.clock.set(t1 + 8 * kMs);
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.clock.now_ns(), t1 + 25 * kMs);
+  EXPECT_NEAR(r.ctl.last_x0[0], 3000.0f * 0.007f + 1010.0f * 0.020f, 1e-3f);
+  EXPECT_EQ(r.tx.commands.back().lead_us, 27000);
+  EXPECT_EQ(r.ctl.shifts, 0);  // on time: the plan's one shift per cycle is enough
+  const auto t = r.loop.timing_total();
+  EXPECT_NEAR(t.lead.max_ms, 27.0, 0.02);
+  EXPECT_NEAR(t.age.max_ms, 12.0, 0.02);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(LatencyCompensation, OffMeansTheMeasuredStateAsIs) {
+  daemon::LoopSettings s = fixed_latency(5 * kMs, 10 * kMs);
+  s.latency.compensate = false;
+  LoopRig r(s);
+  r.state(3 * kMs);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_FLOAT_EQ(r.ctl.last_x0[0], 0.0f);
+  EXPECT_EQ(r.ctl.propagations, 0);
+  EXPECT_EQ(r.tx.commands.back().lead_us, 0);
+}
+
+TEST(LatencyCompensation, ThePlanMovesOnByTheStepsThatReallyElapsed) {
+  LoopRig r(fixed_latency(2 * kMs, 0));
+  r.ctl.compute_ns = [](int) { return 2 * kMs; };
+  for (int k = 0; k < 3; ++k) {
+    r.state(0);
+    ASSERT_TRUE(r.loop.step_realtime(r.run));
+  }
+  EXPECT_EQ(r.ctl.shifts, 0);
+  // The loop is held up (the schedule skips, it does not catch up): that cycle starts
+  // late and holds; the plan has moved on by the control steps that elapsed.
+  r.clock.advance(58 * kMs);
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kHoldPlan);
+  // The plan's next step was for 20 ms after the last command's t_act; 40 ms more passed.
+  EXPECT_EQ(r.ctl.shifts, 2);
+  EXPECT_EQ(r.loop.counters().plan_skips.load(), 2);
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kNormal);
+  EXPECT_EQ(r.ctl.shifts, 2);
+}
+
+TEST(LatencyCompensation, AStateFromTheFutureIsHandledAsStaleAndCounted) {
+  LoopRig r(fixed_latency(2 * kMs, 0));
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  ASSERT_EQ(r.tx.commands.back().mode, Mode::kNormal);
+  const int before = r.ctl.iterations;
+  r.state(0, 5 * kMs);  // stamped 5 ms ahead of the receiver's clock (tolerance 2 ms)
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.ctl.iterations, before);  // not optimised from
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kHoldPlan);
+  EXPECT_EQ(r.loop.counters().future_states.load(), 1);
+  EXPECT_EQ(r.loop.counters().stale_cycles.load(), 1);
+  // Within the tolerance it is a state like any other.
+  r.state(0, 1 * kMs);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kNormal);
+  r.loop.publish_final_status();
+  EXPECT_EQ(r.tx.statuses.back().rejected_future, 1);
+  EXPECT_GT(r.tx.statuses.back().latency_expected_ms, 0.0f);
+}
+
+TEST(LatencyCompensation, ARepeatedLockstepTickIsNotAnsweredTwice) {
+  daemon::LoopSettings s = fixed_latency(2 * kMs, 0);
+  s.lockstep = true;
+  LoopRig r(s);
+  auto tick = [&](std::int64_t seq) {
+    transport::ClockTick t;
+    t.seq = seq;
+    t.sim_utime = seq * 20000;
+    r.inbox.offer_tick(t);
+  };
+  r.state(0);
+  tick(1);
+  ASSERT_TRUE(r.loop.step_lockstep(r.run));
+  tick(1);  // the simulator republished state 1 and its tick
+  EXPECT_FALSE(r.loop.step_lockstep(r.run));
+  // Answered with the command already sent for it, not with a new cycle.
+  ASSERT_EQ(r.tx.commands.size(), 2u);
+  EXPECT_EQ(r.tx.commands[1].seq, r.tx.commands[0].seq);
+  EXPECT_EQ(r.tx.commands[1].state_seq, 1);
+  EXPECT_EQ(r.ctl.iterations, 1);
+  EXPECT_EQ(r.loop.counters().repeated_ticks.load(), 1);
+  r.state(0);
+  tick(2);
+  ASSERT_TRUE(r.loop.step_lockstep(r.run));
+  EXPECT_EQ(r.ctl.iterations, 2);
+  EXPECT_EQ(r.tx.commands.back().state_seq, 2);
+  // A new simulator run, far behind: followed.
+  tick(2 + 500);
+  ASSERT_TRUE(r.loop.step_lockstep(r.run));
+  tick(1);
+  ASSERT_TRUE(r.loop.step_lockstep(r.run));
+  EXPECT_EQ(r.ctl.iterations, 4);
+}
