@@ -23,7 +23,7 @@ from pathlib import Path
 
 import yaml
 
-from . import paths
+from . import paths, timing
 
 LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 # A lock-step flight bursts thousands of datagrams a second; the logger must not drop any
@@ -57,6 +57,8 @@ class FlightSpec:
     wall_timeout: float = 0.0        # 0: from the scenario's duration
     sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
     kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
+    lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
+    plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
 
 
 class Flight:
@@ -183,20 +185,26 @@ class Flight:
             cfg = paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{task}.yaml"
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
-            ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
+            ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", spec.lcm_url]
             if lockstep:
                 ctrl_cmd.append("--lockstep")
             ctrl_cmd += ["--backend", spec.backend]
             # The flight's seed also seeds the controller's sampling (a campaign over seeds
             # varies both the world and the noise); --set can still override it.
             ctrl_cmd += ["--set", f"mppi.seed={spec.seed}"]
-            for kv in list(mp.get("set", [])) + list(spec.sets):
+            # One controller_status_t per cycle, so that score.json and timing.png give the
+            # compute p99 over the flight's cycles (timing.py); the scenario's and the user's
+            # --set come after and may override it.
+            later = [str(kv) for kv in list(mp.get("set", [])) + list(spec.sets)]
+            for kv in timing.status_rate_sets(cfg, later) + later:
                 ctrl_cmd += ["--set", kv]
         else:
-            ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
-        sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
+            ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url",
+                        spec.lcm_url]
+        sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", spec.lcm_url,
                    "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
-        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}&recv_buf_size={LOGGER_RECV_BUF}", str(self.out / "flight.lcmlog")]
+        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+                      str(self.out / "flight.lcmlog")]
 
         t0 = time.monotonic()
         outcome = None
@@ -246,7 +254,7 @@ class Flight:
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
                 "controller_config": str(cfg) if spec.controller == "mppid" else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
-                         "realtime": spec.realtime, "controller": spec.controller},
+                         "realtime": spec.realtime, "controller": spec.controller, "lcm_url": spec.lcm_url},
             }
             (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
@@ -302,9 +310,36 @@ def fly(spec: FlightSpec) -> dict:
         (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
     result = score.score_flight(flight.out, spec, info)
     (flight.out / "score.json").write_text(json.dumps(result, indent=2))
-    try:
-        plots.plot_flight(flight.out)
-    except Exception as e:  # plots must never turn a flight into a crash
-        result.setdefault("warnings", []).append(f"plots failed: {e!r}")
-        (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+    if spec.plots:
+        try:
+            plots.plot_flight(flight.out)
+        except Exception as e:  # plots must never turn a flight into a crash
+            result.setdefault("warnings", []).append(f"plots failed: {e!r}")
+            (flight.out / "score.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def lcm_url_for_port(port: int) -> str:
+    """The flight bus on another UDP port (each campaign flight gets its own)."""
+    if not 1024 <= int(port) <= 65535:
+        raise ValueError(f"LCM port {port} outside 1024-65535")
+    return f"udpm://239.255.76.67:{int(port)}?ttl=0"
+
+
+def watch_parent(parent_pid: int, interval: float = 0.2) -> None:
+    """Ends this process like a SIGTERM (the flight is cleaned up) once the process that
+    started it is gone: a campaign worker (a Ray worker, say) that dies mid-flight leaves no
+    simulator or daemon behind. Watches the parent process itself (its pid changes to a
+    reaper's when it dies), not the thread that started us, which PR_SET_PDEATHSIG would."""
+    if os.getppid() != parent_pid:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+
+    def loop():
+        while True:
+            time.sleep(interval)
+            if os.getppid() != parent_pid:
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+
+    threading.Thread(target=loop, name="parent-watch", daemon=True).start()

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import logs, paths
+from . import logs, paths, timing
 
 QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 
@@ -46,28 +46,25 @@ def _wrap(a):
 
 
 def _controller_stats(status):
-    """From the controller_status_t messages: misses, cycles, the worst window p99s."""
+    """From the controller_status_t messages: misses, cycles, and the timing figures of
+    timing.py (compute_ms_p99 over the flight's cycles; *_worst_window: the worst window)."""
     if not status:
         return {}
     msgs = [m for _, m in status]
     last = msgs[-1]
-    def worst(field):
-        vals = [getattr(m, field) for m in msgs if math.isfinite(getattr(m, field)) and getattr(m, field) > 0]
-        return max(vals) if vals else None
-    return {
+    res = {
         "backend": last.backend,
         "rollouts": last.rollouts,
         "horizon": last.horizon,
         "cycles": int(max(m.cycles for m in msgs)),
         "deadline_misses": int(max(m.misses for m in msgs)),
-        "compute_ms_p99": worst("compute_ms_p99"),
-        "compute_ms_max": worst("compute_ms_max"),
-        "compute_ms_mean": float(np.mean([m.compute_ms_mean for m in msgs if m.compute_ms_mean > 0])) if any(m.compute_ms_mean > 0 for m in msgs) else None,
-        "period_ms_p99": worst("period_ms_p99"),
-        "jitter_ms_p99": worst("jitter_ms_p99"),
         "status_messages": len(msgs),
         "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
     }
+    t = timing.status_timing(msgs)
+    t.pop("compute_samples_ms")
+    res.update(t)
+    return res
 
 
 def score_flight(out: Path, spec, info: dict) -> dict:
@@ -80,7 +77,7 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS"})
     model = scen["plant"]["model"]
     res = {
-        "scenario": scen.get("name", spec.scenario),
+        "scenario": paths.scenario_label(spec.scenario),
         "seed": spec.seed,
         "backend": spec.backend,
         "clock": "realtime" if spec.realtime else "lockstep",
