@@ -248,8 +248,8 @@ def validate_with_daemon(cfg: Path, base_sets, params: list[Param], backend: str
         for p in params:
             err = check(list(base_sets) + [p.setting(val(p))])
             if err:
-                raise TuneError(f"{p.key}: range {p.lo:g}:{p.hi:g} is outside what the settings accept "
-                                f"({'lower' if end == 'lo' else 'upper'} end {val(p):g}): {err}")
+                raise TuneError(f"{p.key}: the settings validation rejects the {'lower' if end == 'lo' else 'upper'} "
+                                f"end of the range {p.lo:g}:{p.hi:g} ({p.setting(val(p))}): {err}")
         err = check(list(base_sets) + [p.setting(val(p)) for p in params])
         raise TuneError(f"the ranges' {'lower' if end == 'lo' else 'upper'} ends together are rejected: {err}")
 
@@ -444,9 +444,7 @@ def _counted(study):
 
 
 def _run_study(st: Study, optuna) -> int:
-    from .campaign import make_jobs
-    from .engine import Progress, make_engine, run_flights
-    from optuna.trial import TrialState
+    from .engine import make_engine
 
     study = _open_study(st, optuna)
     left = st.a.trials - len(_counted(study))
@@ -459,7 +457,7 @@ def _run_study(st: Study, optuna) -> int:
                           cpus_per_flight=st.a.cpus_per_flight)
         try:
             def objective(trial):
-                return _objective(st, study, trial, eng, make_jobs, run_flights, Progress, optuna)
+                return _objective(st, study, trial, eng, optuna)
             while len(_counted(study)) < st.a.trials:
                 study.optimize(objective, n_trials=1, catch=())
                 _write_outputs(st, study)
@@ -482,7 +480,11 @@ def _best(study):
     return max(done, key=lambda t: (t.value, -t.number)) if done else None
 
 
-def _objective(st: Study, study, trial, eng, make_jobs, run_flights, Progress, optuna):
+def _objective(st: Study, study, trial, eng, optuna):
+    """One trial: its settings flown over scenarios x seeds on `eng`; prunes as --prune says."""
+    from .campaign import make_jobs
+    from .engine import Progress, run_flights
+
     values = {p.name: p.suggest(trial) for p in st.params}
     trial_sets = [p.setting(values[p.name]) for p in st.params]
     folder = st.out / "trials" / f"{trial.number:04d}"
