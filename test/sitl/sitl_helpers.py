@@ -74,3 +74,15 @@ def scenario_runs(out: Path) -> dict:
     import json
 
     return {(r["scenario"], r["seed"]): r for r in json.loads((out / "summary.json").read_text())["runs"]}
+
+
+def need_module(name: str):
+    """A PyPI package of requirements.txt: skipped with the reason on a partial venv; in CI
+    (CI set, tools/setup.sh installs requirements.txt) a failure, never a silent skip."""
+    try:
+        return __import__(name)
+    except ImportError:
+        why = f"Python package {name} not installed (pip install -r requirements.txt)"
+        if os.environ.get("CI"):
+            pytest.fail(why)
+        pytest.skip(why)

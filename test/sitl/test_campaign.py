@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from sitl_helpers import ROOT, SITL, group_members, pid_alive, scenario_runs, sitl, write_scenario
+from sitl_helpers import ROOT, SITL, group_members, need_module, pid_alive, scenario_runs, sitl, write_scenario
 from sitl_harness import campaign
 
 
@@ -84,7 +84,7 @@ def test_campaign_accepts_scenario_files(sim_binary, tmp_path):
 def test_local_and_ray_campaigns_agree(mppid_binary, tmp_path):
     """The same lock-step campaign (4 flights of the real daemon) on both engines: the same
     outcomes, figures, truth paths and summary; a local Ray cluster started and stopped."""
-    pytest.importorskip("ray")
+    need_module("ray")
     scen = write_scenario(tmp_path / "rate_circle_short.yaml", name="rate_circle_short", duration=2.0,
                           base="rate_circle")
     before = _raylets()
@@ -135,7 +135,7 @@ def _kill_mid_flight(tmp_path, engine):
 @pytest.mark.parametrize("engine", ["local", "ray"])
 def test_task_killed_mid_flight_leaves_nothing_and_is_flown_again(sim_binary, tmp_path, engine):
     if engine == "ray":
-        pytest.importorskip("ray")
+        need_module("ray")
     before = _raylets()
     out, pids, p = _kill_mid_flight(tmp_path, engine)
     # No orphan simulator, controller, logger or namespace holder.

@@ -10,7 +10,7 @@ import time
 import pytest
 import yaml
 
-from sitl_helpers import ROOT, SITL, group_members, pid_alive, sitl, write_scenario
+from sitl_helpers import ROOT, SITL, group_members, need_module, pid_alive, sitl, write_scenario
 from sitl_harness import overlay, tune
 
 
@@ -94,7 +94,7 @@ def test_tune_resumes_after_a_kill(mppid_binary, tmp_path):
     """A tiny study (stand-in controller, 1 s flights, 2 seeds a trial) is SIGKILLed while a
     trial flies; the same command resumes it: the stored trials are kept, the killed one is
     closed and flown again, and the study ends with the trials asked for and an overlay."""
-    optuna = pytest.importorskip("optuna")
+    optuna = need_module("optuna")
     from optuna.trial import TrialState
 
     scen = write_scenario(tmp_path / "hold.yaml")
@@ -197,7 +197,7 @@ def _fake_study(tmp_path, prune):
 def test_bound_pruning_stops_a_hopeless_trial(tmp_path):
     """The first trial succeeds on 8 of 10 seeds; the second fails its first 3: it can reach 7
     at most, so it is pruned after 3 flights, and the rest are never flown."""
-    optuna = pytest.importorskip("optuna")
+    optuna = need_module("optuna")
     from optuna.trial import TrialState
 
     st = _fake_study(tmp_path, {"bound"})
