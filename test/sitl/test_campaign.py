@@ -147,7 +147,7 @@ def test_task_killed_mid_flight_leaves_nothing_and_is_flown_again(sim_binary, tm
     assert run["success"] is True  # the second attempt flew
     assert len(run["retried"]) == 1 and run["retried"][0].startswith("attempt 1:")
     assert "flying it again" in err
-    assert "Flown again" in (out / "summary.md").read_text()
+    assert "hold6 seed 1: attempt 1:" in (out / "summary.md").read_text()
     if engine == "ray":
         assert "lost" in run["retried"][0], run["retried"]
         assert _raylets() <= before
@@ -166,3 +166,43 @@ def test_local_engine_needs_no_ray(sim_binary, tmp_path):
     p = subprocess.run(base + ["--out", str(tmp_path / "b"), "--engine", "ray"], cwd=ROOT, env=env,
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "needs the `ray` package" in p.stderr, p.stderr
+
+
+def test_local_engine_stops_flights_and_runs_again(sim_binary, tmp_path):
+    """A caller that stops after the first result (tune's pruning) gets one score, the other
+    flights are never flown; the engine then flies the same jobs again in full."""
+    from sitl_harness.engine import LocalEngine, run_flights
+
+    scen = write_scenario(tmp_path / "hold.yaml")
+    jobs = campaign.make_jobs(campaign.resolve_scenarios([str(scen)]), [1, 2, 3], tmp_path / "out",
+                              controller="standin", plots=False)
+    eng = LocalEngine(1)
+    try:
+        first = run_flights(eng, jobs, on_result=lambda job, score: True)
+        assert [r["seed"] for r in first] == [1]
+        assert not any((tmp_path / "out" / "hold_short" / f"seed_{s:04d}").exists() for s in (2, 3))
+        again = run_flights(eng, jobs)
+        assert [r["seed"] for r in again] == [1, 2, 3] and all(r["success"] for r in again)
+    finally:
+        eng.close()
+
+
+def test_compare_names_differences_and_disturbed_lockstep(tmp_path):
+    def folder(name, runs):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "summary.json").write_text(json.dumps({"summary": campaign.summarize(runs), "runs": runs}))
+        return d
+
+    base = {"scenario": "s", "seed": 1, "success": True, "reason": "goal reached", "time_to_goal": 6.0,
+            "compute_ms_p99": 9.0, "wall_s": 3.0}
+    a = folder("a", [dict(base), dict(base, seed=2)])
+    b = folder("b", [dict(base, compute_ms_p99=30.0, wall_s=9.0), dict(base, seed=2)])
+    assert campaign.compare_campaigns(a, b, truth=False) == []  # timings are not outcomes
+    c = folder("c", [dict(base), dict(base, seed=2, time_to_goal=7.5, lockstep_republished=2)])
+    diffs = campaign.compare_campaigns(a, c, truth=False)
+    assert any("seed 2: time_to_goal 6.0 != 7.5 [lock-step disturbed in B (2 states republished)]" in d
+               for d in diffs), diffs
+    assert any(d.startswith("summary s: time_to_goal") for d in diffs)
+    md = campaign.markdown(campaign.summarize([dict(base), dict(base, seed=2, lockstep_republished=2)]))
+    assert "1 lock-step flight(s) waited > 0.5 s" in md

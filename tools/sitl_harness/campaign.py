@@ -146,6 +146,8 @@ def summarize(results) -> dict:
             # Tasks flown again after a failed or lost attempt, and tasks that failed twice.
             "retried": [f"seed {r.get('seed')}: " + "; ".join(r["retried"]) for r in rs if r.get("retried")],
             "task_failures": sum(1 for r in rs if r.get("task_failed")),
+            # Lock-step flights that lost determinism (a cycle took > 0.5 s of wall time).
+            "lockstep_disturbed": sum(1 for r in rs if r.get("lockstep_republished")),
         }
     return {"scenarios": rows}
 
@@ -165,10 +167,13 @@ def markdown(summary) -> str:
     for scen, r in summary["scenarios"].items():
         for line in r.get("retried", []):
             notes.append(f"- {scen} {line}")
+        if r.get("lockstep_disturbed"):
+            notes.append(f"- {scen}: {r['lockstep_disturbed']} lock-step flight(s) waited > 0.5 s for a command "
+                         "(the simulator republished the state): not reproducible")
         if r.get("task_failures"):
             notes.append(f"- {scen}: {r['task_failures']} flight(s) whose task failed twice (counted as failures)")
     if notes:
-        lines += ["", "Flown again after a failed or lost task:"] + notes
+        lines += ["", "Notes (retries, task failures, disturbed lock-step flights):"] + notes
     return "\n".join(lines) + "\n"
 
 
@@ -199,15 +204,22 @@ def compare_campaigns(a: Path, b: Path, truth: bool = True) -> list[str]:
     if set(ra) != set(rb):
         diffs.append(f"runs differ: only in {a}: {sorted(set(ra) - set(rb))}; only in {b}: {sorted(set(rb) - set(ra))}")
     for k in sorted(set(ra) & set(rb), key=str):
+        mine = []
         for key in OUTCOME_KEYS:
             if ra[k].get(key) != rb[k].get(key):
-                diffs.append(f"{k[0]} seed {k[1]}: {key} {ra[k].get(key)!r} != {rb[k].get(key)!r}")
+                mine.append(f"{k[0]} seed {k[1]}: {key} {ra[k].get(key)!r} != {rb[k].get(key)!r}")
         if truth:
             ta = _truth_path(Path(a) / k[0] / f"seed_{k[1]:04d}")
             tb = _truth_path(Path(b) / k[0] / f"seed_{k[1]:04d}")
             if ta != tb:
-                diffs.append(f"{k[0]} seed {k[1]}: truth.jsonl paths differ" +
-                             ("" if ta is not None and tb is not None else " (missing)"))
+                mine.append(f"{k[0]} seed {k[1]}: truth.jsonl paths differ" +
+                            ("" if ta is not None and tb is not None else " (missing)"))
+        if mine:
+            why = [f"{x} ({r['lockstep_republished']} states republished)" for x, r in (("A", ra[k]), ("B", rb[k]))
+                   if r.get("lockstep_republished")]
+            if why:
+                mine = [m + f" [lock-step disturbed in {', '.join(why)}]" for m in mine]
+        diffs += mine
     sa, sb = da["summary"]["scenarios"], db["summary"]["scenarios"]
     for scen in sorted(set(sa) | set(sb)):
         for key in SUMMARY_KEYS:

@@ -123,14 +123,13 @@ class LocalEngine:
     def __init__(self, jobs: int = 2):
         self.capacity = max(1, int(jobs))
         self.pool = ThreadPoolExecutor(max_workers=self.capacity)
-        self.children: dict[int, subprocess.Popen] = {}
-        self.cancelled: set[int] = set()
+        self.tasks: dict = {}  # future -> its task: {"cancel": bool, "proc": Popen | None}
         self.lock = threading.Lock()
 
     def describe(self) -> dict:
         return {"engine": "local", "jobs": self.capacity}
 
-    def _run(self, job: FlightJob, attempt: int) -> dict:
+    def _run(self, job: FlightJob, task: dict) -> dict:
         out = Path(job.out)
         out.mkdir(parents=True, exist_ok=True)
         for stale in ("score.json", "pids.json", "harness.json"):
@@ -138,17 +137,14 @@ class LocalEngine:
         cmd = [sys.executable, "-m", "sitl_harness", "run", *job.run_args(), "--parent-pid", str(os.getpid())]
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
         with self.lock:
-            if job.index in self.cancelled:
+            if task["cancel"]:
                 return {"cancelled": True}
             with open(out / "harness.stderr", "wb") as err:
-                p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdin=subprocess.DEVNULL,
-                                     stdout=subprocess.DEVNULL, stderr=err)
-            self.children[job.index] = p
-        rc = p.wait()
-        with self.lock:
-            self.children.pop(job.index, None)
-            if job.index in self.cancelled:
-                return {"cancelled": True}
+                task["proc"] = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True,
+                                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
+        rc = task["proc"].wait()
+        if task["cancel"]:
+            return {"cancelled": True}
         try:
             score = json.loads((out / "score.json").read_text())
         except (OSError, ValueError):
@@ -156,12 +152,18 @@ class LocalEngine:
         return {"rc": rc, "score": score}
 
     def submit(self, job: FlightJob, attempt: int):
-        return self.pool.submit(self._run, job, attempt)
+        task = {"cancel": False, "proc": None}
+        f = self.pool.submit(self._run, job, task)
+        with self.lock:
+            self.tasks[f] = task
+        return f
 
     def wait_any(self, handles, timeout=None):
         done, _ = futures_wait(list(handles), timeout=timeout, return_when=FIRST_COMPLETED)
         out = []
         for f in done:
+            with self.lock:
+                self.tasks.pop(f, None)
             try:
                 out.append((f, f.result()))
             except Exception as e:  # noqa: BLE001 - a thread that failed is a lost task
@@ -170,12 +172,15 @@ class LocalEngine:
 
     def cancel(self, jobs_and_handles):
         """Stops these flights (SIGTERM: each cleans up its own flight), waits for them."""
+        running = []
         with self.lock:
-            running = []
-            for job, _ in jobs_and_handles:
-                self.cancelled.add(job.index)
-                if job.index in self.children:
-                    running.append(self.children[job.index])
+            for _, f in jobs_and_handles:
+                task = self.tasks.pop(f, None)
+                f.cancel()  # not started yet: never starts
+                if task is not None:
+                    task["cancel"] = True
+                    if task["proc"] is not None:
+                        running.append(task["proc"])
         for p in running:
             try:
                 p.send_signal(signal.SIGTERM)
@@ -186,8 +191,7 @@ class LocalEngine:
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
-        for _, h in jobs_and_handles:
-            h.cancel()
+                p.wait()
 
     def close(self):
         self.pool.shutdown(wait=True, cancel_futures=True)

@@ -96,6 +96,12 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         "mean_speed": None,
         "commands": len(lcm.get("MPPI_COMMAND", [])),
     }
+    if not spec.realtime and summary.get("ignored_commands") is not None:
+        # Lock-step is deterministic only while every answer comes within 0.5 s of wall time:
+        # after that the simulator republishes the state and its clock tick, the controller
+        # runs an extra cycle on the copy (its answer is ignored and counted here) and its
+        # noise and plan move one cycle ahead: the flight is no longer reproducible.
+        res["lockstep_republished"] = int(summary["ignored_commands"])
     if summary.get("commands") is not None:
         # Commands the simulator received but the logger did not record (should be 0).
         res["log_commands_missing"] = max(0, int(summary["commands"]) - res["commands"])
