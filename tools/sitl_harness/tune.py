@@ -6,10 +6,12 @@
 Objective (maximised): the success rate over scenarios x seeds, then a secondary figure
 that only orders trials with the same number of successes:
     value = (successes + 0.99 * b) / flights,   b in [0, 1]
-where b, over the successful flights, is 1 / (1 + mean/scale) for a figure to minimise
-(time to goal / scenario duration, tracking RMSE / the scenario's max_rmse) or
-clearance / (1 + clearance) for the mean minimum clearance [m] (--secondary; `auto`:
-time to goal for goal scenarios, RMSE otherwise).
+(a value lies in [k/n, (k+1)/n) for k successes of n, so one more success always wins;
+study.md and each trial's user attributes give the success count itself). b, over the
+successful flights, is 1 / (1 + mean/scale) for a figure to minimise (time to goal /
+scenario duration, tracking RMSE / the scenario's max_rmse) or clearance / (1 + clearance)
+for the mean minimum clearance [m] (--secondary; `auto`: time to goal for goal scenarios,
+RMSE otherwise).
 
 Pruning (--prune, default bound,median): after each flight the trial reports its success
 rate so far; `bound` stops a trial once its successes so far plus its remaining flights
