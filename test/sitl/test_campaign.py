@@ -105,6 +105,10 @@ def test_local_and_ray_campaigns_agree(mppid_binary, tmp_path):
         urls = {json.loads((outs[e] / "rate_circle_short" / f"seed_{s:04d}" / "harness.json").read_text())
                 ["spec"]["lcm_url"] for s in range(3, 7)}
         assert len(urls) == 4
+        # Flights run at the campaign's niceness (Ray starts its workers at 15).
+        nice = {json.loads((outs[e] / "rate_circle_short" / f"seed_{s:04d}" / "harness.json").read_text())
+                ["niceness"] for s in range(3, 7)}
+        assert nice == {os.getpriority(os.PRIO_PROCESS, 0)}, (e, nice)
     assert _raylets() <= before  # the local cluster is gone
 
 

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -30,6 +31,7 @@ def main(argv=None) -> int:
     r.add_argument("--kill-controller-after", type=float, default=0.0, help=argparse.SUPPRESS)
     r.add_argument("--lcm-port", type=int, default=0, help=argparse.SUPPRESS)   # campaigns: one bus per flight
     r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
+    r.add_argument("--niceness", type=int, default=None, help=argparse.SUPPRESS)  # Ray: the driver's niceness
     r.add_argument("--no-plots", action="store_true", help="skip path/traces/timing.png")
     r.add_argument("--quiet", action="store_true")
 
@@ -99,6 +101,13 @@ def main(argv=None) -> int:
             return 2
         if a.parent_pid:
             watch_parent(a.parent_pid)
+        if a.niceness is not None:
+            # A Ray worker runs at niceness 15; its flight runs at the campaign's, like a local one.
+            try:
+                os.setpriority(os.PRIO_PROCESS, 0, a.niceness)
+            except OSError as e:
+                print(f"sitl: cannot set niceness {a.niceness} (kept {os.getpriority(os.PRIO_PROCESS, 0)}): {e}",
+                      file=sys.stderr)
         try:
             score = fly(spec)
         except KeyboardInterrupt:

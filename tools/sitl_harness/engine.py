@@ -236,7 +236,9 @@ class RayEngine:
                 "cpus_per_flight": self.cpus_per_flight}
 
     def submit(self, job: FlightJob, attempt: int):
-        payload = {"root": str(paths.ROOT), "out": str(job.out), "args": job.run_args(), "attempt": attempt,
+        # Ray starts its workers at niceness 15: the flight goes back to the campaign's own.
+        args = job.run_args() + ["--niceness", str(os.getpriority(os.PRIO_PROCESS, 0))]
+        payload = {"root": str(paths.ROOT), "out": str(job.out), "args": args, "attempt": attempt,
                    "driver_node_id": self.driver_node}
         p = Path(job.scenario)
         if p.suffix in (".yaml", ".yml") and p.is_file():

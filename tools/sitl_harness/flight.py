@@ -249,6 +249,7 @@ class Flight:
             info = {
                 "harness_outcome": outcome,
                 "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
                 "returncodes": {k: p.returncode for k, p in self.procs.items()},
                 "events": self.events,
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},

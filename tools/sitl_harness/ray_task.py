@@ -44,7 +44,8 @@ def run_flight_task(payload: dict) -> dict:
     except Exception:  # noqa: BLE001 - called outside Ray (tests)
         pass
     (out / "worker.json").write_text(json.dumps({"pid": os.getpid(), "node_id": node_id,
-                                                 "attempt": payload.get("attempt", 1)}))
+                                                 "attempt": payload.get("attempt", 1),
+                                                 "worker_niceness": os.getpriority(os.PRIO_PROCESS, 0)}))
     env = dict(os.environ)
     env["PYTHONPATH"] = str(root / "tools")
     cmd = [python, "-m", "sitl_harness", "run", *args, "--parent-pid", str(os.getpid())]
