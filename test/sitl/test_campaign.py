@@ -91,8 +91,11 @@ def test_local_and_ray_campaigns_agree(mppid_binary, tmp_path):
     outs = {}
     for engine in ("local", "ray"):
         outs[engine] = tmp_path / engine
+        # One optimizer thread a flight: two flights at a time on CI's two cores, and no cycle
+        # slow enough (> 0.5 s) to make the simulator republish a state (not reproducible).
+        # The plan is bit-identical for any thread count.
         p = sitl("campaign", "--scenarios", scen, "--seeds", "3-6", "--out", outs[engine], "--engine", engine,
-                 "--jobs", 2, timeout=600, check=0)
+                 "--jobs", 2, "--set", "mppi.threads=1", timeout=600, check=0)
         assert "4/4" in p.stderr  # the progress bar
     assert campaign.compare_campaigns(outs["local"], outs["ray"]) == []
     a, b = (json.loads((outs[e] / "summary.json").read_text()) for e in ("local", "ray"))
@@ -210,3 +213,26 @@ def test_compare_names_differences_and_disturbed_lockstep(tmp_path):
     assert any(d.startswith("summary s: time_to_goal") for d in diffs)
     md = campaign.markdown(campaign.summarize([dict(base), dict(base, seed=2, lockstep_republished=2)]))
     assert "1 lock-step flight(s) waited > 0.5 s" in md
+
+
+def test_ray_campaign_joins_an_existing_cluster(sim_binary, tmp_path):
+    """--address: the campaign runs its flights on a running cluster (here one this test
+    starts) and leaves that cluster running."""
+    ray = need_module("ray")
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    ctx = ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, logging_level="WARNING")
+    try:
+        address = ctx.address_info["gcs_address"]
+        scen = write_scenario(tmp_path / "hold.yaml")
+        out = tmp_path / "camp"
+        sitl("campaign", "--scenarios", scen, "--seeds", 2, "--out", out, "--controller", "standin", "--engine", "ray",
+             "--address", address, timeout=300, check=0)
+        runs = scenario_runs(out)
+        assert [r["success"] for r in runs.values()] == [True, True]
+        engine = json.loads((out / "summary.json").read_text())["summary"]["engine"]
+        assert engine["engine"] == "ray" and engine["address"] == address and engine["jobs"] == 2
+        worker = json.loads((out / "hold_short" / "seed_0001" / "worker.json").read_text())
+        assert worker["node_id"] == ray.get_runtime_context().get_node_id()
+        assert ray.get(ray.remote(lambda: 42).remote()) == 42  # still up
+    finally:
+        ray.shutdown()
