@@ -217,11 +217,15 @@ class RayEngine:
         self.address = address
         self.started = False
         if not ray.is_initialized():
-            if address:
-                ray.init(address=address, log_to_driver=False, logging_level="WARNING")
-            else:
-                ray.init(num_cpus=max(1, int(jobs or 2)), include_dashboard=False, log_to_driver=False,
-                         logging_level="WARNING")
+            try:
+                if address:
+                    ray.init(address=address, log_to_driver=False, logging_level="WARNING")
+                else:
+                    ray.init(num_cpus=max(1, int(jobs or 2)), include_dashboard=False, log_to_driver=False,
+                             logging_level="WARNING")
+            except Exception as e:  # noqa: BLE001 - Ray raises many kinds; the message says which
+                where = f"join the Ray cluster at {address}" if address else "start a local Ray cluster"
+                raise RuntimeError(f"cannot {where}: {type(e).__name__}: {e}") from e
             self.started = True
         # Shipped by value: workers need only the standard library (and the repository).
         ray.cloudpickle.register_pickle_by_value(ray_task)

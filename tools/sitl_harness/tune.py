@@ -401,7 +401,7 @@ def main_tune(a) -> int:
     except KeyboardInterrupt:
         print("\nsitl tune: interrupted; run the same command again to resume", file=sys.stderr)
         return 130
-    except TuneError as e:
+    except (TuneError, RuntimeError) as e:
         print(f"sitl tune: {e}", file=sys.stderr)
         return 2
 
