@@ -13,7 +13,6 @@ error to upright over the hold window (swingup), the ellipse residual d (laps); 
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np

@@ -60,11 +60,8 @@ import argparse
 import fcntl
 import json
 import math
-import os
-import shutil
 import subprocess
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
