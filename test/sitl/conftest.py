@@ -45,3 +45,4 @@ def controller(sim_binary):
     return "mppid" if paths.find_binary("mppid") else "standin"
 
 
+

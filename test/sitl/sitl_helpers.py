@@ -45,3 +45,44 @@ def group_members(pgid: int) -> list[int]:
             except (OSError, ValueError, IndexError):
                 pass
     return out
+
+
+def write_scenario(path: Path, name: str | None = "hold_short", duration: float = 1.0, base: str = "hold") -> Path:
+    """A short test scenario file. base "hold": the 16-state quadrotor told to hold its
+    start (the hover stand-in succeeds); "rate_circle": rate_track_circle, shortened."""
+    import yaml
+
+    if base == "hold":
+        doc = {"description": "test: hold the start", "task": "quadrotor_track",
+               "plant": {"model": "quadrotor", "params": {}},
+               "timing": {"physics_hz": 1000, "state_hz": 50, "duration": duration},
+               "world": {"start": [3, 0, 2], "stop_at_goal": False},
+               "reference": {"kind": "hold", "center": [3, 0, 2], "yaw": 0.0},
+               "success": {"type": "tracking", "max_rmse": 0.3, "settle": 0.0}}
+    else:
+        doc = yaml.safe_load((ROOT / "config" / "scenarios" / "rate_track_circle.yaml").read_text())
+        doc["timing"]["duration"] = duration
+        doc["success"]["settle"] = min(1.0, duration / 2)
+    doc.pop("name", None)
+    if name:
+        doc = {"name": name, **doc}
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def scenario_runs(out: Path) -> dict:
+    import json
+
+    return {(r["scenario"], r["seed"]): r for r in json.loads((out / "summary.json").read_text())["runs"]}
+
+
+def need_module(name: str):
+    """A PyPI package of requirements.txt: skipped with the reason on a partial venv; in CI
+    (CI set, tools/setup.sh installs requirements.txt) a failure, never a silent skip."""
+    try:
+        return __import__(name)
+    except ImportError:
+        why = f"Python package {name} not installed (pip install -r requirements.txt)"
+        if os.environ.get("CI"):
+            pytest.fail(why)
+        pytest.skip(why)

@@ -1,21 +1,17 @@
-"""Campaigns: N seeds x scenarios, flown as separate `sitl run` processes, several at a
-time (lock-step flights are independent: each has its own network namespace)."""
+"""Campaigns: seeds x scenarios (names or YAML files), each flight a separate `sitl run`
+process with its own network namespace and LCM URL, run by an engine (engine.py: local
+processes, or Ray tasks); the summary is the same whatever the engine."""
 from __future__ import annotations
 
 import json
 import math
-import os
-import signal
-import subprocess
 import sys
-import threading
-import time
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 
 from . import paths
+from .engine import FlightJob, Progress, make_engine, run_flights
 
 
 def wilson(k: int, n: int, z: float = 1.96):
@@ -29,103 +25,91 @@ def wilson(k: int, n: int, z: float = 1.96):
     return (max(0.0, c - h), min(1.0, c + h))
 
 
-class Progress:
-    def __init__(self, total: int):
-        self.total, self.done, self.ok, self.t0 = total, 0, 0, time.monotonic()
-        self.lock = threading.Lock()
-        self.tty = sys.stderr.isatty()
+def parse_seeds(text: str, first_seed: int = 1) -> list[int]:
+    """"20" -> 20 seeds from first_seed; "51-70" or "1,3,10-12" -> those seeds."""
+    text = str(text).strip()
+    if text.isdigit():
+        n = int(text)
+        if n < 1:
+            raise ValueError("--seeds: at least one seed")
+        return list(range(first_seed, first_seed + n))
+    seeds: list[int] = []
+    for part in text.split(","):
+        a, dash, b = part.strip().partition("-")
+        try:
+            lo, hi = int(a), int(b) if dash else int(a)
+        except ValueError:
+            raise ValueError(f"--seeds: cannot read '{part}' (a count, or seeds such as 51-70 or 1,4,9-12)") from None
+        if lo < 0 or hi < lo:
+            raise ValueError(f"--seeds: bad range '{part}'")
+        seeds += [k for k in range(lo, hi + 1) if k not in seeds]
+    if not seeds:
+        raise ValueError("--seeds: no seed")
+    return seeds
 
-    def update(self, success: bool, label: str):
-        with self.lock:
-            self.done += 1
-            self.ok += int(success)
-            w = 30
-            fill = int(w * self.done / max(1, self.total))
-            el = time.monotonic() - self.t0
-            eta = el / self.done * (self.total - self.done)
-            line = (f"[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} ok {self.ok} "
-                    f"fail {self.done - self.ok}  {el:.0f}s elapsed, ~{eta:.0f}s left  {label}")
-            sys.stderr.write(("\r" + line.ljust(120)) if self.tty else line + "\n")
-            if self.tty and self.done == self.total:
-                sys.stderr.write("\n")
-            sys.stderr.flush()
+
+def resolve_scenarios(names) -> list[tuple[str, str]]:
+    """[(scenario as given: a name or a YAML file, label)]; the label (the scenario's `name`,
+    else the file's stem) names its result folder. Raises FileNotFoundError or ValueError."""
+    out, seen = [], {}
+    for n in names:
+        p = Path(n)
+        spec = str(p.resolve()) if p.suffix in (".yaml", ".yml") and p.is_file() else n
+        label = paths.scenario_label(spec)
+        if label in seen:
+            raise ValueError(f"scenarios {seen[label]} and {n} are both named '{label}'")
+        seen[label] = n
+        out.append((spec, label))
+    return out
+
+
+def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", realtime=False, sets=(), plots=True,
+              timeout=0.0, ideal=False, latency=None) -> list[FlightJob]:
+    """One job per scenario and seed, scenario-major; folders out/<label>/seed_NNNN."""
+    jobs = []
+    for spec, label in scenarios:
+        for seed in seeds:
+            jobs.append(FlightJob(index=len(jobs), scenario=spec, label=label, seed=seed,
+                                  out=Path(out) / label / f"seed_{seed:04d}", backend=backend, controller=controller,
+                                  realtime=realtime, sets=list(sets), plots=plots, timeout=timeout, ideal=ideal,
+                                  latency=latency))
+    return jobs
 
 
 def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: str = "cpu", first_seed: int = 1,
-                 controller: str = "mppid", realtime: bool = False, sets=(), ideal: bool = False,
+                 controller: str = "mppid", realtime: bool = False, sets=(), engine: str = "local",
+                 address: str | None = None, cpus_per_flight: float = 1.0, ideal: bool = False,
                  latency: float | None = None) -> dict:
+    """Flies every scenario (names or YAML files) over the seeds (a count from first_seed, or
+    a list) on the engine; writes summary.json, summary.md, summary.png; returns the summary."""
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    runs = [(s, first_seed + k) for s in scenarios for k in range(seeds)]
+    seed_list = list(range(first_seed, first_seed + seeds)) if isinstance(seeds, int) else list(seeds)
+    resolved = resolve_scenarios(scenarios)
     if realtime:
         jobs = 1  # real-time flights compete for the CPU: one at a time
-    elif jobs is None:
-        # The measured latency is charged: a second flight would lengthen it.
+    elif jobs is None and engine == "local":
+        # Lock-step charging the measured latency: a second flight on the machine would
+        # lengthen it. With --ideal, a fixed --latency or the stand-in, two at a time.
         jobs = 2 if (ideal or latency is not None or controller != "mppid") else 1
-    prog = Progress(len(runs))
-    children: set[subprocess.Popen] = set()
-    lock = threading.Lock()
-    stopping = threading.Event()
-
-    def one(scen, seed):
-        d = out / scen / f"seed_{seed:04d}"
-        cmd = [sys.executable, "-m", "sitl_harness", "run", "--scenario", scen, "--seed", str(seed), "--out", str(d),
-               "--backend", backend, "--controller", controller, "--quiet"] + (["--realtime"] if realtime else [])
-        if ideal:
-            cmd.append("--ideal")
-        elif latency is not None:
-            cmd += ["--latency", str(latency)]
-        for kv in sets:
-            cmd += ["--set", kv]
-        env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
-        if stopping.is_set():
-            return scen, seed, None
-        d.mkdir(parents=True, exist_ok=True)
-        with open(d / "harness.stderr", "wb") as err:
-            p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
-                                 stderr=err)
-        with lock:
-            children.add(p)
-        p.wait()
-        with lock:
-            children.discard(p)
-        try:
-            score = json.loads((d / "score.json").read_text())
-        except (OSError, json.JSONDecodeError):
-            score = {"scenario": scen, "seed": seed, "success": False, "reason": f"no score (rc={p.returncode})"}
-        prog.update(bool(score.get("success")), f"{scen}#{seed}")
-        return scen, seed, score
-
-    results = []
-    ex = ThreadPoolExecutor(max_workers=max(1, jobs))
+    flights = make_jobs(resolved, seed_list, out, backend=backend, controller=controller, realtime=realtime, sets=sets,
+                        ideal=ideal, latency=latency)
+    eng = make_engine(engine, jobs=jobs, address=address, cpus_per_flight=cpus_per_flight)
     try:
-        futs = [ex.submit(one, s, k) for s, k in runs]
-        for f in as_completed(futs):
-            scen, seed, score = f.result()
-            if score is not None:
-                results.append(score)
-    except KeyboardInterrupt:
-        # Not `with ThreadPoolExecutor`: its exit would wait for every running flight.
-        stopping.set()
-        ex.shutdown(wait=False, cancel_futures=True)
-        with lock:
-            running = list(children)
-        for p in running:
-            try:
-                p.send_signal(signal.SIGTERM)  # each run cleans up its own flight
-            except ProcessLookupError:
-                pass
-        for p in running:
-            try:
-                p.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-        raise
-    ex.shutdown(wait=True)
+        results = run_flights(eng, flights, Progress(len(flights)))
+        desc = eng.describe()
+    finally:
+        eng.close()
     summary = summarize(results)
     summary["command"] = " ".join(sys.argv)
-    summary["jobs"] = jobs
+    summary["engine"] = desc
+    summary["jobs"] = desc["jobs"]
     summary["sets"] = list(sets)
+    summary["seeds"] = seed_list
+    summary["clock"] = ("realtime" if realtime else "lockstep, " + (
+        "ideal (no latency charged)" if ideal else f"fixed latency {latency:g} s" if latency is not None
+        else "measured latency charged"))
+    summary["scenario_files"] = {label: spec for spec, label in resolved}
     (out / "summary.json").write_text(json.dumps({"summary": summary, "runs": sorted(results, key=lambda r: (r.get("scenario", ""), r.get("seed", 0)))}, indent=2))
     (out / "summary.md").write_text(markdown(summary))
     try:
@@ -164,9 +148,16 @@ def summarize(results) -> dict:
             "tracking_rmse": _stat([r.get("tracking_rmse") for r in ok]),
             "min_clearance": _stat([r.get("min_clearance") for r in rs]),
             "mean_speed": _stat([r.get("mean_speed") for r in ok]),
+            # Per flight: p99 over its cycles (timing.py); the column shows the worst flight.
             "compute_ms_p99": _stat([r.get("compute_ms_p99") for r in rs]),
+            "compute_ms_p99_worst_window": _stat([r.get("compute_ms_p99_worst_window") for r in rs]),
             "deadline_misses": _stat([r.get("deadline_misses") for r in rs]),
             "failures": reasons,
+            # Tasks flown again after a failed or lost attempt, and tasks that failed twice.
+            "retried": [f"seed {r.get('seed')}: " + "; ".join(r["retried"]) for r in rs if r.get("retried")],
+            "task_failures": sum(1 for r in rs if r.get("task_failed")),
+            # Lock-step flights that lost determinism (a cycle took > 0.5 s of wall time).
+            "lockstep_disturbed": sum(1 for r in rs if r.get("lockstep_republished")),
         }
     return {"scenarios": rows}
 
@@ -174,7 +165,7 @@ def summarize(results) -> dict:
 def markdown(summary) -> str:
     def f(s, key="mean", fmt="{:.2f}"):
         return fmt.format(s[key]) if s else "-"
-    lines = ["| scenario | runs | success | 95 % CI (Wilson) | time to goal [s] | RMSE | min clearance [m] | mean speed [m/s] | compute p99 [ms] | failures |",
+    lines = ["| scenario | runs | success | 95 % CI (Wilson) | time to goal [s] | RMSE | min clearance [m] | mean speed [m/s] | compute p99 [ms] (worst flight) | failures |",
              "|---|---:|---:|---|---:|---:|---:|---:|---:|---|"]
     for scen, r in summary["scenarios"].items():
         lo, hi = r["wilson95"]
@@ -182,4 +173,67 @@ def markdown(summary) -> str:
         lines.append(f"| {scen} | {r['runs']} | {r['successes']}/{r['runs']} ({100 * r['success_rate']:.0f} %) | "
                      f"{100 * lo:.0f}-{100 * hi:.0f} % | {f(r['time_to_goal'])} | {f(r['tracking_rmse'], fmt='{:.3f}')} | "
                      f"{f(r['min_clearance'], 'min')} | {f(r['mean_speed'])} | {f(r['compute_ms_p99'], 'max')} | {fails} |")
+    notes = []
+    for scen, r in summary["scenarios"].items():
+        for line in r.get("retried", []):
+            notes.append(f"- {scen} {line}")
+        if r.get("lockstep_disturbed"):
+            notes.append(f"- {scen}: {r['lockstep_disturbed']} lock-step flight(s) waited > 0.5 s for a command "
+                         "(the simulator republished the state): not reproducible")
+        if r.get("task_failures"):
+            notes.append(f"- {scen}: {r['task_failures']} flight(s) whose task failed twice (counted as failures)")
+    if notes:
+        lines += ["", "Notes (retries, task failures, disturbed lock-step flights):"] + notes
     return "\n".join(lines) + "\n"
+
+
+# What a lock-step flight must reproduce whatever the engine or the machine's load: the
+# outcome and the figures computed from the simulator's truth (not timings, not attempts).
+OUTCOME_KEYS = ("scenario", "seed", "success", "reason", "sim_outcome", "harness_outcome", "time_to_goal", "sim_time",
+                "min_clearance", "min_separation", "collisions", "tracking_rmse", "mean_speed", "laps")
+SUMMARY_KEYS = ("runs", "successes", "success_rate", "wilson95", "time_to_goal", "tracking_rmse", "min_clearance",
+                "mean_speed", "failures")
+
+
+def _truth_path(folder: Path) -> list[str] | None:
+    p = Path(folder) / "truth.jsonl"
+    if not p.is_file():
+        return None
+    # The wall-clock answer time is the only field that depends on the machine.
+    return [ln.split(',"lat_ms"')[0] for ln in p.read_text().splitlines()]
+
+
+def compare_campaigns(a: Path, b: Path, truth: bool = True) -> list[str]:
+    """Differences between two campaign folders in what lock-step must reproduce: each
+    run's outcome fields, the summary's rows less the timing columns, and (truth) each
+    flight's path in truth.jsonl. [] when they agree."""
+    da, db = (json.loads((Path(x) / "summary.json").read_text()) for x in (a, b))
+    diffs = []
+    ra = {(r.get("scenario"), r.get("seed")): r for r in da["runs"]}
+    rb = {(r.get("scenario"), r.get("seed")): r for r in db["runs"]}
+    if set(ra) != set(rb):
+        diffs.append(f"runs differ: only in {a}: {sorted(set(ra) - set(rb))}; only in {b}: {sorted(set(rb) - set(ra))}")
+    for k in sorted(set(ra) & set(rb), key=str):
+        mine = []
+        for key in OUTCOME_KEYS:
+            if ra[k].get(key) != rb[k].get(key):
+                mine.append(f"{k[0]} seed {k[1]}: {key} {ra[k].get(key)!r} != {rb[k].get(key)!r}")
+        if truth:
+            ta = _truth_path(Path(a) / k[0] / f"seed_{k[1]:04d}")
+            tb = _truth_path(Path(b) / k[0] / f"seed_{k[1]:04d}")
+            if ta != tb:
+                mine.append(f"{k[0]} seed {k[1]}: truth.jsonl paths differ" +
+                            ("" if ta is not None and tb is not None else " (missing)"))
+        if mine:
+            why = [f"{x} ({r['lockstep_republished']} states republished)" for x, r in (("A", ra[k]), ("B", rb[k]))
+                   if r.get("lockstep_republished")]
+            if why:
+                mine = [m + f" [lock-step disturbed in {', '.join(why)}]" for m in mine]
+        diffs += mine
+    sa, sb = da["summary"]["scenarios"], db["summary"]["scenarios"]
+    for scen in sorted(set(sa) | set(sb)):
+        for key in SUMMARY_KEYS:
+            va, vb = (s.get(scen, {}).get(key) for s in (sa, sb))
+            if va != vb:
+                diffs.append(f"summary {scen}: {key} {va!r} != {vb!r}")
+    return diffs

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -28,19 +29,29 @@ def main(argv=None) -> int:
                      help="lock-step: charge this fixed latency instead of the measured one (repeatable runs)")
     r.add_argument("--controller", choices=["mppid", "standin"], default="mppid",
                    help="standin: a hover stand-in (tests the simulator without the daemon)")
+    r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
+                   help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
     r.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit [s] (default from the scenario)")
     r.add_argument("--kill-controller-after", type=float, default=0.0, help=argparse.SUPPRESS)
+    r.add_argument("--lcm-port", type=int, default=0, help=argparse.SUPPRESS)   # campaigns: one bus per flight
+    r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
+    r.add_argument("--niceness", type=int, default=None, help=argparse.SUPPRESS)  # Ray: the driver's niceness
+    r.add_argument("--no-plots", action="store_true", help="skip path/traces/timing.png")
     r.add_argument("--quiet", action="store_true")
 
-    c = sub.add_parser("campaign", help="N seeds x scenarios, summary table with Wilson intervals")
-    c.add_argument("--scenarios", required=True, help="comma-separated names")
-    c.add_argument("--seeds", type=int, default=10)
+    c = sub.add_parser("campaign", help="seeds x scenarios, summary table with Wilson intervals")
+    c.add_argument("--scenarios", required=True, help="comma-separated scenario names and/or YAML files")
+    c.add_argument("--seeds", default="10", help="a count (from --first-seed) or seeds: 51-70, 1,4,9-12")
     c.add_argument("--first-seed", type=int, default=1)
     c.add_argument("--out", type=Path, required=True)
+    c.add_argument("--engine", choices=["local", "ray"], default="local",
+                   help="local: processes on this machine; ray: one Ray task per flight")
+    c.add_argument("--address", default=None,
+                   help="ray: an existing cluster (auto, HOST:PORT, ray://HOST:PORT); default: start a local one")
     c.add_argument("--jobs", type=int, default=None,
-                   help="flights in parallel (default: 1 in real time and in lock-step with the measured "
-                        "latency, whose timings the flights would disturb; 2 with --ideal or --latency)")
+                   help="flights at a time (default 2; ray on a cluster: its CPUs / --cpus-per-flight; real time: 1)")
+    c.add_argument("--cpus-per-flight", type=float, default=1.0, help="ray: CPUs a flight task asks for")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
     c.add_argument("--realtime", action="store_true")
@@ -48,7 +59,20 @@ def main(argv=None) -> int:
     clat.add_argument("--ideal", action="store_true", help="lock-step without charging the controller's latency")
     clat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
                       help="lock-step: charge this fixed latency instead of the measured one")
+    c.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
+                   help="settings overlay: its keys become --set pairs, before --set")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
+
+    cmp_ = sub.add_parser("compare", help="two campaign folders: same outcomes? (lock-step: engine-independent)")
+    cmp_.add_argument("a", type=Path)
+    cmp_.add_argument("b", type=Path)
+    cmp_.add_argument("--no-truth", action="store_true", help="skip comparing each flight's truth.jsonl path")
+
+    o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
+    o.add_argument("file", type=Path)
+
+    from .tune import add_tune_parser
+    add_tune_parser(sub)
 
     p = sub.add_parser("plot", help="re-make the plots of a result folder")
     p.add_argument("folder", type=Path)
@@ -57,20 +81,45 @@ def main(argv=None) -> int:
     if a.cmd == "list":
         print("\n".join(paths.scenario_names()))
         return 0
+    if a.cmd in ("run", "campaign", "overlay"):
+        from .overlay import OverlayError, load_sets
+        try:
+            over = [kv for f in ([a.file] if a.cmd == "overlay" else a.overlay) for kv in load_sets(f)]
+        except OverlayError as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
+        if a.cmd == "overlay":
+            print(" ".join(f"--set {kv}" for kv in over))
+            return 0
+        a.set = over + a.set
     if a.cmd == "run":
-        from .flight import FlightSpec, fly
+        from .flight import FlightSpec, fly, lcm_url_for_port, watch_parent, LCM_URL
         out = a.out or paths.ROOT / "results" / f"{Path(a.scenario).stem}-s{a.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+        try:
+            url = lcm_url_for_port(a.lcm_port) if a.lcm_port else LCM_URL
+        except ValueError as e:
+            print(f"sitl: --lcm-port: {e}", file=sys.stderr)
+            return 2
         if (a.ideal or a.latency is not None) and a.realtime:
             print("sitl: --ideal and --latency are lock-step options", file=sys.stderr)
             return 2
         spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
                           ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
-                          kill_controller_after=a.kill_controller_after)
+                          kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots)
         try:
-            paths.scenario_path(a.scenario)
+            paths.scenario_label(a.scenario)
         except FileNotFoundError as e:
             print(f"sitl: {e}", file=sys.stderr)
             return 2
+        if a.parent_pid:
+            watch_parent(a.parent_pid)
+        if a.niceness is not None:
+            # A Ray worker runs at niceness 15; its flight runs at the campaign's, like a local one.
+            try:
+                os.setpriority(os.PRIO_PROCESS, 0, a.niceness)
+            except OSError as e:
+                print(f"sitl: cannot set niceness {a.niceness} (kept {os.getpriority(os.PRIO_PROCESS, 0)}): {e}",
+                      file=sys.stderr)
         try:
             score = fly(spec)
         except KeyboardInterrupt:
@@ -83,23 +132,43 @@ def main(argv=None) -> int:
             print(f"results: {out}")
         return 0 if score.get("success") else 1
     if a.cmd == "campaign":
-        from .campaign import run_campaign
-        names = [s for s in a.scenarios.split(",") if s]
-        for n in names:
-            try:
-                paths.scenario_path(n)
-            except FileNotFoundError as e:
-                print(f"sitl: {e}", file=sys.stderr)
-                return 2
+        from .campaign import parse_seeds, resolve_scenarios, run_campaign
+        names = [s.strip() for s in a.scenarios.split(",") if s.strip()]
         try:
-            summary = run_campaign(names, a.seeds, a.out, jobs=a.jobs, backend=a.backend, first_seed=a.first_seed,
-                                   controller=a.controller, realtime=a.realtime, sets=a.set, ideal=a.ideal,
-                                   latency=a.latency)
+            resolve_scenarios(names)
+            seeds = parse_seeds(a.seeds, a.first_seed)
+            if a.address and a.engine != "ray":
+                raise ValueError("--address needs --engine ray")
+        except (FileNotFoundError, ValueError) as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
+        if (a.ideal or a.latency is not None) and a.realtime:
+            print("sitl: --ideal and --latency are lock-step options", file=sys.stderr)
+            return 2
+        try:
+            summary = run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
+                                   realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
+                                   cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130
+        except RuntimeError as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
         print((Path(a.out) / "summary.md").read_text())
         return 0
+    if a.cmd == "compare":
+        from .campaign import compare_campaigns
+        diffs = compare_campaigns(a.a, a.b, truth=not a.no_truth)
+        runs = len(json.loads((a.a / "summary.json").read_text())["runs"])
+        for d in diffs:
+            print(d)
+        print(f"{runs} runs: " + ("identical outcomes" + ("" if a.no_truth else " and truth paths") if not diffs
+                                  else f"{len(diffs)} differences"))
+        return 0 if not diffs else 1
+    if a.cmd == "tune":
+        from .tune import main_tune
+        return main_tune(a)
     if a.cmd == "plot":
         from .plots import plot_flight
         for f in plot_flight(a.folder):

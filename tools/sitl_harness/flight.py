@@ -60,6 +60,8 @@ class FlightSpec:
     wall_timeout: float = 0.0        # 0: from the scenario's duration
     sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
     kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
+    lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
+    plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
 
 
 class Flight:
@@ -186,7 +188,7 @@ class Flight:
             cfg = paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{task}.yaml"
             if not cfg.is_file():
                 raise FlightError(f"scenario {spec.scenario} names controller config {cfg}, which does not exist")
-            ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", LCM_URL]
+            ctrl_cmd = [str(mppid), "--config", str(cfg), "--lcm-url", spec.lcm_url]
             # As the systemd unit runs it (SCHED_FIFO, locked memory; it runs on with a
             # warning where the OS refuses), in lock-step too: there its measured latency is
             # what the simulator charges, and it must be the service's, not a busy machine's.
@@ -202,10 +204,11 @@ class Flight:
             # varies both the world and the noise); --set can still override it.
             ctrl_cmd += ["--set", f"mppi.seed={spec.seed}"]
             for kv in list(mp.get("set", [])) + list(spec.sets):
-                ctrl_cmd += ["--set", kv]
+                ctrl_cmd += ["--set", str(kv)]
         else:
-            ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url", LCM_URL]
-        sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", LCM_URL,
+            ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url",
+                        spec.lcm_url]
+        sim_cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", spec.lcm_url,
                    "--out", str(self.out), "--lockstep" if lockstep else "--realtime"]
         if lockstep and spec.ideal:
             sim_cmd.append("--ideal")
@@ -216,7 +219,8 @@ class Flight:
             # not slow its physics down, nor other load its clock and the latency it measures
             # (the daemon runs SCHED_FIFO 80, the simulator above).
             sim_cmd = ["chrt", "-f", str(SIM_FIFO_PRIORITY)] + sim_cmd
-        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={LCM_URL}&recv_buf_size={LOGGER_RECV_BUF}", str(self.out / "flight.lcmlog")]
+        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+                      str(self.out / "flight.lcmlog")]
 
         t0 = time.monotonic()
         outcome = None
@@ -261,13 +265,14 @@ class Flight:
             info = {
                 "harness_outcome": outcome,
                 "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
                 "returncodes": {k: p.returncode for k, p in self.procs.items()},
                 "events": self.events,
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
                 "controller_config": str(cfg) if spec.controller == "mppid" else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
-                         "controller": spec.controller},
+                         "controller": spec.controller, "lcm_url": spec.lcm_url},
             }
             (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
@@ -332,9 +337,36 @@ def fly(spec: FlightSpec) -> dict:
         (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
     result = score.score_flight(flight.out, spec, info)
     (flight.out / "score.json").write_text(json.dumps(result, indent=2))
-    try:
-        plots.plot_flight(flight.out)
-    except Exception as e:  # plots must never turn a flight into a crash
-        result.setdefault("warnings", []).append(f"plots failed: {e!r}")
-        (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+    if spec.plots:
+        try:
+            plots.plot_flight(flight.out)
+        except Exception as e:  # plots must never turn a flight into a crash
+            result.setdefault("warnings", []).append(f"plots failed: {e!r}")
+            (flight.out / "score.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def lcm_url_for_port(port: int) -> str:
+    """The flight bus on another UDP port (each campaign flight gets its own)."""
+    if not 1024 <= int(port) <= 65535:
+        raise ValueError(f"LCM port {port} outside 1024-65535")
+    return f"udpm://239.255.76.67:{int(port)}?ttl=0"
+
+
+def watch_parent(parent_pid: int, interval: float = 0.2) -> None:
+    """Ends this process like a SIGTERM (the flight is cleaned up) once the process that
+    started it is gone: a campaign worker (a Ray worker, say) that dies mid-flight leaves no
+    simulator or daemon behind. Watches the parent process itself (its pid changes to a
+    reaper's when it dies), not the thread that started us, which PR_SET_PDEATHSIG would."""
+    if os.getppid() != parent_pid:
+        os.kill(os.getpid(), signal.SIGTERM)
+        return
+
+    def loop():
+        while True:
+            time.sleep(interval)
+            if os.getppid() != parent_pid:
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+
+    threading.Thread(target=loop, name="parent-watch", daemon=True).start()

@@ -57,5 +57,22 @@ def scenario_path(name: str) -> Path:
     return p
 
 
+def scenario_label(name: str) -> str:
+    """What a scenario is called in results (campaign folders, score.json, summaries): its
+    `name` key, else the file's stem. `name` is a repository scenario name or a YAML file."""
+    import yaml
+
+    p = scenario_path(name)
+    try:
+        doc = yaml.safe_load(p.read_text()) or {}
+    except (OSError, yaml.YAMLError) as e:
+        raise FileNotFoundError(f"scenario {name}: cannot read {p}: {e}") from e
+    label = doc.get("name") if isinstance(doc, dict) else None
+    label = str(label) if label else p.stem
+    if not label or "/" in label or label in (".", ".."):
+        raise FileNotFoundError(f"scenario {name}: name '{label}' cannot name a folder")
+    return label
+
+
 def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIOS.glob("*.yaml"))

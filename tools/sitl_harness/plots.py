@@ -2,6 +2,7 @@
 (top view and altitude), command and state traces, and the controller's timing."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -10,7 +11,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from . import logs  # noqa: E402
+from . import logs, timing  # noqa: E402
 
 STATE_NAMES = {
     "quadrotor": ["x", "y", "z", "vx", "vy", "vz", "roll", "pitch", "yaw", "p", "q", "r", "w1", "w2", "w3", "w4"],
@@ -144,9 +145,13 @@ def _traces(out, t, X, U, model, nx, nu, m):
 
 
 def _timing(out, ticks):
+    """timing.png: the state-to-command time the simulator saw, the controller's compute time
+    per cycle and the command period; the figures in the titles (timing.py's definitions,
+    the same numbers as score.json) are also written to timing.json."""
     data = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS"})
     cmd_t = np.array([t for t, _ in data.get("MPPI_COMMAND", [])], float) / 1e3
-    comp = [m.compute_ms_last for _, m in data.get("MPPI_STATUS", [])]
+    status = [m for _, m in data.get("MPPI_STATUS", [])]
+    tm = timing.flight_timing(status, [m for _, m in data.get("MPPI_COMMAND", [])])
     lat = [tk["lat_ms"] for tk in ticks if tk.get("lat_ms") is not None]
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
     if lat:
@@ -154,10 +159,18 @@ def _timing(out, ticks):
         axes[0].set_title("state -> command [ms] (sim, per cycle)", fontsize=9)
     else:
         axes[0].set_title("state -> command: real time (n/a)", fontsize=9)
-    if comp:
-        axes[1].hist(comp, bins=30, color="tab:green")
-        st = data["MPPI_STATUS"][-1][1]
-        axes[1].set_title(f"compute [ms] (status; p99 {st.compute_ms_p99:.2f}, misses {st.misses})", fontsize=9)
+    misses = int(max(m.misses for m in status)) if status else 0
+    if tm["compute_samples_ms"]:
+        axes[1].hist(tm["compute_samples_ms"], bins=50, color="tab:green")
+        axes[1].axvline(tm["compute_ms_p99"], c="k", ls="--", lw=0.8)
+        axes[1].set_title(f"compute per cycle [ms]: p99 {tm['compute_ms_p99']:.2f} over "
+                          f"{len(tm['compute_samples_ms'])} cycles, max {tm['compute_ms_max']:.2f}, misses {misses}",
+                          fontsize=9)
+    elif status and tm["compute_ms_p99_worst_window"] is not None:
+        # No per-cycle times: the per-window p99s, named as such.
+        axes[1].hist([m.compute_ms_p99 for m in status], bins=30, color="tab:green")
+        axes[1].set_title(f"compute p99 per status window [ms]: worst window {tm['compute_ms_p99_worst_window']:.2f}, "
+                          f"misses {misses}", fontsize=9)
     else:
         axes[1].set_title("no controller_status_t", fontsize=9)
     if len(cmd_t) > 2:
@@ -169,4 +182,7 @@ def _timing(out, ticks):
     p = out / "timing.png"
     fig.savefig(p, dpi=80)
     plt.close(fig)
+    shown = {k: v for k, v in tm.items() if k != "compute_samples_ms"}
+    shown["compute_samples"] = len(tm["compute_samples_ms"] or [])
+    (out / "timing.json").write_text(json.dumps(shown, indent=2))
     return p

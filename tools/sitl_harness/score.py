@@ -13,13 +13,12 @@ error to upright over the hold window (swingup), the ellipse residual d (laps); 
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from . import logs, paths
+from . import logs, paths, timing
 
 QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 
@@ -45,29 +44,26 @@ def _wrap(a):
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def _controller_stats(status):
-    """From the controller_status_t messages: misses, cycles, the worst window p99s."""
+def _controller_stats(status, commands=()):
+    """From the controller_status_t messages: misses, cycles, and the timing figures of
+    timing.py (compute_ms_p99 over the flight's cycles; *_worst_window: the worst window)."""
     if not status:
         return {}
     msgs = [m for _, m in status]
     last = msgs[-1]
-    def worst(field):
-        vals = [getattr(m, field) for m in msgs if math.isfinite(getattr(m, field)) and getattr(m, field) > 0]
-        return max(vals) if vals else None
-    return {
+    res = {
         "backend": last.backend,
         "rollouts": last.rollouts,
         "horizon": last.horizon,
         "cycles": int(max(m.cycles for m in msgs)),
         "deadline_misses": int(max(m.misses for m in msgs)),
-        "compute_ms_p99": worst("compute_ms_p99"),
-        "compute_ms_max": worst("compute_ms_max"),
-        "compute_ms_mean": float(np.mean([m.compute_ms_mean for m in msgs if m.compute_ms_mean > 0])) if any(m.compute_ms_mean > 0 for m in msgs) else None,
-        "period_ms_p99": worst("period_ms_p99"),
-        "jitter_ms_p99": worst("jitter_ms_p99"),
         "status_messages": len(msgs),
         "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
     }
+    t = timing.flight_timing(msgs, [m for _, m in commands])
+    t.pop("compute_samples_ms", None)
+    res.update(t)
+    return res
 
 
 def score_flight(out: Path, spec, info: dict) -> dict:
@@ -80,10 +76,12 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS"})
     model = scen["plant"]["model"]
     res = {
-        "scenario": scen.get("name", spec.scenario),
+        "scenario": paths.scenario_label(spec.scenario),
         "seed": spec.seed,
         "backend": spec.backend,
         "clock": "realtime" if spec.realtime else "lockstep",
+        # Lock-step: what the simulator charged each command ("measured", "ideal", seconds).
+        "latency_charge": world.get("latency_charge"),
         "controller": spec.controller,
         "success": False,
         "reason": None,
@@ -99,10 +97,16 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         "mean_speed": None,
         "commands": len(lcm.get("MPPI_COMMAND", [])),
     }
+    if not spec.realtime and summary.get("ignored_commands") is not None:
+        # Lock-step is deterministic only while every answer comes within 0.5 s of wall time:
+        # after that the simulator republishes the state and its clock tick, the controller
+        # runs an extra cycle on the copy (its answer is ignored and counted here) and its
+        # noise and plan move one cycle ahead: the flight is no longer reproducible.
+        res["lockstep_republished"] = int(summary["ignored_commands"])
     if summary.get("commands") is not None:
         # Commands the simulator received but the logger did not record (should be 0).
         res["log_commands_missing"] = max(0, int(summary["commands"]) - res["commands"])
-    res.update(_controller_stats(lcm.get("MPPI_STATUS", [])))
+    res.update(_controller_stats(lcm.get("MPPI_STATUS", []), lcm.get("MPPI_COMMAND", [])))
     lat = [tk["lat_ms"] for tk in ticks if tk.get("lat_ms") is not None]
     if lat:
         res["answer_ms_p99"] = float(np.percentile(lat, 99))  # state published -> command received (lock-step)
