@@ -3,11 +3,15 @@
 // captured in one CUDA graph, and one synchronisation per update. Included by the per-task
 // instantiation units.
 //
-// Chosen at construction: where the noise is drawn (kernels.cuh, NoiseMode: the pre-pass for
-// teams when its buffer fits in the noise budget) and, for single vehicles, the lanes per
-// rollout G (1 to 8: about 8 warps per multiprocessor while the rollouts alone leave it
-// idle). MPPID_CUDA_NOISE=prepass|inline and MPPID_CUDA_LANES=1|2|4|8 override them (for
-// measurements); the plan is the same either way (rollout costs bit for bit).
+// Chosen at construction: for single vehicles the rollout kernel, rollout_chunked
+// (chunked.cuh: only the dynamics serial, costs and noise parallel over (rollout, step)) when
+// its shared memory fits, else rollout_single with G lanes per rollout (1 to 8: about 8 warps
+// per multiprocessor while the rollouts alone leave it idle); for teams where the noise is
+// drawn (kernels.cuh, NoiseMode: the pre-pass when its buffer fits in the noise budget).
+// For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
+// MPPID_CUDA_WARPS=<warps per chunked block>, MPPID_CUDA_NOISE=prepass|inline and
+// MPPID_CUDA_LANES=1|2|4|8 override the choices; the plan is the same either way (rollout
+// costs bit for bit).
 #pragma once
 
 #include <cuda_runtime.h>
@@ -21,6 +25,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "chunked.cuh"
 #include "cuda_check.cuh"
 #include "kernels.cuh"
 #include "mppi/gpu/cuda_backend.hpp"
@@ -93,6 +98,15 @@ class CudaBackend final : public RolloutBackend<T> {
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
       rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
+      // The chunked kernel when its shared memory fits (one block per 32 rollouts).
+      chunked_ = true;
+      if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) != "lanes";
+      if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
+      if (const char* v = std::getenv("MPPID_CUDA_WARPS")) chunk_warps_ = std::clamp(std::atoi(v), 1, 32);
+      chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
+      chunk_smem_ = ChunkLayout<T>(chunk_steps_, t_).bytes;
+      if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
+      chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
       // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
       // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
       // 380/290/240/240 us: past ~8 warps the G-fold repeated dynamics cost more issue slots
@@ -129,7 +143,10 @@ class CudaBackend final : public RolloutBackend<T> {
       d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
       d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
     }
-    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * sizeof(float), "the per-chunk minima");
+    const std::size_t min_cols = chunked_ ? static_cast<std::size_t>(chunk_blocks_) : static_cast<std::size_t>(chunks_);
+    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * min_cols * sizeof(float), "the per-chunk minima");
+    if (chunked_ && chunk_blocks_ > kDirectMin)
+      d_pmin_final_ = DeviceBuffer(static_cast<std::size_t>(t_) * sizeof(float), "the per-step minima");
     d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * (kNu + 1) * sizeof(float), "the per-chunk sums");
     d_stats_part_ = DeviceBuffer(static_cast<std::size_t>(chunks_) * sizeof(StatsPart), "the per-chunk statistics");
     in_bytes_ = align16(sizeof(Input<T>)) + plan_floats_ * sizeof(float);
@@ -143,7 +160,14 @@ class CudaBackend final : public RolloutBackend<T> {
     cudaStream_t stream = nullptr;
     check(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), "cudaStreamCreateWithFlags");
     stream_.reset(stream);
-    if (rollout_smem_ > 48 * 1024) {
+    if constexpr (!kTeam) {
+      if (chunked_ && chunk_smem_ > 48 * 1024) {
+        check(cudaFuncSetAttribute(rollout_chunked<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                   static_cast<int>(chunk_smem_)),
+              "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(chunk_smem_) + " bytes)");
+      }
+    }
+    if (!chunked_ && rollout_smem_ > 48 * 1024) {
       const std::string what = "cudaFuncSetAttribute (dynamic shared memory " + std::to_string(rollout_smem_) + " bytes)";
       with_rollout_kernel([&](auto kernel) {
         check(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize, static_cast<int>(rollout_smem_)),
@@ -204,8 +228,8 @@ class CudaBackend final : public RolloutBackend<T> {
 
   std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
   std::size_t device_bytes() const override {
-    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() +
-           d_pmin_.bytes() + d_part_.bytes() + d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
+    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() +
+           d_pmin_final_.bytes() + d_part_.bytes() + d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
   }
 
  private:
@@ -213,6 +237,9 @@ class CudaBackend final : public RolloutBackend<T> {
   static constexpr std::size_t kNoiseBudgetMax = std::size_t{16} << 30;
   static constexpr int kReduceBlock = 256;
   static constexpr int kSampleBlock = 256;
+  // Past this many chunked blocks, one small kernel reduces their per-step minima first (the
+  // weighting blocks would each read them all otherwise).
+  static constexpr long long kDirectMin = 1024;
 
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
   template <class F>
@@ -250,7 +277,8 @@ class CudaBackend final : public RolloutBackend<T> {
     };
     if (k_ < 1) bad("rollouts must be >= 1");
     if (t_ < 2) bad("horizon must be >= 2");
-    if (rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
+    if (chunked_ && chunk_blocks_ > prop.maxGridSize[0]) bad("chunked rollout grid exceeds the device limits");
+    if (!chunked_ && rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
                                                 std::to_string(prop.maxGridSize[0]));
     if (t_ > prop.maxGridSize[0] || chunks_ > prop.maxGridSize[1]) bad("weighting grid exceeds the device limits");
     if (mode_ == NoiseMode::kPrepass && t_ > prop.maxGridSize[1]) bad("noise pre-pass grid exceeds the device limits");
@@ -276,25 +304,48 @@ class CudaBackend final : public RolloutBackend<T> {
       sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_in, d_plan, k_, d_u_.as<float>(), d_cc_.as<float>(), c_);
       lazy_check(cudaGetLastError(), [&] { return what("launching the noise pre-pass"); });
     }
-    const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
-    with_rollout_kernel([&](auto kernel) {
-      kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
-                                                           d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
-    });
-    lazy_check(cudaGetLastError(), [&] {
-      return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
-                  std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
-    });
-    partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0,
-                  st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
-    lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+    const float* mins = d_pmin_.as<float>();
+    int min_count = chunks_;
+    if (chunked_) {
+      if constexpr (!kTeam) {
+        const int threads = 32 * chunk_warps_;
+        rollout_chunked<T><<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
+            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), k_, t_,
+            chunk_steps_, dt_, substeps_, c_);
+        lazy_check(cudaGetLastError(), [&] {
+          return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
+                      std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
+        });
+        min_count = static_cast<int>(chunk_blocks_);
+        if (chunk_blocks_ > kDirectMin) {
+          reduce_min<T><<<trajectory_ ? 1u : static_cast<unsigned>(t_), kReduceBlock, 0, st>>>(
+              d_pmin_.as<float>(), min_count, d_pmin_final_.as<float>());
+          lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+          mins = d_pmin_final_.as<float>();
+          min_count = 1;
+        }
+      }
+    } else {
+      const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
+      with_rollout_kernel([&](auto kernel) {
+        kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
+                                                             d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
+      });
+      lazy_check(cudaGetLastError(), [&] {
+        return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
+                    std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
+      });
+      partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock,
+                       0, st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
+      lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+    }
     weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-        d_in, d_plan, mode_ == NoiseMode::kInline ? nullptr : d_u_.as<float>(), d_cost_.as<float>(),
-        d_pmin_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_,
-        inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
+        d_in, d_plan, mode_ == NoiseMode::kInline ? nullptr : d_u_.as<float>(), d_cost_.as<float>(), mins, min_count,
+        d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(),
+        d_stats_part_.as<StatsPart>(), c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
     finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
-                                                                     d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+                                                                     d_stats_part_.as<StatsPart>(), mins, min_count,
                                                                      chunks_, d_plan_out, d_stats, c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
     lazy_check(cudaMemcpyAsync(h_out_.as<void>(), d_out_.as<void>(), out_bytes_, cudaMemcpyDeviceToHost, st),
@@ -334,7 +385,11 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t in_bytes_ = 0, out_bytes_ = 0;
   NoiseMode mode_ = NoiseMode::kInline;
   int lanes_ = 1;
-  DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
+  bool chunked_ = false;
+  int chunk_steps_ = 8, chunk_warps_ = 4;
+  std::size_t chunk_smem_ = 0;
+  long long chunk_blocks_ = 0;
+  DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_pmin_final_, d_part_, d_stats_part_, d_in_, d_out_;
   PinnedBuffer h_in_, h_out_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;
