@@ -21,7 +21,9 @@
 // The per-step costs stay in shared memory (T x 32 floats) until the end, where one warp
 // turns them into the cost-to-go (summed from the end, as CpuBackend does), writes S~ once,
 // and the block writes its minimum of every step (pmin[i][block]) for the weights. The
-// weights and the plan update are weigh/finalize (kernels.cuh), unchanged.
+// weights and the plan update are weigh/finalize (kernels.cuh), unchanged; u_out (when not
+// null) keeps every perturbed control (K x T x NU, [i][k][n]) for weigh, which otherwise
+// draws the noise again.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -124,7 +126,7 @@ struct ChunkLayout {
 
 template <class T>
 __global__ void rollout_chunked(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out,
-                                float* pmin, int K, int horizon, int chunk, float dt, int substeps,
+                                float* pmin, float* u_out, int K, int horizon, int chunk, float dt, int substeps,
                                 SamplerConstants<T::kNu> c) {
   constexpr int R = ChunkLayout<T>::R, NX = T::kNx, NU = T::kNu;
   static_assert(T::kVehicles == 1, "rollout_chunked is for single vehicles");
@@ -181,6 +183,7 @@ __global__ void rollout_chunked(const Input<T>* in, const float* plan, float* S,
 #pragma unroll
       for (int n = 0; n < NU; ++n) uo[n * R] = u[n];
       ccs[(b * chunk + s) * R + l] = control_cost<NU>(c, pu, du);
+      if (u_out != nullptr && k0 + l < K) store_floats<NU>(u_out + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
     }
   };
   draw(0, 0);

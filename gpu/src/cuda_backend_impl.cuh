@@ -8,8 +8,11 @@
 // its shared memory fits, else rollout_single with G lanes per rollout (1 to 8: about 8 warps
 // per multiprocessor while the rollouts alone leave it idle); for teams where the noise is
 // drawn (kernels.cuh, NoiseMode: the pre-pass when its buffer fits in the noise budget).
+// The chunked kernel keeps the perturbed controls for the update while they fit in about the
+// L2 cache (else the update draws them again).
 // For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
-// MPPID_CUDA_WARPS=<warps per chunked block>, MPPID_CUDA_NOISE=prepass|inline and
+// MPPID_CUDA_WARPS=<warps per chunked block>, MPPID_CUDA_NOISE=prepass|inline (teams),
+// keep|redraw (chunked) and
 // MPPID_CUDA_LANES=1|2|4|8 override the choices; the plan is the same either way (rollout
 // costs bit for bit).
 #pragma once
@@ -82,10 +85,15 @@ class CudaBackend final : public RolloutBackend<T> {
     check(cudaMemGetInfo(&free_bytes, &total_bytes), "cudaMemGetInfo");
     const std::size_t budget = std::min<std::size_t>(free_bytes / 4, kNoiseBudgetMax);
     mode_ = kTeam && u_bytes + cc_bytes <= budget ? NoiseMode::kPrepass : NoiseMode::kInline;
+    // Single vehicles (chunked kernel): keep the controls for the update while they fit in
+    // about the L2 cache; past that, drawing them again costs less than the memory traffic.
+    keep_u_ = !kTeam && u_bytes <= kKeepControlsMax;
     if (const char* m = std::getenv("MPPID_CUDA_NOISE")) {
       const std::string v(m);
       if (v == "prepass" && u_bytes + cc_bytes <= budget) mode_ = NoiseMode::kPrepass;
       else if (v == "inline") mode_ = NoiseMode::kInline;
+      if (v == "keep" && u_bytes <= budget) keep_u_ = true;
+      else if (v == "redraw") keep_u_ = false;
     }
 
     // Launch shapes.
@@ -107,6 +115,7 @@ class CudaBackend final : public RolloutBackend<T> {
       chunk_smem_ = ChunkLayout<T>(chunk_steps_, t_).bytes;
       if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
       chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
+      if (!chunked_) keep_u_ = false;
       // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
       // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
       // 380/290/240/240 us: past ~8 warps the G-fold repeated dynamics cost more issue slots
@@ -139,6 +148,7 @@ class CudaBackend final : public RolloutBackend<T> {
     d_cost_ = DeviceBuffer(kt * sizeof(float), "the cost-to-go S~ (K x T = " + std::to_string(k_) + " x " +
                                                    std::to_string(t_) + " floats)");
     d_crashed_ = DeviceBuffer(static_cast<std::size_t>(k_), "the crash flags (K bytes)");
+    if (keep_u_) d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
     if (mode_ == NoiseMode::kPrepass) {
       d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
       d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
@@ -240,6 +250,7 @@ class CudaBackend final : public RolloutBackend<T> {
   // Past this many chunked blocks, one small kernel reduces their per-step minima first (the
   // weighting blocks would each read them all otherwise).
   static constexpr long long kDirectMin = 1024;
+  static constexpr std::size_t kKeepControlsMax = std::size_t{48} << 20;
 
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
   template <class F>
@@ -310,8 +321,8 @@ class CudaBackend final : public RolloutBackend<T> {
       if constexpr (!kTeam) {
         const int threads = 32 * chunk_warps_;
         rollout_chunked<T><<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
-            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), k_, t_,
-            chunk_steps_, dt_, substeps_, c_);
+            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(),
+            keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_, c_);
         lazy_check(cudaGetLastError(), [&] {
           return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
                       std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
@@ -340,7 +351,8 @@ class CudaBackend final : public RolloutBackend<T> {
       lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
     }
     weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-        d_in, d_plan, mode_ == NoiseMode::kInline ? nullptr : d_u_.as<float>(), d_cost_.as<float>(), mins, min_count,
+        d_in, d_plan, mode_ == NoiseMode::kPrepass || keep_u_ ? d_u_.as<float>() : nullptr, d_cost_.as<float>(), mins,
+        min_count,
         d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(),
         d_stats_part_.as<StatsPart>(), c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
@@ -386,6 +398,7 @@ class CudaBackend final : public RolloutBackend<T> {
   NoiseMode mode_ = NoiseMode::kInline;
   int lanes_ = 1;
   bool chunked_ = false;
+  bool keep_u_ = false;
   int chunk_steps_ = 8, chunk_warps_ = 4;
   std::size_t chunk_smem_ = 0;
   long long chunk_blocks_ = 0;

@@ -1,10 +1,13 @@
 """Campaigns: N seeds x scenarios, flown as separate `sitl run` processes, several at a
-time (lock-step flights are independent: each has its own network namespace)."""
+time (lock-step flights are independent: each has its own network namespace). Real-time
+flights compete for the CPU and run one at a time, unless realtime_jobs > 1 asks for that
+many at once, each pinned (taskset) to its own share of the cores."""
 from __future__ import annotations
 
 import json
 import math
 import os
+import queue
 import signal
 import subprocess
 import sys
@@ -51,13 +54,29 @@ class Progress:
             sys.stderr.flush()
 
 
+def core_sets(n: int, cpus=None) -> list[list[int]]:
+    """n disjoint, equal shares of the CPUs this process may use (the rest left over)."""
+    cpus = sorted(cpus if cpus is not None else os.sched_getaffinity(0))
+    per = len(cpus) // n
+    if per < 1:
+        raise ValueError(f"{n} pinned real-time flights need at least {n} CPUs; {len(cpus)} available")
+    return [cpus[i * per:(i + 1) * per] for i in range(n)]
+
+
 def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu", first_seed: int = 1,
-                 controller: str = "mppid", realtime: bool = False, sets=()) -> dict:
+                 controller: str = "mppid", realtime: bool = False, sets=(), realtime_jobs: int = 1) -> dict:
     out = Path(out).resolve()
     out.mkdir(parents=True, exist_ok=True)
     runs = [(s, first_seed + k) for s in scenarios for k in range(seeds)]
+    pins: queue.Queue | None = None
     if realtime:
-        jobs = 1  # real-time flights compete for the CPU: one at a time
+        # Real-time flights compete for the CPU: one at a time, or realtime_jobs at once,
+        # each on its own cores.
+        jobs = max(1, realtime_jobs)
+        if jobs > 1:
+            pins = queue.Queue()
+            for cs in core_sets(jobs):
+                pins.put(cs)
     prog = Progress(len(runs))
     children: set[subprocess.Popen] = set()
     lock = threading.Lock()
@@ -73,14 +92,21 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
         if stopping.is_set():
             return scen, seed, None
         d.mkdir(parents=True, exist_ok=True)
-        with open(d / "harness.stderr", "wb") as err:
-            p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
-                                 stderr=err)
-        with lock:
-            children.add(p)
-        p.wait()
-        with lock:
-            children.discard(p)
+        cores = pins.get() if pins is not None else None
+        try:
+            if cores is not None:
+                cmd = ["taskset", "-c", ",".join(map(str, cores))] + cmd
+            with open(d / "harness.stderr", "wb") as err:
+                p = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                                     stderr=err)
+            with lock:
+                children.add(p)
+            p.wait()
+            with lock:
+                children.discard(p)
+        finally:
+            if cores is not None:
+                pins.put(cores)
         try:
             score = json.loads((d / "score.json").read_text())
         except (OSError, json.JSONDecodeError):
@@ -117,6 +143,7 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int = 2, backend: str = "cpu
     summary = summarize(results)
     summary["command"] = " ".join(sys.argv)
     summary["jobs"] = jobs
+    summary["realtime_pinned"] = pins is not None
     summary["sets"] = list(sets)
     (out / "summary.json").write_text(json.dumps({"summary": summary, "runs": sorted(results, key=lambda r: (r.get("scenario", ""), r.get("seed", 0)))}, indent=2))
     (out / "summary.md").write_text(markdown(summary))

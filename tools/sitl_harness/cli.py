@@ -34,6 +34,9 @@ def main(argv=None) -> int:
     c.add_argument("--first-seed", type=int, default=1)
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--jobs", type=int, default=2, help="flights in parallel (lock-step only)")
+    c.add_argument("--realtime-jobs", type=int, default=1, metavar="N",
+                   help="with --realtime: N flights at once, each pinned (taskset) to its own 1/N of the CPUs "
+                        "(default 1: one at a time)")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
     c.add_argument("--realtime", action="store_true")
@@ -79,7 +82,8 @@ def main(argv=None) -> int:
                 return 2
         try:
             summary = run_campaign(names, a.seeds, a.out, jobs=a.jobs, backend=a.backend, first_seed=a.first_seed,
-                                   controller=a.controller, realtime=a.realtime, sets=a.set)
+                                   controller=a.controller, realtime=a.realtime, sets=a.set,
+                                   realtime_jobs=a.realtime_jobs)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130
