@@ -112,7 +112,7 @@ class CudaBackend final : public RolloutBackend<T> {
       if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
       if (const char* v = std::getenv("MPPID_CUDA_WARPS")) chunk_warps_ = std::clamp(std::atoi(v), 1, 32);
       chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
-      chunk_smem_ = ChunkLayout<T>(chunk_steps_, t_).bytes;
+      chunk_smem_ = ChunkLayout<T>(chunk_steps_).bytes;
       if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
       chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
       if (!chunked_) keep_u_ = false;
@@ -153,12 +153,11 @@ class CudaBackend final : public RolloutBackend<T> {
       d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
       d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
     }
-    const std::size_t min_cols = chunked_ ? static_cast<std::size_t>(chunk_blocks_) : static_cast<std::size_t>(chunks_);
-    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * min_cols * sizeof(float), "the per-chunk minima");
-    if (chunked_ && chunk_blocks_ > kDirectMin)
-      d_pmin_final_ = DeviceBuffer(static_cast<std::size_t>(t_) * sizeof(float), "the per-step minima");
-    d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * (kNu + 1) * sizeof(float), "the per-chunk sums");
-    d_stats_part_ = DeviceBuffer(static_cast<std::size_t>(chunks_) * sizeof(StatsPart), "the per-chunk statistics");
+    // Per-chunk (lane kernel) or per-block (chunked kernel) minima, sums and statistics.
+    const std::size_t parts = chunked_ ? static_cast<std::size_t>(chunk_blocks_) : static_cast<std::size_t>(chunks_);
+    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * sizeof(float), "the per-chunk minima");
+    d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * (kNu + 1) * sizeof(float), "the per-chunk sums");
+    d_stats_part_ = DeviceBuffer(parts * sizeof(StatsPart), "the per-chunk statistics");
     in_bytes_ = align16(sizeof(Input<T>)) + plan_floats_ * sizeof(float);
     out_bytes_ = align16(plan_floats_ * sizeof(float)) + sizeof(DeviceStats);
     d_in_ = DeviceBuffer(in_bytes_, "the per-cycle input");
@@ -238,8 +237,8 @@ class CudaBackend final : public RolloutBackend<T> {
 
   std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
   std::size_t device_bytes() const override {
-    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() +
-           d_pmin_final_.bytes() + d_part_.bytes() + d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
+    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() + d_part_.bytes() +
+           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
   }
 
  private:
@@ -247,9 +246,6 @@ class CudaBackend final : public RolloutBackend<T> {
   static constexpr std::size_t kNoiseBudgetMax = std::size_t{16} << 30;
   static constexpr int kReduceBlock = 256;
   static constexpr int kSampleBlock = 256;
-  // Past this many chunked blocks, one small kernel reduces their per-step minima first (the
-  // weighting blocks would each read them all otherwise).
-  static constexpr long long kDirectMin = 1024;
   static constexpr std::size_t kKeepControlsMax = std::size_t{48} << 20;
 
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
@@ -315,26 +311,22 @@ class CudaBackend final : public RolloutBackend<T> {
       sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_in, d_plan, k_, d_u_.as<float>(), d_cc_.as<float>(), c_);
       lazy_check(cudaGetLastError(), [&] { return what("launching the noise pre-pass"); });
     }
-    const float* mins = d_pmin_.as<float>();
-    int min_count = chunks_;
     if (chunked_) {
+      // Rollouts, costs and each block's weighted sums in one kernel; then the blocks combined.
       if constexpr (!kTeam) {
         const int threads = 32 * chunk_warps_;
         rollout_chunked<T><<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
-            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(),
-            keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_, c_);
+            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
+            d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
+            inv_lambda_, trajectory_ ? 1 : 0, c_);
         lazy_check(cudaGetLastError(), [&] {
           return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
                       std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
         });
-        min_count = static_cast<int>(chunk_blocks_);
-        if (chunk_blocks_ > kDirectMin) {
-          reduce_min<T><<<trajectory_ ? 1u : static_cast<unsigned>(t_), kReduceBlock, 0, st>>>(
-              d_pmin_.as<float>(), min_count, d_pmin_final_.as<float>());
-          lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
-          mins = d_pmin_final_.as<float>();
-          min_count = 1;
-        }
+        finalize_blocks<kNu><<<static_cast<unsigned>(t_), kReduceBlock, 0, st>>>(
+            d_plan, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+            static_cast<int>(chunk_blocks_), inv_lambda_, trajectory_ ? 1 : 0, d_plan_out, d_stats, c_);
+        lazy_check(cudaGetLastError(), [&] { return what("launching the block-combining update kernel"); });
       }
     } else {
       const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
@@ -349,17 +341,16 @@ class CudaBackend final : public RolloutBackend<T> {
       partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock,
                        0, st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
       lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+      weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
+          d_in, d_plan, mode_ == NoiseMode::kPrepass ? d_u_.as<float>() : nullptr, d_cost_.as<float>(),
+          d_pmin_.as<float>(), chunks_, d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0,
+          d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
+      lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
+      finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
+                                                                       d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+                                                                       chunks_, chunks_, d_plan_out, d_stats, c_);
+      lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
     }
-    weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-        d_in, d_plan, mode_ == NoiseMode::kPrepass || keep_u_ ? d_u_.as<float>() : nullptr, d_cost_.as<float>(), mins,
-        min_count,
-        d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(),
-        d_stats_part_.as<StatsPart>(), c_);
-    lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
-    finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
-                                                                     d_stats_part_.as<StatsPart>(), mins, min_count,
-                                                                     chunks_, d_plan_out, d_stats, c_);
-    lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
     lazy_check(cudaMemcpyAsync(h_out_.as<void>(), d_out_.as<void>(), out_bytes_, cudaMemcpyDeviceToHost, st),
                [&] { return what("cudaMemcpyAsync of the output"); });
   }
@@ -399,10 +390,10 @@ class CudaBackend final : public RolloutBackend<T> {
   int lanes_ = 1;
   bool chunked_ = false;
   bool keep_u_ = false;
-  int chunk_steps_ = 8, chunk_warps_ = 4;
+  int chunk_steps_ = 4, chunk_warps_ = 4;
   std::size_t chunk_smem_ = 0;
   long long chunk_blocks_ = 0;
-  DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_pmin_final_, d_part_, d_stats_part_, d_in_, d_out_;
+  DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
   PinnedBuffer h_in_, h_out_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;

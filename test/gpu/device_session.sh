@@ -1,8 +1,10 @@
 #!/bin/bash
 # Kernel measurements on the GPU machine, after tools/gpu/run-all.sh has built build-gpu/:
 # every rollout-kernel variant on the issue's target sizes (the test scenario: sigma 20, 32
-# obstacles, T = 100), then Nsight Compute on one update's kernels. gpu/NOTES.md holds the
-# predictions these are checked against. Logs land in $OUT (or results/).
+# obstacles, T = 100), a build with denormals flushed (MPPID_CUDA_FTZ) checked for parity
+# and timed, then Nsight Compute on one update's kernels. gpu/NOTES.md holds the predictions
+# these are checked against. Logs land in $OUT (or results/).
+#   test/gpu/device_session.sh build-ftz     (first, or beside run-all.sh's build)
 #   test/gpu/device_session.sh [quick]
 set -u
 B=${B:-build-gpu}
@@ -13,43 +15,66 @@ TM="$B/bin/mppid-gpu-timing"
 [ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
-row() {  # label, env..., -- cases
+row() {  # label, env..., -- timing-tool arguments
   local label=$1; shift
   local envs=()
   while [ "$1" != "--" ]; do envs+=("$1"); shift; done
   shift
-  env "${envs[@]}" "$TM" "$@" 2>&1 | grep '"task"' | sed -E "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 us p99 \4 us/"
+  env "${envs[@]}" "$TM" "$@" 2>&1 | grep -E '"task"|timing:' | sed -E "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 us p99 \4 us/"
 }
+if [ "${1:-}" = build-ftz ]; then
+  # The flushed-denormal variant (no LCM: only the tests and the timing tool); may run beside
+  # run-all.sh's build.
+  cmake -S . -B build-ftz -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 \
+    -DMPPID_WERROR=OFF -DMPPID_LCM=OFF -DMPPID_CUDA_FTZ=ON -DRANDOM123_INCLUDE_DIR="$PWD/.devdeps/usr/include" &&
+    ninja -C build-ftz -j8 cuda_backend_tests mppid-gpu-timing
+  exit
+fi
 {
   stamp "variants (median of the iterations)"
   row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
   row "chunked " MPPID_CUDA_KERNEL=chunked -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
-  for c in 4 8 16 32; do
+  for c in 2 4 8 16; do
     for w in 2 4 8; do
       row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 300 quadrotor_forest:16384
     done
   done
-  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 300 quadrotor_forest:16384 quadrotor_forest:4096
+  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 300 quadrotor_forest:16384 quadrotor_rate_forest:16384
   row "keep    " MPPID_CUDA_NOISE=keep -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
   row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
   row "chunked " -- --iters 300 quadrotor_track:16384 quadrotor_rate_track:16384 racecar_ellipse:16384 cartpole_swingup:16384
   row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 30 --warmup 3 quadrotor_forest:1048576
-  row "chunked " MPPID_CUDA_KERNEL=chunked -- --iters 30 --warmup 3 quadrotor_forest:1048576
-  for c in 8 16; do
-    row "chunk=$c warps=8" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=8 -- --iters 30 --warmup 3 quadrotor_forest:1048576
+  for c in 2 4 8; do
+    for w in 4 8; do
+      row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 30 --warmup 3 quadrotor_forest:1048576
+    done
   done
+  row "chunked " -- --iters 1000 quadrotor_forest:16384 quadrotor_forest:1024 quadrotor_forest:256
   row "graph off" MPPID_CUDA_GRAPH=0 -- --iters 500 quadrotor_forest:16384
   stamp "variants done"
 } 2>&1 | tee "$OUT/variants.txt"
 
+if [ -x build-ftz/bin/cuda_backend_tests ]; then
+  {
+    stamp "flushed denormals (MPPID_CUDA_FTZ=ON)"
+    build-ftz/bin/cuda_backend_tests --gtest_filter='CudaParity.*:CudaDeterminism.*' 2>&1 |
+      grep -E '^\[parity\] [a-z_0-9]+ +cost|FAILED|PASSED|tests ran'
+    TM=build-ftz/bin/mppid-gpu-timing
+    row "ftz     " -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000
+    row "ftz     " -- --iters 30 --warmup 3 quadrotor_forest:1048576
+  } 2>&1 | tee "$OUT/ftz.txt"
+else
+  echo "no build-ftz/ (test/gpu/device_session.sh build-ftz makes it)"
+fi
+
 if [ "${1:-}" != quick ] && command -v ncu > /dev/null; then
-  # One update's kernels (skip the warm-up updates), K = 16384 and 1M.
+  # One update's kernels (after the warm-up updates), K = 16384 and 1M.
   for c in quadrotor_forest:16384 quadrotor_forest:1048576; do
-    timeout 120 ncu --kernel-name regex:'rollout|weigh|finalize|reduce_min|partial_min' --launch-skip 12 --launch-count 4 \
+    timeout 120 ncu --kernel-name regex:'rollout|weigh|finalize|partial_min' --launch-skip 12 --launch-count 3 \
       --section SpeedOfLight --section WarpStateStats --section SchedulerStats --section Occupancy --section LaunchStats \
-      "$TM" --iters 5 --warmup 5 $c
+      --section InstructionStats "$TM" --iters 5 --warmup 5 $c
   done > "$OUT/ncu.txt" 2>&1
-  grep -E '^  [a-z_]+.*\(|Duration|Issue Slots Busy|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Registers Per|Block Limit' \
+  grep -E '^  [a-z_]+.*\(|Duration|Executed Ipc A|Issued Warp Per|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Executed Instructions  |Block Limit (Sh|Reg)' \
     "$OUT/ncu.txt" | head -80
   stamp ncu
 fi

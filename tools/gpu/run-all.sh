@@ -74,7 +74,10 @@ fi
   echo
   echo "- GPU: $(nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader 2>&1)"
   echo "- CPU: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'); $(. /etc/os-release && echo "$PRETTY_NAME")"
-  echo "- commit: $(git rev-parse --short HEAD 2>/dev/null || echo '(no git)'); stages: $STAGES; quick: $QUICK"
+  # A copied tree (no .git of its own) names its source in .gpuwork-commit, when there is one.
+  commit="$(cat .gpuwork-commit 2>/dev/null || true)"
+  [[ -n "$commit" || ! -d .git && ! -f .git ]] || commit="$(git rev-parse --short HEAD 2>/dev/null)"
+  echo "- commit: ${commit:-unknown}; stages: $STAGES; quick: $QUICK"
 } >>"$SUMMARY"
 for t in ip unshare nsenter taskset; do command -v $t >/dev/null || fail "setup: '$t' not found"; done
 say "setup done (python $PY, lcm $LCM_DIR)"
@@ -99,9 +102,9 @@ export MPPID_BUILD_DIR="$B"
 # ---- tests ---------------------------------------------------------------------------------
 if want test; then
   # The CUDA tests alone (they time nothing, but share one GPU), then the rest in parallel.
-  timeout 900 ctest --test-dir "$B" -L gpu --output-on-failure >"$RES/ctest-gpu.log" 2>&1 || fail "ctest -L gpu"
+  timeout 900 ctest --test-dir "$B" -L gpu -V >"$RES/ctest-gpu.log" 2>&1 || fail "ctest -L gpu"
   timeout 1200 ctest --test-dir "$B" -LE gpu --output-on-failure -j8 >"$RES/ctest.log" 2>&1 || fail "ctest (all but gpu)"
-  grep -h '^\[parity\]' "$RES/ctest-gpu.log" >"$RES/parity.txt" 2>/dev/null || true
+  grep -ho '\[parity\].*' "$RES/ctest-gpu.log" >"$RES/parity.txt" 2>/dev/null || true
   note "- ctest, CUDA tests: $(grep -E 'tests passed|tests failed' "$RES/ctest-gpu.log" | tail -1)"
   note "- ctest, the rest: $(grep -E 'tests passed|tests failed' "$RES/ctest.log" | tail -1)"
   grep -hA40 'The following tests FAILED' "$RES/ctest-gpu.log" "$RES/ctest.log" | sed 's/^/    /' >>"$SUMMARY" || true
