@@ -48,9 +48,9 @@ struct ObstacleTable {
   static constexpr int kCap = ObstacleSet::kCapacity;
   // Padding: a NaN centre gives a NaN distance, which fminf never picks (whatever the position).
   static constexpr float kAway = __builtin_nanf("");
-  int count;   // real cylinders
-  int padded;  // count rounded up to 8
-  float r[kCap];
+  alignas(16) float r[kCap];  // first: read 16 bytes at a time
+  int count;                  // real cylinders
+  int padded;                 // count rounded up to 8
 };
 
 template <class T>

@@ -4,10 +4,11 @@
 // instantiation units.
 //
 // Chosen at construction: for single vehicles the rollout kernel, rollout_chunked
-// (chunked.cuh: only the dynamics serial, costs and noise parallel over (rollout, step)) when
-// its shared memory fits, else rollout_single with G lanes per rollout (1 to 8: about 8 warps
-// per multiprocessor while the rollouts alone leave it idle); for teams where the noise is
-// drawn (kernels.cuh, NoiseMode: the pre-pass when its buffer fits in the noise budget).
+// (chunked.cuh: only the dynamics serial, costs and noise parallel over (rollout, step), the
+// weighting in the same kernel) up to K = 128 x multiprocessors when its shared memory fits,
+// else rollout_single with G lanes per rollout (1 to 8: about 8 warps per multiprocessor
+// while the rollouts alone leave it idle); for teams where the noise is drawn (kernels.cuh,
+// NoiseMode: the pre-pass when its buffer fits in the noise budget).
 // The chunked kernel keeps the perturbed controls for the update while they fit in about the
 // L2 cache (else the update draws them again).
 // For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
@@ -106,8 +107,12 @@ class CudaBackend final : public RolloutBackend<T> {
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
       rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
-      // The chunked kernel when its shared memory fits (one block per 32 rollouts).
-      chunked_ = true;
+      // The chunked kernel while the lane kernel's one thread per rollout leaves the GPU short
+      // of warps (up to four blocks of 32 rollouts per multiprocessor); past that the lane
+      // kernel, whose threads then fill the GPU with less overhead a rollout. Measured on an
+      // H100 (gpu/NOTES.md): K = 16,384 chunked 187 us vs lanes 249 us; K = 65,536 lanes
+      // ~500 us vs chunked ~720 us; K = 1,048,576 lanes 6.9 ms vs chunked 10.1 ms.
+      chunked_ = static_cast<long long>(k_) <= 128LL * sms;
       if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) != "lanes";
       if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
       if (const char* v = std::getenv("MPPID_CUDA_WARPS")) chunk_warps_ = std::clamp(std::atoi(v), 1, 32);

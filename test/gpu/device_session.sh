@@ -11,8 +11,6 @@ B=${B:-build-gpu}
 OUT=${OUT:-results}
 mkdir -p "$OUT"
 export LD_LIBRARY_PATH=$PWD/.devdeps/lib:${LD_LIBRARY_PATH:-}
-TM="$B/bin/mppid-gpu-timing"
-[ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
 row() {  # label, env..., -- timing-tool arguments
@@ -30,6 +28,8 @@ if [ "${1:-}" = build-ftz ]; then
     ninja -C build-ftz -j8 cuda_backend_tests mppid-gpu-timing
   exit
 fi
+TM="$B/bin/mppid-gpu-timing"
+[ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 {
   stamp "variants (median of the iterations)"
   row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096

@@ -184,10 +184,12 @@ TEST(CudaParity, ChunkedKernelEveryChunkAndWarpCount) {
   unsetenv("MPPID_CUDA_NOISE");
 }
 
-// Rollout counts that leave the last block of 32 partly empty, and enough blocks that the
-// per-block minima are reduced by their own kernel first.
+// Rollout counts that leave the last block of 32 partly empty, and many blocks to combine
+// (the chunked kernel forced: past 128 rollouts per multiprocessor the default is the lane
+// kernel).
 TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
   SKIP_WITHOUT_CUDA();
+  setenv("MPPID_CUDA_KERNEL", "chunked", 1);
   for (int k : {1, 33, 1000, 40000}) {
     auto sc = gpu_test::make_scenario<QuadrotorForest>(k, 100);
     sc.settings.seed = 7;
@@ -200,6 +202,7 @@ TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
     EXPECT_LE(e.over_tolerance, kDivergentFraction * k + 1) << "K=" << k;
     EXPECT_LE(e.plan, kPlanTolerance) << "K=" << k;
   }
+  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // Several cycles through the optimizer (update, shift) on a fresh backend each run.
