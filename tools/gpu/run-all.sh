@@ -10,7 +10,8 @@
 #                        [--realtime-jobs 1] [--daemon-seconds 60] [--results DIR]
 #
 #   --stages          which stages (default: all; setup always runs). A machine kept warm
-#                     between device calls keeps build-gpu/, so a later call can run, e.g.,
+#                     between device calls keeps build-gpu/ (MPPID_GPU_BUILD: elsewhere) unless
+#                     the call's carried paths replace it, so a later call can run, e.g.,
 #                     --stages campaign alone without rebuilding.
 #   --quick           a short end-to-end check: daemon-bench 20 s, 2 seeds of forest_4m and 1
 #                     of each team scenario, fewer benchmark iterations
@@ -22,7 +23,7 @@ set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$ROOT"
 D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
-B="$ROOT/build-gpu"
+B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"  # outside a carried folder, a warm machine keeps it
 STAGES="build,test,bench,daemon,campaign"
 QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
