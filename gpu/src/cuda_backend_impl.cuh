@@ -3,11 +3,19 @@
 // captured in one CUDA graph, and one synchronisation per update. Included by the per-task
 // instantiation units.
 //
-// Chosen at construction: where the noise is drawn (kernels.cuh, NoiseMode: the pre-pass for
-// teams when its buffer fits in the noise budget) and, for single vehicles, the lanes per
-// rollout G (1 to 8: about 8 warps per multiprocessor while the rollouts alone leave it
-// idle). MPPID_CUDA_NOISE=prepass|inline and MPPID_CUDA_LANES=1|2|4|8 override them (for
-// measurements); the plan is the same either way (rollout costs bit for bit).
+// Chosen at construction: for single vehicles the rollout kernel, rollout_chunked
+// (chunked.cuh: only the dynamics serial, costs and noise parallel over (rollout, step), the
+// weighting in the same kernel) up to K = 128 x multiprocessors when its shared memory fits,
+// else rollout_single with G lanes per rollout (1 to 8: about 8 warps per multiprocessor
+// while the rollouts alone leave it idle); for teams where the noise is drawn (kernels.cuh,
+// NoiseMode: the pre-pass when its buffer fits in the noise budget).
+// The chunked kernel keeps the perturbed controls for the update while they fit in about the
+// L2 cache (else the update draws them again).
+// For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
+// MPPID_CUDA_WARPS=<warps per chunked block>, MPPID_CUDA_NOISE=prepass|inline (teams),
+// keep|redraw (chunked) and
+// MPPID_CUDA_LANES=1|2|4|8 override the choices; the plan is the same either way (rollout
+// costs bit for bit).
 #pragma once
 
 #include <cuda_runtime.h>
@@ -21,6 +29,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "chunked.cuh"
 #include "cuda_check.cuh"
 #include "kernels.cuh"
 #include "mppi/gpu/cuda_backend.hpp"
@@ -77,10 +86,15 @@ class CudaBackend final : public RolloutBackend<T> {
     check(cudaMemGetInfo(&free_bytes, &total_bytes), "cudaMemGetInfo");
     const std::size_t budget = std::min<std::size_t>(free_bytes / 4, kNoiseBudgetMax);
     mode_ = kTeam && u_bytes + cc_bytes <= budget ? NoiseMode::kPrepass : NoiseMode::kInline;
+    // Single vehicles (chunked kernel): keep the controls for the update while they fit in
+    // about the L2 cache; past that, drawing them again costs less than the memory traffic.
+    keep_u_ = !kTeam && u_bytes <= kKeepControlsMax;
     if (const char* m = std::getenv("MPPID_CUDA_NOISE")) {
       const std::string v(m);
       if (v == "prepass" && u_bytes + cc_bytes <= budget) mode_ = NoiseMode::kPrepass;
       else if (v == "inline") mode_ = NoiseMode::kInline;
+      if (v == "keep" && u_bytes <= budget) keep_u_ = true;
+      else if (v == "redraw") keep_u_ = false;
     }
 
     // Launch shapes.
@@ -93,6 +107,20 @@ class CudaBackend final : public RolloutBackend<T> {
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
       rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
+      // The chunked kernel while the lane kernel's one thread per rollout leaves the GPU short
+      // of warps (up to four blocks of 32 rollouts per multiprocessor); past that the lane
+      // kernel, whose threads then fill the GPU with less overhead a rollout. Measured on an
+      // H100 (gpu/NOTES.md): K = 16,384 chunked 187 us vs lanes 249 us; K = 65,536 lanes
+      // ~500 us vs chunked ~720 us; K = 1,048,576 lanes 6.9 ms vs chunked 10.1 ms.
+      chunked_ = static_cast<long long>(k_) <= 128LL * sms;
+      if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) != "lanes";
+      if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
+      if (const char* v = std::getenv("MPPID_CUDA_WARPS")) chunk_warps_ = std::clamp(std::atoi(v), 1, 32);
+      chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
+      chunk_smem_ = ChunkLayout<T>(chunk_steps_).bytes;
+      if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
+      chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
+      if (!chunked_) keep_u_ = false;
       // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
       // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
       // 380/290/240/240 us: past ~8 warps the G-fold repeated dynamics cost more issue slots
@@ -125,13 +153,16 @@ class CudaBackend final : public RolloutBackend<T> {
     d_cost_ = DeviceBuffer(kt * sizeof(float), "the cost-to-go S~ (K x T = " + std::to_string(k_) + " x " +
                                                    std::to_string(t_) + " floats)");
     d_crashed_ = DeviceBuffer(static_cast<std::size_t>(k_), "the crash flags (K bytes)");
+    if (keep_u_) d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
     if (mode_ == NoiseMode::kPrepass) {
       d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
       d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
     }
-    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * sizeof(float), "the per-chunk minima");
-    d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * chunks_ * (kNu + 1) * sizeof(float), "the per-chunk sums");
-    d_stats_part_ = DeviceBuffer(static_cast<std::size_t>(chunks_) * sizeof(StatsPart), "the per-chunk statistics");
+    // Per-chunk (lane kernel) or per-block (chunked kernel) minima, sums and statistics.
+    const std::size_t parts = chunked_ ? static_cast<std::size_t>(chunk_blocks_) : static_cast<std::size_t>(chunks_);
+    d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * sizeof(float), "the per-chunk minima");
+    d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * (kNu + 1) * sizeof(float), "the per-chunk sums");
+    d_stats_part_ = DeviceBuffer(parts * sizeof(StatsPart), "the per-chunk statistics");
     in_bytes_ = align16(sizeof(Input<T>)) + plan_floats_ * sizeof(float);
     out_bytes_ = align16(plan_floats_ * sizeof(float)) + sizeof(DeviceStats);
     d_in_ = DeviceBuffer(in_bytes_, "the per-cycle input");
@@ -143,7 +174,14 @@ class CudaBackend final : public RolloutBackend<T> {
     cudaStream_t stream = nullptr;
     check(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), "cudaStreamCreateWithFlags");
     stream_.reset(stream);
-    if (rollout_smem_ > 48 * 1024) {
+    if constexpr (!kTeam) {
+      if (chunked_ && chunk_smem_ > 48 * 1024) {
+        check(cudaFuncSetAttribute(rollout_chunked<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                   static_cast<int>(chunk_smem_)),
+              "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(chunk_smem_) + " bytes)");
+      }
+    }
+    if (!chunked_ && rollout_smem_ > 48 * 1024) {
       const std::string what = "cudaFuncSetAttribute (dynamic shared memory " + std::to_string(rollout_smem_) + " bytes)";
       with_rollout_kernel([&](auto kernel) {
         check(cudaFuncSetAttribute(kernel, cudaFuncAttributeMaxDynamicSharedMemorySize, static_cast<int>(rollout_smem_)),
@@ -204,8 +242,8 @@ class CudaBackend final : public RolloutBackend<T> {
 
   std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
   std::size_t device_bytes() const override {
-    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() +
-           d_pmin_.bytes() + d_part_.bytes() + d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
+    return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() + d_part_.bytes() +
+           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
   }
 
  private:
@@ -213,6 +251,7 @@ class CudaBackend final : public RolloutBackend<T> {
   static constexpr std::size_t kNoiseBudgetMax = std::size_t{16} << 30;
   static constexpr int kReduceBlock = 256;
   static constexpr int kSampleBlock = 256;
+  static constexpr std::size_t kKeepControlsMax = std::size_t{48} << 20;
 
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
   template <class F>
@@ -250,7 +289,8 @@ class CudaBackend final : public RolloutBackend<T> {
     };
     if (k_ < 1) bad("rollouts must be >= 1");
     if (t_ < 2) bad("horizon must be >= 2");
-    if (rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
+    if (chunked_ && chunk_blocks_ > prop.maxGridSize[0]) bad("chunked rollout grid exceeds the device limits");
+    if (!chunked_ && rollout_grid_ > prop.maxGridSize[0]) bad("rollout grid of " + std::to_string(rollout_grid_) + " blocks exceeds " +
                                                 std::to_string(prop.maxGridSize[0]));
     if (t_ > prop.maxGridSize[0] || chunks_ > prop.maxGridSize[1]) bad("weighting grid exceeds the device limits");
     if (mode_ == NoiseMode::kPrepass && t_ > prop.maxGridSize[1]) bad("noise pre-pass grid exceeds the device limits");
@@ -276,27 +316,46 @@ class CudaBackend final : public RolloutBackend<T> {
       sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_in, d_plan, k_, d_u_.as<float>(), d_cc_.as<float>(), c_);
       lazy_check(cudaGetLastError(), [&] { return what("launching the noise pre-pass"); });
     }
-    const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
-    with_rollout_kernel([&](auto kernel) {
-      kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
-                                                           d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
-    });
-    lazy_check(cudaGetLastError(), [&] {
-      return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
-                  std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
-    });
-    partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0,
-                  st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
-    lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
-    weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-        d_in, d_plan, mode_ == NoiseMode::kInline ? nullptr : d_u_.as<float>(), d_cost_.as<float>(),
-        d_pmin_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_,
-        inv_lambda_, trajectory_ ? 1 : 0, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
-    lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
-    finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
-                                                                     d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
-                                                                     chunks_, d_plan_out, d_stats, c_);
-    lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
+    if (chunked_) {
+      // Rollouts, costs and each block's weighted sums in one kernel; then the blocks combined.
+      if constexpr (!kTeam) {
+        const int threads = 32 * chunk_warps_;
+        rollout_chunked<T><<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
+            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
+            d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
+            inv_lambda_, trajectory_ ? 1 : 0, c_);
+        lazy_check(cudaGetLastError(), [&] {
+          return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
+                      std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
+        });
+        finalize_blocks<kNu><<<static_cast<unsigned>(t_), kReduceBlock, 0, st>>>(
+            d_plan, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+            static_cast<int>(chunk_blocks_), inv_lambda_, trajectory_ ? 1 : 0, d_plan_out, d_stats, c_);
+        lazy_check(cudaGetLastError(), [&] { return what("launching the block-combining update kernel"); });
+      }
+    } else {
+      const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
+      with_rollout_kernel([&](auto kernel) {
+        kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
+                                                             d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
+      });
+      lazy_check(cudaGetLastError(), [&] {
+        return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
+                    std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
+      });
+      partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock,
+                       0, st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
+      lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
+      weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
+          d_in, d_plan, mode_ == NoiseMode::kPrepass ? d_u_.as<float>() : nullptr, d_cost_.as<float>(),
+          d_pmin_.as<float>(), chunks_, d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0,
+          d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
+      lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
+      finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
+                                                                       d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
+                                                                       chunks_, chunks_, d_plan_out, d_stats, c_);
+      lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
+    }
     lazy_check(cudaMemcpyAsync(h_out_.as<void>(), d_out_.as<void>(), out_bytes_, cudaMemcpyDeviceToHost, st),
                [&] { return what("cudaMemcpyAsync of the output"); });
   }
@@ -334,6 +393,11 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t in_bytes_ = 0, out_bytes_ = 0;
   NoiseMode mode_ = NoiseMode::kInline;
   int lanes_ = 1;
+  bool chunked_ = false;
+  bool keep_u_ = false;
+  int chunk_steps_ = 4, chunk_warps_ = 4;
+  std::size_t chunk_smem_ = 0;
+  long long chunk_blocks_ = 0;
   DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
   PinnedBuffer h_in_, h_out_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;

@@ -366,17 +366,18 @@ __global__ void partial_min(const float* S, int K, int chunk, float* pmin) {
 
 // Block (i, c): sum w and w du over chunk c at step i, w from S~(tau_i,k) (cost-to-go) or
 // S~(tau_0,k) (trajectory). Block (0, c) also sums the step-0 statistics. u_stored: the
-// controls of every (k, i), or null to draw them again.
+// controls of every (k, i), or null to draw them again. pmin: min_count partial minima per
+// step (row-major by step), reduced here to the step's minimum.
 template <class T>
 __global__ void weigh(const Input<T>* in, const float* plan, const float* u_stored, const float* S, const float* pmin,
-                      const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory, float* part,
-                      StatsPart* stats_part, SamplerConstants<T::kNu> c) {
+                      int min_count, const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory,
+                      float* part, StatsPart* stats_part, SamplerConstants<T::kNu> c) {
   constexpr int NU = T::kNu;
   const int i = static_cast<int>(blockIdx.x), ci = static_cast<int>(blockIdx.y), chunks = static_cast<int>(gridDim.y);
   const int wi = trajectory ? 0 : i;
   float m = kCostCeiling;
-  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x))
-    m = fmin_(m, pmin[static_cast<std::size_t>(wi) * chunks + n]);
+  for (int n = static_cast<int>(threadIdx.x); n < min_count; n += static_cast<int>(blockDim.x))
+    m = fmin_(m, pmin[static_cast<std::size_t>(wi) * min_count + n]);
   m = block_min(m);
 
   const NoiseKey key = in->key;
@@ -421,7 +422,7 @@ __global__ void weigh(const Input<T>* in, const float* plan, const float* u_stor
 // Block i: u_i = clamp(u_i + sum w du / sum w); block 0 also writes the statistics.
 template <int NU>
 __global__ void finalize(const float* plan, const float* part, const StatsPart* stats_part, const float* pmin,
-                         int chunks, float* plan_out, DeviceStats* stats, SamplerConstants<NU> c) {
+                         int min_count, int chunks, float* plan_out, DeviceStats* stats, SamplerConstants<NU> c) {
   const int i = static_cast<int>(blockIdx.x);
   float acc[NU + 1] = {};
   for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x))
@@ -439,8 +440,8 @@ __global__ void finalize(const float* plan, const float* part, const StatsPart* 
     st[1] += stats_part[n].sum_cost;
     cnt[0] += stats_part[n].finite;
     cnt[1] += stats_part[n].crashed;
-    m = fmin_(m, pmin[n]);
   }
+  for (int n = static_cast<int>(threadIdx.x); n < min_count; n += static_cast<int>(blockDim.x)) m = fmin_(m, pmin[n]);
   m = block_min(m);
   block_sum(st);
   block_sum(cnt);

@@ -1,58 +1,80 @@
 #!/bin/bash
-# One GPU-machine session: build, parity/determinism tests, timings of the three targets in
-# every noise mode, the Fig. 11 sweep through mppid-bench, and a short Nsight Compute look
-# at the latency-bound rollout kernels. Everything lands in $OUT (at most 8 files).
+# Kernel measurements on the GPU machine, after tools/gpu/run-all.sh has built build-gpu/:
+# every rollout-kernel variant on the issue's target sizes (the test scenario: sigma 20, 32
+# obstacles, T = 100), a build with denormals flushed (MPPID_CUDA_FTZ) checked for parity
+# and timed, then Nsight Compute on one update's kernels. gpu/NOTES.md holds the predictions
+# these are checked against. Logs land in $OUT (or results/).
+#   test/gpu/device_session.sh build-ftz     (first, or beside run-all.sh's build)
 #   test/gpu/device_session.sh [quick]
 set -u
-OUT=${OUT:-/tmp/out}
-B=build-dev
+B=${B:-build-gpu}
+OUT=${OUT:-results}
+mkdir -p "$OUT"
+export LD_LIBRARY_PATH=$PWD/.devdeps/lib:${LD_LIBRARY_PATH:-}
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
-nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader > "$OUT/gpu.txt" 2>&1
-stamp "$(cat "$OUT/gpu.txt")"
-bash test/gpu/device_run.sh "$B" || exit 1
-stamp built
-export LD_LIBRARY_PATH=$PWD/.devdeps/lib/x86_64-linux-gnu:${LD_LIBRARY_PATH:-}
-
-# Parity and determinism: the contract.
-"$B/bin/cuda_backend_tests" > "$OUT/tests.log" 2>&1
-rc=$?
-grep -E '^\[parity\]|FAILED|PASSED|^\[  ' "$OUT/tests.log" | grep -vE '^\[ RUN|^\[       OK' | tail -40
-stamp "tests rc=$rc"
-
-# The targets (test scenario: sigma 20, 32 obstacles): the default choice, then the variants.
+row() {  # label, env..., -- timing-tool arguments
+  local label=$1; shift
+  local envs=()
+  while [ "$1" != "--" ]; do envs+=("$1"); shift; done
+  shift
+  env "${envs[@]}" "$TM" "$@" 2>&1 | grep -E '"task"|timing:' | sed -E "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 us p99 \4 us/"
+}
+if [ "${1:-}" = build-ftz ]; then
+  # The flushed-denormal variant (no LCM: only the tests and the timing tool); may run beside
+  # run-all.sh's build.
+  cmake -S . -B build-ftz -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 \
+    -DMPPID_WERROR=OFF -DMPPID_LCM=OFF -DMPPID_CUDA_FTZ=ON -DRANDOM123_INCLUDE_DIR="$PWD/.devdeps/usr/include" &&
+    ninja -C build-ftz -j8 cuda_backend_tests mppid-gpu-timing
+  exit
+fi
 TM="$B/bin/mppid-gpu-timing"
+[ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 {
-  echo "== auto"
-  $TM --iters 1000 quadrotor_forest:16384 team3_forest:1200 team9_forest:6000 quadrotor_forest:65536
-  $TM --iters 200 --warmup 20 quadrotor_forest:262144 quadrotor_forest:655360 quadrotor_forest:786432 quadrotor_forest:1048576
-  for g in 1 2 4 8; do
-    echo "== lanes $g"
-    MPPID_CUDA_LANES=$g $TM --iters 1000 quadrotor_forest:4096 quadrotor_forest:16384
+  stamp "variants (median of the iterations)"
+  row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
+  row "chunked " MPPID_CUDA_KERNEL=chunked -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
+  for c in 2 4 8 16; do
+    for w in 2 4 8; do
+      row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 300 quadrotor_forest:16384
+    done
   done
-  echo "== noise inline"
-  MPPID_CUDA_NOISE=inline $TM --iters 1000 team3_forest:1200 team9_forest:6000
-} > "$OUT/timing.log" 2>&1
-grep -E '^==|"task"' "$OUT/timing.log" | sed 's/"mean_us.*//'
-stamp timings
+  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 300 quadrotor_forest:16384 quadrotor_rate_forest:16384
+  row "keep    " MPPID_CUDA_NOISE=keep -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
+  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
+  row "chunked " -- --iters 300 quadrotor_track:16384 quadrotor_rate_track:16384 racecar_ellipse:16384 cartpole_swingup:16384
+  row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 30 --warmup 3 quadrotor_forest:1048576
+  for c in 2 4 8; do
+    for w in 4 8; do
+      row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 30 --warmup 3 quadrotor_forest:1048576
+    done
+  done
+  row "chunked " -- --iters 1000 quadrotor_forest:16384 quadrotor_forest:1024 quadrotor_forest:256
+  row "graph off" MPPID_CUDA_GRAPH=0 -- --iters 500 quadrotor_forest:16384
+  stamp "variants done"
+} 2>&1 | tee "$OUT/variants.txt"
 
-# Fig. 11: the public bench on the task configs (config/tasks/*.yaml).
-BN="$B/bin/mppid-bench"
-{
-  for m in quadrotor team3 team9; do
-    $BN --model $m --backend cuda --rollouts 256,1024,4096,16384,65536 --horizon 100 --iterations 1000 --json
-    $BN --model $m --backend cuda --rollouts 262144,1048576 --horizon 100 --iterations 100 --warmup 5 --json
-  done
-} > "$OUT/bench.jsonl" 2> "$OUT/bench.err"
-sed 's/,"startup_host_bytes.*//' "$OUT/bench.jsonl"
-stamp bench
+if [ -x build-ftz/bin/cuda_backend_tests ]; then
+  {
+    stamp "flushed denormals (MPPID_CUDA_FTZ=ON)"
+    build-ftz/bin/cuda_backend_tests --gtest_filter='CudaParity.*:CudaDeterminism.*' 2>&1 |
+      grep -E '^\[parity\] [a-z_0-9]+ +cost|FAILED|PASSED|tests ran'
+    TM=build-ftz/bin/mppid-gpu-timing
+    row "ftz     " -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000
+    row "ftz     " -- --iters 30 --warmup 3 quadrotor_forest:1048576
+  } 2>&1 | tee "$OUT/ftz.txt"
+else
+  echo "no build-ftz/ (test/gpu/device_session.sh build-ftz makes it)"
+fi
 
 if [ "${1:-}" != quick ] && command -v ncu > /dev/null; then
-  for c in quadrotor_forest:16384 team3_forest:1200; do
-    timeout 90 ncu --kernel-name regex:'rollout_(single|team)' --launch-skip 3 --launch-count 1 \
-      --section SpeedOfLight --section WarpStateStats --section SchedulerStats --section Occupancy \
-      "$TM" --iters 5 --warmup 0 $c
+  # One update's kernels (after the warm-up updates), K = 16384 and 1M.
+  for c in quadrotor_forest:16384 quadrotor_forest:1048576; do
+    timeout 120 ncu --kernel-name regex:'rollout|weigh|finalize|partial_min' --launch-skip 12 --launch-count 3 \
+      --section SpeedOfLight --section WarpStateStats --section SchedulerStats --section Occupancy --section LaunchStats \
+      --section InstructionStats "$TM" --iters 5 --warmup 5 $c
   done > "$OUT/ncu.txt" 2>&1
-  grep -E 'rollout_|Duration|Issue Slots Busy|No Eligible|Stall|Warp Cycles Per Issued|Achieved Occupancy' "$OUT/ncu.txt" | head -40
+  grep -E '^  [a-z_]+.*\(|Duration|Executed Ipc A|Issued Warp Per|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Executed Instructions  |Block Limit (Sh|Reg)' \
+    "$OUT/ncu.txt" | head -80
   stamp ncu
 fi

@@ -147,16 +147,62 @@ TEST(CudaParity, Team3ForestTrajectoryWeighting) {
   check_parity<Team3Forest>("team3_forest", Weighting::kTrajectory);
 }
 
-// The single-vehicle kernel splits the obstacle loop over G lanes per rollout (chosen from K);
-// every G must give the CPU's costs.
+// The lane kernel (rollout_single, the fallback when the chunked kernel's shared memory does
+// not fit) splits the obstacle loop over G lanes per rollout; every G must give the CPU's costs.
 TEST(CudaParity, QuadrotorForestEveryLaneCount) {
   SKIP_WITHOUT_CUDA();
+  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
   for (const char* lanes : {"1", "2", "4", "8"}) {
     setenv("MPPID_CUDA_LANES", lanes, 1);
-    std::printf("[parity] lanes per rollout %s\n", lanes);
+    std::printf("[parity] lane kernel, lanes per rollout %s\n", lanes);
     check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo);
   }
   unsetenv("MPPID_CUDA_LANES");
+  unsetenv("MPPID_CUDA_KERNEL");
+}
+
+// The chunked kernel (the default for single vehicles) at chunk lengths that do and do not
+// divide the horizon, one step, the whole horizon, and 1, 2 and 8 warps per block: the crash
+// fix-up and the buffers' hand-over between chunks must give the CPU's costs every time.
+TEST(CudaParity, ChunkedKernelEveryChunkAndWarpCount) {
+  SKIP_WITHOUT_CUDA();
+  for (const char* chunk : {"1", "7", "16", "100"}) {
+    setenv("MPPID_CUDA_CHUNK", chunk, 1);
+    std::printf("[parity] chunked kernel, %s steps a chunk\n", chunk);
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo);
+    check_parity<RateQuadrotorTrack>("quadrotor_rate_track", Weighting::kCostToGo);
+  }
+  unsetenv("MPPID_CUDA_CHUNK");
+  // The update draws the noise again here (the default keeps the controls at this size).
+  setenv("MPPID_CUDA_NOISE", "redraw", 1);
+  for (const char* warps : {"1", "2", "8"}) {
+    setenv("MPPID_CUDA_WARPS", warps, 1);
+    std::printf("[parity] chunked kernel, %s warps a block, noise drawn again for the update\n", warps);
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kTrajectory);
+  }
+  unsetenv("MPPID_CUDA_WARPS");
+  unsetenv("MPPID_CUDA_NOISE");
+}
+
+// Rollout counts that leave the last block of 32 partly empty, and many blocks to combine
+// (the chunked kernel forced: past 128 rollouts per multiprocessor the default is the lane
+// kernel).
+TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
+  SKIP_WITHOUT_CUDA();
+  setenv("MPPID_CUDA_KERNEL", "chunked", 1);
+  for (int k : {1, 33, 1000, 40000}) {
+    auto sc = gpu_test::make_scenario<QuadrotorForest>(k, 100);
+    sc.settings.seed = 7;
+    CpuBackend<QuadrotorForest> cpu(sc.settings);
+    auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings);
+    auto plan = gpu_test::initial_plan(sc.settings);
+    const Errors e = compare_one_update(sc, cpu, *gpu, 5, &plan);
+    std::printf("[parity] chunked K=%d: %d bit-identical, %d over tolerance, plan err %.3g\n", k, e.identical,
+                e.over_tolerance, e.plan);
+    EXPECT_LE(e.over_tolerance, kDivergentFraction * k + 1) << "K=" << k;
+    EXPECT_LE(e.plan, kPlanTolerance) << "K=" << k;
+  }
+  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // Several cycles through the optimizer (update, shift) on a fresh backend each run.

@@ -51,6 +51,9 @@ def main(argv=None) -> int:
                    help="ray: an existing cluster (auto, HOST:PORT, ray://HOST:PORT); default: start a local one")
     c.add_argument("--jobs", type=int, default=None,
                    help="flights at a time (default 2; ray on a cluster: its CPUs / --cpus-per-flight; real time: 1)")
+    c.add_argument("--realtime-jobs", type=int, default=1, metavar="N",
+                   help="with --realtime: N flights at once, each pinned (taskset) to its own 1/N of the CPUs "
+                        "(default 1: one at a time)")
     c.add_argument("--cpus-per-flight", type=float, default=1.0, help="ray: CPUs a flight task asks for")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
@@ -148,7 +151,8 @@ def main(argv=None) -> int:
         try:
             summary = run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
                                    realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
-                                   cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency)
+                                   cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
+                                   realtime_jobs=a.realtime_jobs)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130

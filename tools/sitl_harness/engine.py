@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import shutil
 import signal
 import subprocess
@@ -126,14 +127,21 @@ class Progress:
 class LocalEngine:
     name = "local"
 
-    def __init__(self, jobs: int = 2):
+    def __init__(self, jobs: int = 2, pin: bool = False):
         self.capacity = max(1, int(jobs))
         self.pool = ThreadPoolExecutor(max_workers=self.capacity)
         self.tasks: dict = {}  # future -> its task: {"cancel": bool, "proc": Popen | None}
         self.lock = threading.Lock()
+        # Pinned: each flight runs on its own share of the CPUs (taskset), so real-time
+        # flights side by side (on a many-core machine) do not take each other's cores.
+        self.pins: queue.Queue | None = None
+        if pin and self.capacity > 1:
+            self.pins = queue.Queue()
+            for cs in core_sets(self.capacity):
+                self.pins.put(cs)
 
     def describe(self) -> dict:
-        return {"engine": "local", "jobs": self.capacity}
+        return {"engine": "local", "jobs": self.capacity, "pinned": self.pins is not None}
 
     def _run(self, job: FlightJob, task: dict) -> dict:
         out = Path(job.out)
@@ -142,13 +150,22 @@ class LocalEngine:
             (out / stale).unlink(missing_ok=True)
         cmd = [sys.executable, "-m", "sitl_harness", "run", *job.run_args(), "--parent-pid", str(os.getpid())]
         env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
-        with self.lock:
-            if task["cancel"]:
-                return {"cancelled": True}
-            with open(out / "harness.stderr", "wb") as err:
-                task["proc"] = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True,
-                                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
-        rc = task["proc"].wait()
+        cores = self.pins.get() if self.pins is not None else None
+        try:
+            if cores is not None:
+                # The daemon's loop thread goes on the share's last core, its workers fill it.
+                cmd = (["taskset", "-c", ",".join(map(str, cores))] + cmd +
+                       ["--set", f"daemon.realtime.cpu={cores[-1]}", "--set", f"mppi.threads={len(cores)}"])
+            with self.lock:
+                if task["cancel"]:
+                    return {"cancelled": True}
+                with open(out / "harness.stderr", "wb") as err:
+                    task["proc"] = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True,
+                                                    stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
+            rc = task["proc"].wait()
+        finally:
+            if cores is not None:
+                self.pins.put(cores)
         if task["cancel"]:
             return {"cancelled": True}
         try:
@@ -297,11 +314,23 @@ class RayEngine:
             self.ray.shutdown()
 
 
-def make_engine(name: str, jobs: int | None = None, address: str | None = None, cpus_per_flight: float = 1.0):
+def core_sets(n: int, cpus=None) -> list[list[int]]:
+    """n disjoint, equal shares of the CPUs this process may use (the rest left over)."""
+    cpus = sorted(cpus if cpus is not None else os.sched_getaffinity(0))
+    per = len(cpus) // n
+    if per < 1:
+        raise ValueError(f"{n} pinned real-time flights need at least {n} CPUs; {len(cpus)} available")
+    return [cpus[i * per:(i + 1) * per] for i in range(n)]
+
+
+def make_engine(name: str, jobs: int | None = None, address: str | None = None, cpus_per_flight: float = 1.0,
+                pin: bool = False):
     if name == "local":
         if address:
             raise ValueError("--address is for --engine ray")
-        return LocalEngine(jobs or 2)
+        return LocalEngine(jobs or 2, pin=pin)
+    if pin:
+        raise ValueError("--realtime-jobs (pinned flights) is for --engine local")
     if name == "ray":
         return RayEngine(address=address, jobs=jobs, cpus_per_flight=cpus_per_flight)
     raise ValueError(f"unknown engine {name}")

@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# Fills .devdeps/ (git-ignored) with what the GPU machine lacks to build and fly the whole
+# stack offline: the run there is tools/gpu/run-all.sh, and tools/gpu/README.md says what to
+# carry. Runs on the project's Debian 12 machine (needs network: PyPI and Debian's archive).
+#
+#   tools/gpu/pack-deps.sh [--all] [--out DIR]
+#
+# Default: what the GPU machine's image (Ubuntu 24.04, checked on an H100 machine on
+# 2026-11-23) lacks:
+#   wheels/lcm-1.5.*-cp312-*.whl   the lcm wheel (liblcm, lcm-gen, lcm-logger, lcmConfig.cmake)
+#   usr/include/Random123/         librandom123-dev
+#   lib/libglib-2.0.so.0           libglib2.0-0 (liblcm and the lcm binaries need it)
+#   bin/busybox, bin/ip            busybox-static: `ip` brings up lo in the network
+#                                  namespaces of the daemon bench and the SITL flights
+# --all adds the C++ libraries that image already has, for an image without them:
+#   Eigen, yaml-cpp (+ its shared library), CLI11, spdlog + fmt, Google Benchmark, and
+#   the GoogleTest sources (built in the tree through -DMPPID_GTEST_SOURCE).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+OUT="$ROOT/.devdeps"
+ALL=0
+while (($#)); do
+  case "$1" in
+    --all) ALL=1 ;;
+    --out) OUT="$2"; shift ;;
+    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    *) echo "pack-deps.sh: unknown argument '$1'" >&2; exit 2 ;;
+  esac
+  shift
+done
+log() { printf '[pack-deps] %s\n' "$*"; }
+rm -rf "$OUT"
+mkdir -p "$OUT/wheels" "$OUT/lib" "$OUT/bin"
+TMP="$(mktemp -d)"
+trap 'rm -rf "$TMP"' EXIT
+
+# ---- the lcm wheel for the GPU machine's Python (3.12) -------------------------------
+PY="$ROOT/.venv/bin/python"
+[[ -x "$PY" ]] || PY="$(command -v python3)"
+"$PY" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+  --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
+  --platform manylinux2014_x86_64 -d "$OUT/wheels" 'lcm>=1.5,<1.6'
+log "wheel: $(cd "$OUT/wheels" && ls)"
+
+# ---- Debian 12 packages, unpacked -------------------------------------------------------
+debs=(librandom123-dev libglib2.0-0 busybox-static)
+if ((ALL)); then
+  debs+=(libeigen3-dev libyaml-cpp-dev libyaml-cpp0.7 libcli11-dev libspdlog-dev libspdlog1.10 libfmt-dev libfmt9
+         libbenchmark-dev libbenchmark1debian googletest)
+fi
+(cd "$TMP" && apt-get download "${debs[@]}" >/dev/null 2>&1) || {
+  echo "pack-deps.sh: apt-get download ${debs[*]} failed (run 'apt-get update' first?)" >&2; exit 1; }
+mkdir -p "$TMP/root"
+for f in "$TMP"/*.deb; do dpkg -x "$f" "$TMP/root"; done
+R="$TMP/root"
+mkdir -p "$OUT/usr/include"
+cp -a "$R/usr/include/Random123" "$OUT/usr/include/"
+cp -a "$R"/usr/lib/x86_64-linux-gnu/libglib-2.0.so.0* "$OUT/lib/"
+cp -a "$R/bin/busybox" "$OUT/bin/busybox"
+ln -sf busybox "$OUT/bin/ip"
+if ((ALL)); then
+  for d in eigen3 yaml-cpp CLI spdlog fmt benchmark; do cp -a "$R/usr/include/$d" "$OUT/usr/include/"; done
+  mkdir -p "$OUT/usr/lib/x86_64-linux-gnu" "$OUT/usr/share"
+  cp -a "$R"/usr/lib/x86_64-linux-gnu/{libyaml-cpp*,libspdlog*,libfmt*,libbenchmark*} "$OUT/usr/lib/x86_64-linux-gnu/"
+  cp -a "$R"/usr/lib/x86_64-linux-gnu/cmake "$OUT/usr/lib/x86_64-linux-gnu/"
+  cp -a "$R"/usr/share/eigen3 "$OUT/usr/share/"
+  [[ -d "$R/usr/share/cmake" ]] && cp -a "$R/usr/share/cmake" "$OUT/usr/share/"
+  cp -a "$R/usr/src/googletest" "$OUT/googletest"
+fi
+du -sh "$OUT" | sed 's/^/[pack-deps] size: /'
+log "done: $OUT (carry it as .devdeps; see tools/gpu/README.md)"
