@@ -309,6 +309,9 @@ class CudaBackend final : public RolloutBackend<T> {
     // 1 / sum (w / sum w)^2 = (sum w)^2 / sum w^2
     stats->ess = d.sum_w2 > 0.0f ? d.sum_w * d.sum_w / d.sum_w2 : 0.0f;
     stats->crashed = d.crashed;
+    stats->rollouts = k_;
+    stats->partial = false;
+    stats->updated = true;
     bool ok = ffinite(stats->ess);
     for (std::size_t n = 0; n < plan_floats_; ++n) ok = ok && ffinite(plan[n]);
     stats->finite = ok;

@@ -67,6 +67,8 @@ void visit_fields(typename ForestCost<Vehicle>::Params& p, V&& v) {
   v("w_separation", p.w_separation, 0.0f, 1e6f);
   v("separation_scale", p.separation_scale, 1e-3f, 1e3f);
   v("w_terminal", p.w_terminal, 0.0f, 1e6f);
+  v("obstacle_reach", p.obstacle_reach, 0.0f, 1e3f);
+  v("obstacle_cell", p.obstacle_cell, 0.05f, 1e3f);
 }
 template <class Vehicle, class V>
 void visit_fields(typename TrackingCost<Vehicle>::Params& p, V&& v) {
