@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -53,6 +54,19 @@ std::vector<int> parse_list(const std::string& text) {
   return out;
 }
 
+// The scenario's forest, widened (same 4 m spacing, same seed) until it holds `at_least`
+// cylinders: a scene with more obstacles than the controller is told about.
+void grow_forest(mppi::offline::Scenario* s, int at_least, int vehicles) {
+  if (s->forest.empty() || static_cast<int>(s->forest.size()) >= at_least) return;
+  std::vector<std::array<float, 2>> clear;
+  for (int j = 0; j < vehicles; ++j) {
+    clear.push_back({s->x0[0], s->inputs.goals[j][1]});
+    clear.push_back({s->inputs.goals[j][0], s->inputs.goals[j][1]});
+  }
+  for (float e = 4.0f; static_cast<int>(s->forest.size()) < at_least; e += 4.0f)
+    s->forest = mppi::offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, clear);
+}
+
 std::string escape(const std::string& s) {
   std::string o;
   for (char c : s) {
@@ -77,7 +91,9 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "CPU threads, or a comma list");
   app.add_option("--iterations", iterations, "timed iterations per configuration");
   app.add_option("--warmup", warmup, "untimed iterations first");
-  app.add_option("--obstacles", obstacles, "obstacles the controller is told about (forest tasks), or a comma list");
+  app.add_option("--obstacles", obstacles,
+                 "obstacles the controller is told about (forest tasks: the nearest of the scene), or a comma list; "
+                 "the scene is the 4 m forest (48 cylinders), widened when a count exceeds it");
   app.add_option("--simd", simd,
                  "CPU backend's SIMD target: auto | off (one sample at a time) | sse4 | avx2 | avx3 | neon, or a "
                  "comma list (targets this CPU lacks are skipped with a note)");
@@ -90,6 +106,7 @@ int main(int argc, char** argv) {
   const auto ks = parse_list(rollouts);
   const auto ns = backend == "cpu" ? parse_list(threads) : std::vector<int>{0};
   const auto obstacle_counts = parse_list(obstacles);
+  const int scene_obstacles = *std::max_element(obstacle_counts.begin(), obstacle_counts.end());
   const auto simds = backend == "cpu" ? split(simd) : std::vector<std::string>{"auto"};
   std::string gpu;
 #ifdef MPPID_HAVE_CUDA
@@ -113,6 +130,7 @@ int main(int argc, char** argv) {
           continue;
         }
         auto scenario = mppi::offline::default_scenario(*c, 4.0f, 1);
+        grow_forest(&scenario, scene_obstacles, c->vehicles());
         scenario.inputs.obstacles.count = std::min<int>({obstacle_count, static_cast<int>(scenario.forest.size()),
                                                          mppi::ObstacleSet::kCapacity});
         // The nearest ones first, as the daemon sends them.

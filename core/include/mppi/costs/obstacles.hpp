@@ -66,7 +66,7 @@ MPPI_HD void store_cell_indices(float fx, float fy, int nx, int* out) {
 // over [0, t_end].
 //
 // The search costs the length of the lists (a few cylinders in a forest) instead of the
-// whole set; a SIMD batch of samples searches the lists of its samples' distinct cells.
+// whole set; a SIMD batch of samples searches the union of its samples' lists.
 struct ObstacleGrid {
   static constexpr int kMaxCells = 1024;
   static constexpr int kMaxRefs = 8192;
@@ -92,14 +92,24 @@ struct ObstacleGrid {
         int cell[L];
         store_cell_indices(fx, fy, nx, cell);
         V best = ObstacleSet::kFar;
-        for (int l = 0; l < L; ++l) {
-          const int c = cell[l];
-          bool seen = false;
-          for (int m = 0; m < l; ++m) seen = seen || cell[m] == c;
-          if (seen) continue;
-          for (int r = first[c]; r < first[c + 1]; ++r) {
+        if constexpr (L == 1) {
+          for (int r = first[cell[0]]; r < first[cell[0] + 1]; ++r) {
             const V d = ObstacleSet::surface_distance(set.items[refs[r]], px, py, t);
             best = select(d < best, d, best);
+          }
+        } else {
+          // A batch of samples: the union of its samples' lists (neighbouring cells share
+          // most of theirs), each cylinder once, in index order.
+          constexpr int kWords = ObstacleSet::kCapacity / 64;
+          std::uint64_t bits[kWords] = {};
+          for (int l = 0; l < L; ++l)
+            for (int r = first[cell[l]]; r < first[cell[l] + 1]; ++r) bits[refs[r] >> 6] |= std::uint64_t{1} << (refs[r] & 63);
+          for (int w = 0; w < kWords; ++w) {
+            for (std::uint64_t b = bits[w]; b != 0; b &= b - 1) {
+              const int i = 64 * w + __builtin_ctzll(b);
+              const V d = ObstacleSet::surface_distance(set.items[i], px, py, t);
+              best = select(d < best, d, best);
+            }
           }
         }
         return best;
