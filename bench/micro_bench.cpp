@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -139,6 +140,35 @@ void BM_QuadrotorForestSampleStep(benchmark::State& st) {
   }
 }
 BENCHMARK(BM_QuadrotorForestSampleStep);
+
+// The per-cycle obstacle culling (ObstacleGrid::build): N cylinders of the 4 m forest,
+// widened as needed, the path of a plan flying 12 m along x, reach 8 m, 1 m cells.
+void BM_ObstacleGridBuild(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  std::vector<Cylinder> forest;
+  for (float e = 0.0f; static_cast<int>(forest.size()) < n; e += 4.0f)
+    forest = offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, {{0.0f, 0.0f}});
+  std::sort(forest.begin(), forest.end(), [](const Cylinder& a, const Cylinder& b) {
+    return std::hypot(a.x, a.y) - a.radius < std::hypot(b.x, b.y) - b.radius;
+  });
+  ObstacleSet set;
+  set.count = n;
+  for (int i = 0; i < n; ++i) set.items[i] = forest[static_cast<std::size_t>(i)];
+  std::vector<float> path;
+  for (int i = 0; i <= 100; ++i) {
+    path.push_back(0.12f * static_cast<float>(i));
+    path.push_back(0.0f);
+  }
+  auto grid = std::make_unique<ObstacleGrid>();
+  for (auto _ : st) {
+    grid->build(set, path.data(), 101, 2.0f, 8.0f, 1.0f);
+    benchmark::DoNotOptimize(grid->first);
+  }
+  st.counters["cells"] = grid->nx * grid->ny;
+  st.counters["listed"] = grid->listed;
+  st.counters["refs_per_cell"] = static_cast<double>(grid->first[grid->nx * grid->ny]) / (grid->nx * grid->ny);
+}
+BENCHMARK(BM_ObstacleGridBuild)->Arg(48)->Arg(64)->Arg(200)->Arg(256)->Unit(benchmark::kMicrosecond);
 
 // ---- The CPU backend's rollouts, per task and SIMD target ---------------------------------
 

@@ -330,17 +330,19 @@ TEST(ControlLoop, LockstepAnswersEveryTickWithOneCommand) {
   EXPECT_EQ(r.last().mode, Mode::kFailsafe);
 }
 
-TEST(ControlLoop, KeepsTheNearest64Obstacles) {
+TEST(ControlLoop, KeepsTheNearestObstaclesUpToCapacity) {
   Rig r;
   auto& o = r.inbox.obstacles_buffer();
-  o.count = 200;
-  for (int i = 0; i < 200; ++i) o.items[i] = Cylinder{static_cast<float>(200 - i), 0.0f, 0.5f, 0.0f, 0.0f};
+  constexpr int kCap = ObstacleSet::kCapacity;
+  const int n = kCap + 100;
+  o.count = n;
+  for (int i = 0; i < n; ++i) o.items[i] = Cylinder{static_cast<float>(n - i), 0.0f, 0.5f, 0.0f, 0.0f};
   r.inbox.offer_obstacles();
   r.state(1, 0.0f);  // vehicle at the origin
   r.cycle();
   const ObstacleSet& kept = r.ctl.inputs.obstacles;
-  ASSERT_EQ(kept.count, 64);
-  for (int i = 0; i < kept.count; ++i) EXPECT_LE(kept.items[i].x, 64.0f);
+  ASSERT_EQ(kept.count, kCap);
+  for (int i = 0; i < kept.count; ++i) EXPECT_LE(kept.items[i].x, static_cast<float>(kCap));
 }
 
 TEST(ControlLoop, ReferenceTimeIsStateTimeSinceReferenceEpoch) {
