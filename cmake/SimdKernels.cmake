@@ -3,7 +3,6 @@
 # start-up (mppi/simd.hpp). Highway's flags per target (hwy/ops/set_macros-inl.h).
 set(MPPID_SIMD_TASKS CartpoleSwingup RacecarEllipse QuadrotorForest QuadrotorTrack
     RateQuadrotorForest RateQuadrotorTrack Team3Forest Team9Forest)  # = kNamedTask (tasks.hpp)
-option(MPPID_SIMD "Build the SIMD kernels of the CPU backend" ON)
 
 set(MPPID_SIMD_TARGETS "")
 if(MPPID_SIMD AND CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")

@@ -1,6 +1,8 @@
 #include "mppi/simd.hpp"
 
+#ifdef MPPID_HAVE_HWY
 #include <hwy/targets.h>
+#endif
 
 #include <stdexcept>
 
@@ -9,6 +11,7 @@ namespace {
 
 constexpr Target kAll[kTargetCount] = {Target::kScalar, Target::kSse4, Target::kAvx2, Target::kAvx3, Target::kNeon};
 
+#ifdef MPPID_HAVE_HWY
 // Highway's bit of each target (0: none).
 std::int64_t hwy_bit(Target t) {
   switch (t) {
@@ -23,6 +26,7 @@ std::int64_t hwy_bit(Target t) {
     default: return 0;
   }
 }
+#endif
 
 }  // namespace
 
@@ -69,8 +73,12 @@ bool compiled(Target t) {
 bool supported(Target t) {
   if (t == Target::kScalar) return true;
   if (!compiled(t)) return false;
+#ifdef MPPID_HAVE_HWY
   const std::int64_t bit = hwy_bit(t);
   return bit != 0 && (hwy::SupportedTargets() & bit) != 0;
+#else
+  return false;
+#endif
 }
 
 Target best() {

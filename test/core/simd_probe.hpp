@@ -49,7 +49,7 @@ const cpu::KernelOps<T>* exact_kernel_ops();  // LibmMath
 
 // The probes of the targets this build compiles and this CPU runs; f(target, name).
 template <class F>
-void for_each_simd_target(F&& f) {
+void for_each_simd_target([[maybe_unused]] F&& f) {
 #ifdef MPPID_SIMD_SSE4
   if (simd::supported(simd::Target::kSse4)) f(std::integral_constant<simd::Target, simd::Target::kSse4>{});
 #endif
