@@ -30,6 +30,14 @@ std::string cpu_name() {
   return "unknown";
 }
 
+// The 1-minute load average (/proc/loadavg), to judge how quiet the machine was.
+double load_average() {
+  std::ifstream f("/proc/loadavg");
+  double load = -1.0;
+  f >> load;
+  return load;
+}
+
 std::string task_for(const std::string& model) {
   if (model == "quadrotor") return "quadrotor_forest";
   if (model == "quadrotor_rate") return "quadrotor_rate_forest";
@@ -163,7 +171,7 @@ int main(int argc, char** argv) {
                   << ",\"weighting\":\"" << mppi::to_string(cfg.mppi.weighting) << "\""
                   << ",\"simd\":\"" << target << "\",\"forest_size\":" << scenario.forest.size()
                   << ",\"machine\":{\"cpu\":\"" << escape(cpu_name()) << "\",\"cores\":" << std::thread::hardware_concurrency()
-                  << ",\"gpu\":\"" << escape(gpu) << "\"}}" << std::endl;
+                  << ",\"gpu\":\"" << escape(gpu) << "\",\"load_average\":" << load_average() << "}}" << std::endl;
         }
        }
       }

@@ -91,7 +91,7 @@ class CudaBackend final : public RolloutBackend<T> {
       warps_per_block_ = (static_cast<long long>(k_) + per_warp - 1) / per_warp <= 2LL * sms ? 1 : 2;
       rollout_block_ = 32 * warps_per_block_;
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
-      rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
+      rollout_smem_ = align16(staged_param_bytes<T>()) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
       // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
       // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
@@ -111,7 +111,7 @@ class CudaBackend final : public RolloutBackend<T> {
       rollout_block_ = 128;
       while (rollout_block_ > 32 && (threads + rollout_block_ - 1) / rollout_block_ < 4LL * sms) rollout_block_ /= 2;
       rollout_grid_ = (threads + rollout_block_ - 1) / rollout_block_;
-      rollout_smem_ = align16(sizeof(Params));
+      rollout_smem_ = align16(staged_param_bytes<T>());
     }
     // Chunks of rollouts per block of the weighting kernels: enough blocks to fill the
     // device, at most 65535 chunks (grid.y).
