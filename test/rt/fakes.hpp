@@ -116,6 +116,7 @@ class FakeController final : public Controller {
     std::copy_n(plan_.data(), 4, u_out);
     shift();
   }
+  void set_stop_flag(const std::atomic<bool>* stop) override { stop_flag = stop; }
   void reset() override {
     ++resets;
     std::fill(plan_.begin(), plan_.end(), 3000.0f);
@@ -137,6 +138,7 @@ class FakeController final : public Controller {
   std::function<bool(int, std::vector<float>*, UpdateStats*)> fault;
   int iterations = 0, resets = 0, inputs_set = 0, mid_cycle_changes = 0;
   int restores = 0;  // set_plan calls (the loop restoring its last good plan)
+  const std::atomic<bool>* stop_flag = nullptr;  // the anytime stop flag last given
   std::vector<float> last_x0;
   std::vector<std::pair<std::string, double>> params_set;
   TaskInputs inputs;
