@@ -57,7 +57,8 @@ class Mppi {
   // The anytime cycle (RolloutBackend::set_stop_flag).
   void set_stop_flag(const std::atomic<bool>* stop) { backend_->set_stop_flag(stop); }
 
-  // The parameters the last update ran with (after Task::prepare).
+  // The parameters the last update ran with, after Task::prepare (tasks whose cost uses the
+  // plan's path, e.g. the forest's obstacle grid; for the others, unused defaults).
   const Params& prepared_params() const { return *work_; }
 
   // The fallback after a missed deadline or a bad update: the previous plan, shifted.
