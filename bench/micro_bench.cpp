@@ -1,9 +1,21 @@
 // Google Benchmark per model, per cost and for the noise: the pieces one rollout step is
-// made of, on the host. `build/bin/mppid-microbench --benchmark_format=json` for JSON.
+// made of, on the host; and BM_Rollouts/<task>/<target>: the CPU backend's rollouts of
+// every task on one thread for each SIMD target this CPU runs and the scalar code,
+// reported per sample-step (the counter per_sample_step, in seconds of CPU time; a team's
+// sample-step steps every vehicle).
+// `build/bin/mppid-microbench --benchmark_format=json` for JSON.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <string>
 #include <vector>
 
+#include "mppi/app/config.hpp"
+#include "mppi/cpu_backend.hpp"
+#include "mppi/offline/offline.hpp"
+#include "mppi/params.hpp"
 #include "mppi/rng.hpp"
 #include "mppi/sampling.hpp"
 #include "mppi/tasks.hpp"
@@ -130,6 +142,137 @@ void BM_QuadrotorForestSampleStep(benchmark::State& st) {
 }
 BENCHMARK(BM_QuadrotorForestSampleStep);
 
+// The per-cycle obstacle culling (ObstacleGrid::build): N cylinders of the 4 m forest,
+// widened as needed, the path of a plan flying 12 m along x, reach 8 m, 1 m cells.
+void BM_ObstacleGridBuild(benchmark::State& st) {
+  const int n = static_cast<int>(st.range(0));
+  std::vector<Cylinder> forest;
+  for (float e = 0.0f; static_cast<int>(forest.size()) < n; e += 4.0f)
+    forest = offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, {{0.0f, 0.0f}});
+  std::sort(forest.begin(), forest.end(), [](const Cylinder& a, const Cylinder& b) {
+    return std::hypot(a.x, a.y) - a.radius < std::hypot(b.x, b.y) - b.radius;
+  });
+  ObstacleSet set;
+  set.count = n;
+  for (int i = 0; i < n; ++i) set.items[i] = forest[static_cast<std::size_t>(i)];
+  std::vector<float> path;
+  for (int i = 0; i <= 100; ++i) {
+    path.push_back(0.12f * static_cast<float>(i));
+    path.push_back(0.0f);
+  }
+  auto grid = std::make_unique<ObstacleGrid>();
+  for (auto _ : st) {
+    grid->build(set, path.data(), 101, 2.0f, 8.0f, 1.0f);
+    benchmark::DoNotOptimize(grid->first);
+  }
+  st.counters["cells"] = grid->nx * grid->ny;
+  st.counters["listed"] = grid->listed;
+  st.counters["refs_per_cell"] = static_cast<double>(grid->first[grid->nx * grid->ny]) / (grid->nx * grid->ny);
+}
+BENCHMARK(BM_ObstacleGridBuild)->Arg(48)->Arg(64)->Arg(200)->Arg(256)->Unit(benchmark::kMicrosecond);
+
+// ---- The CPU backend's rollouts, per task and SIMD target ---------------------------------
+
+// K rollouts of T steps of a task from its settings file and offline scenario (forest tasks:
+// the 48 obstacles nearest the start, culled from the plan's path as the optimizer does).
+template <class T>
+struct RolloutBench {
+  static constexpr int K = 256, kHorizon = 100;
+  typename T::Params params{};
+  MppiSettings settings;
+  SamplerConstants<T::kNu> sampler{};
+  std::vector<float> x0, plan, cost, du, weights, path;
+  std::vector<unsigned char> crashed;
+  cpu::Batch<T> batch;
+
+  explicit RolloutBench(const std::string& task) {
+    auto cfg = app::load_config(app::default_config_path(task),
+                                {"mppi.rollouts=" + std::to_string(K), "mppi.horizon=" + std::to_string(kHorizon),
+                                 "mppi.simd=off", "backend=cpu"});
+    settings = cfg.mppi;
+    for (const auto& [key, value] : cfg.params) set_task_param<T>(params, key, value);
+    auto c = app::make_controller(cfg);
+    auto sc = offline::default_scenario(*c, 4.0f, 1);
+    auto forest = sc.forest;
+    std::sort(forest.begin(), forest.end(), [&](const Cylinder& a, const Cylinder& b) {
+      return std::hypot(a.x - sc.x0[0], a.y - sc.x0[1]) - a.radius < std::hypot(b.x - sc.x0[0], b.y - sc.x0[1]) - b.radius;
+    });
+    sc.inputs.obstacles.count = std::min<int>(48, static_cast<int>(forest.size()));
+    for (int i = 0; i < sc.inputs.obstacles.count; ++i) sc.inputs.obstacles.items[i] = forest[static_cast<std::size_t>(i)];
+    if constexpr (std::is_same_v<typename T::Cost, ForestCost<typename T::Vehicle>>) {
+      for (int j = 0; j < T::kVehicles; ++j)
+        for (int d = 0; d < 3; ++d) params.cost.goal[j][d] = sc.inputs.goals[j][d];
+      params.cost.obstacles = sc.inputs.obstacles;
+    } else if constexpr (std::is_same_v<typename T::Cost, TrackingCost<typename T::Vehicle>>) {
+      params.cost.reference = sc.inputs.reference;
+    }
+    x0 = sc.x0;
+    plan.resize(static_cast<std::size_t>(kHorizon) * T::kNu);
+    for (int i = 0; i < kHorizon; ++i)
+      std::copy(settings.u_init.begin(), settings.u_init.end(), plan.begin() + i * T::kNu);
+    path.resize(static_cast<std::size_t>(kHorizon + 1) * T::kVehicles * 2);
+    T::prepare(params, x0.data(), plan.data(), kHorizon, settings.dt, settings.substeps, path.data());
+    sampler = make_sampler_constants<T::kNu>(settings);
+    cost.resize(static_cast<std::size_t>(kHorizon) * K);
+    du.resize(static_cast<std::size_t>(kHorizon) * T::kNu * K);
+    weights.resize(K);
+    crashed.resize(K);
+    batch.params = &params;
+    batch.x0 = x0.data();
+    batch.plan = plan.data();
+    batch.sampler = &sampler;
+    batch.key = NoiseKey{1, 0};
+    batch.horizon = kHorizon;
+    batch.stride = K;
+    batch.dt = settings.dt;
+    batch.substeps = settings.substeps;
+    batch.inv_lambda = 1.0f / settings.lambda;
+    batch.cost = cost.data();
+    batch.du = du.data();
+    batch.crashed = crashed.data();
+    batch.weights = weights.data();
+  }
+};
+
+template <class T>
+void BM_Rollouts(benchmark::State& st, const std::string& task, simd::Target target) {
+  RolloutBench<T> b(task);
+  const cpu::KernelOps<T> ops =
+      target == simd::Target::kScalar ? cpu::kernel_ops<T, cpu::ScalarLanes>() : *cpu::kernels_for<T>(target);
+  std::uint32_t cycle = 0;
+  for (auto _ : st) {
+    b.batch.key.cycle = cycle++;
+    ops.rollouts(b.batch, 0, RolloutBench<T>::K);
+    benchmark::DoNotOptimize(b.cost.data());
+  }
+  // Seconds per sample-step (the console prints e.g. "10.3n", ns).
+  st.counters["per_sample_step"] =
+      benchmark::Counter(static_cast<double>(RolloutBench<T>::K) * RolloutBench<T>::kHorizon,
+                         benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  st.SetLabel(std::string(simd::name(target)) + ", " + std::to_string(ops.lanes) + " lanes");
+}
+
+void register_rollouts() {
+  std::vector<simd::Target> targets = {simd::Target::kScalar};
+  for (simd::Target t : {simd::Target::kSse4, simd::Target::kAvx2, simd::Target::kAvx3, simd::Target::kNeon})
+    if (simd::supported(t)) targets.push_back(t);
+  for (const auto& name : task_names()) {
+    visit_task(name, [&](auto tag) {
+      using T = typename decltype(tag)::type;
+      for (simd::Target t : targets)
+        benchmark::RegisterBenchmark(("BM_Rollouts/" + name + "/" + simd::name(t)).c_str(), BM_Rollouts<T>, name, t)
+            ->Unit(benchmark::kMillisecond);
+    });
+  }
+}
+
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  register_rollouts();
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -29,6 +30,14 @@ std::string cpu_name() {
   return "unknown";
 }
 
+// The 1-minute load average (/proc/loadavg), to judge how quiet the machine was.
+double load_average() {
+  std::ifstream f("/proc/loadavg");
+  double load = -1.0;
+  f >> load;
+  return load;
+}
+
 std::string task_for(const std::string& model) {
   if (model == "quadrotor") return "quadrotor_forest";
   if (model == "quadrotor_rate") return "quadrotor_rate_forest";
@@ -39,12 +48,31 @@ std::string task_for(const std::string& model) {
   return model;  // a task name
 }
 
-std::vector<int> parse_list(const std::string& text) {
-  std::vector<int> out;
+std::vector<std::string> split(const std::string& text) {
+  std::vector<std::string> out;
   std::stringstream ss(text);
   std::string item;
-  while (std::getline(ss, item, ',')) out.push_back(std::stoi(item));
+  while (std::getline(ss, item, ',')) out.push_back(item);
   return out;
+}
+
+std::vector<int> parse_list(const std::string& text) {
+  std::vector<int> out;
+  for (const auto& item : split(text)) out.push_back(std::stoi(item));
+  return out;
+}
+
+// The scenario's forest, widened (same 4 m spacing, same seed) until it holds `at_least`
+// cylinders: a scene with more obstacles than the controller is told about.
+void grow_forest(mppi::offline::Scenario* s, int at_least, int vehicles) {
+  if (s->forest.empty() || static_cast<int>(s->forest.size()) >= at_least) return;
+  std::vector<std::array<float, 2>> clear;
+  for (int j = 0; j < vehicles; ++j) {
+    clear.push_back({s->x0[0], s->inputs.goals[j][1]});
+    clear.push_back({s->inputs.goals[j][0], s->inputs.goals[j][1]});
+  }
+  for (float e = 4.0f; static_cast<int>(s->forest.size()) < at_least; e += 4.0f)
+    s->forest = mppi::offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, clear);
 }
 
 std::string escape(const std::string& s) {
@@ -60,8 +88,9 @@ std::string escape(const std::string& s) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Time one full MPPI iteration (median, p99) for each configuration; prints JSON"};
-  std::string model = "quadrotor", backend = "cpu", rollouts = "1024", threads = "2", config;
-  int horizon = 100, iterations = 1000, warmup = 20, obstacles = 32;
+  std::string model = "quadrotor", backend = "cpu", rollouts = "1024", threads = "2", config, simd = "auto",
+              obstacles = "32";
+  int horizon = 100, iterations = 1000, warmup = 20;
   bool json = false;
   app.add_option("--model", model, "quadrotor | quadrotor_rate | cartpole | racecar | team3 | team9 | a task name");
   app.add_option("--backend", backend, "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}));
@@ -70,7 +99,12 @@ int main(int argc, char** argv) {
   app.add_option("--threads", threads, "CPU threads, or a comma list");
   app.add_option("--iterations", iterations, "timed iterations per configuration");
   app.add_option("--warmup", warmup, "untimed iterations first");
-  app.add_option("--obstacles", obstacles, "obstacles the controller is told about (forest tasks)");
+  app.add_option("--obstacles", obstacles,
+                 "obstacles the controller is told about (forest tasks: the nearest of the scene), or a comma list; "
+                 "the scene is the 4 m forest (48 cylinders), widened when a count exceeds it");
+  app.add_option("--simd", simd,
+                 "CPU backend's SIMD target: auto | off (one sample at a time) | sse4 | avx2 | avx3 | neon, or a "
+                 "comma list (targets this CPU lacks are skipped with a note)");
   app.add_option("--config", config, "settings file (default: the task's)");
   app.add_flag("--json", json, "one JSON object per line (the default output; kept for scripts)");
   CLI11_PARSE(app, argc, argv);
@@ -79,6 +113,9 @@ int main(int argc, char** argv) {
   if (config.empty()) config = mppi::app::default_config_path(task);
   const auto ks = parse_list(rollouts);
   const auto ns = backend == "cpu" ? parse_list(threads) : std::vector<int>{0};
+  const auto obstacle_counts = parse_list(obstacles);
+  const int scene_obstacles = *std::max_element(obstacle_counts.begin(), obstacle_counts.end());
+  const auto simds = backend == "cpu" ? split(simd) : std::vector<std::string>{"auto"};
   std::string gpu;
 #ifdef MPPID_HAVE_CUDA
   if (backend == "cuda") gpu = mppi::cuda_device_name();
@@ -86,14 +123,23 @@ int main(int argc, char** argv) {
   try {
     for (int k : ks) {
       for (int n : ns) {
+       for (int obstacle_count : obstacle_counts) {
+        for (const auto& target : simds) {
         std::vector<std::string> sets = {"backend=" + backend, "mppi.rollouts=" + std::to_string(k),
                                          "mppi.horizon=" + std::to_string(horizon),
-                                         "mppi.threads=" + std::to_string(n)};
+                                         "mppi.threads=" + std::to_string(n), "mppi.simd=" + target};
         const auto cfg = mppi::app::load_config(config, sets);
         const std::size_t bytes0 = mppi::testing::allocated_bytes();
-        auto c = mppi::app::make_controller(cfg);
+        std::unique_ptr<mppi::Controller> c;
+        try {
+          c = mppi::app::make_controller(cfg);
+        } catch (const mppi::app::ConfigError& e) {
+          std::cerr << "mppid-bench: skipping simd=" << target << ": " << e.what() << std::endl;
+          continue;
+        }
         auto scenario = mppi::offline::default_scenario(*c, 4.0f, 1);
-        scenario.inputs.obstacles.count = std::min<int>({obstacles, static_cast<int>(scenario.forest.size()),
+        grow_forest(&scenario, scene_obstacles, c->vehicles());
+        scenario.inputs.obstacles.count = std::min<int>({obstacle_count, static_cast<int>(scenario.forest.size()),
                                                          mppi::ObstacleSet::kCapacity});
         // The nearest ones first, as the daemon sends them.
         auto forest = scenario.forest;
@@ -123,8 +169,11 @@ int main(int argc, char** argv) {
                   << ",\"startup_host_bytes\":" << startup_bytes << ",\"device_bytes\":" << c->device_bytes()
                   << ",\"allocations_per_iteration\":" << allocs << ",\"obstacles\":" << scenario.inputs.obstacles.count
                   << ",\"weighting\":\"" << mppi::to_string(cfg.mppi.weighting) << "\""
+                  << ",\"simd\":\"" << target << "\",\"forest_size\":" << scenario.forest.size()
                   << ",\"machine\":{\"cpu\":\"" << escape(cpu_name()) << "\",\"cores\":" << std::thread::hardware_concurrency()
-                  << ",\"gpu\":\"" << escape(gpu) << "\"}}" << std::endl;
+                  << ",\"gpu\":\"" << escape(gpu) << "\",\"load_average\":" << load_average() << "}}" << std::endl;
+        }
+       }
       }
     }
   } catch (const std::exception& e) {

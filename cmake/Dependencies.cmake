@@ -1,6 +1,10 @@
 # Every dependency comes from Debian or PyPI (installed by tools/setup.sh); nothing is vendored.
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(OpenMP REQUIRED COMPONENTS CXX)
+option(MPPID_SIMD "Build the SIMD kernels of the CPU backend (needs Google Highway)" ON)
+if(MPPID_SIMD)
+  find_package(hwy REQUIRED)  # Google Highway (Debian libhwy-dev): SIMD targets and vector math
+endif()
 find_path(RANDOM123_INCLUDE_DIR Random123/philox.h REQUIRED)
 add_library(random123 INTERFACE)
 target_include_directories(random123 SYSTEM INTERFACE ${RANDOM123_INCLUDE_DIR})

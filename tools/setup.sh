@@ -41,6 +41,7 @@ APT_PACKAGES=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   # C++ libraries (OpenMP comes with gcc as libgomp)
   libeigen3-dev librandom123-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
+  libhwy-dev  # Google Highway: the CPU backend's SIMD targets and vector math
   libsystemd-dev libglib2.0-dev
   # tests and benchmarks
   googletest libgtest-dev libgmock-dev libbenchmark-dev

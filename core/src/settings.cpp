@@ -1,5 +1,7 @@
 #include "mppi/settings.hpp"
 
+#include "mppi/simd.hpp"
+
 #include <cmath>
 #include <string>
 #include <tuple>
@@ -29,6 +31,10 @@ std::string validate(const MppiSettings& s, int nu) {
     return "control_cost_scale: must be >= 0";
   if (s.smoothing_window < 1 || s.smoothing_window % 2 == 0) return "smoothing_window: must be odd and >= 1";
   if (s.threads < 0) return "threads: must be >= 0";
+  if (!simd::parse_setting(s.simd, nullptr))
+    return "simd: must be auto, off or a target (" + simd::target_names() + ")";
+  if (s.chunk_rollouts < 0 || s.chunk_rollouts > s.rollouts) return "chunk_rollouts: must lie in [0, rollouts]";
+  if (s.min_rollouts < 0 || s.min_rollouts > s.rollouts) return "min_rollouts: must lie in [0, rollouts]";
   for (auto [name, vec, empty_ok] : {std::tuple<const char*, const std::vector<float>*, bool>{"sigma", &s.sigma, false},
                                      {"u_min", &s.u_min, false},
                                      {"u_max", &s.u_max, false},
@@ -43,6 +49,17 @@ std::string validate(const MppiSettings& s, int nu) {
     if (s.u_init[j] < s.u_min[j] || s.u_init[j] > s.u_max[j]) return "u_init: must lie inside [u_min, u_max]";
   }
   return {};
+}
+
+int resolved_chunk_rollouts(const MppiSettings& s) {
+  if (s.chunk_rollouts > 0) return s.chunk_rollouts;
+  const int eighth = (s.rollouts + 7) / 8;
+  return (eighth + 15) / 16 * 16;
+}
+
+int resolved_min_rollouts(const MppiSettings& s) {
+  if (s.min_rollouts > 0) return s.min_rollouts;
+  return (s.rollouts + 3) / 4;
 }
 
 const char* to_string(Weighting w) { return w == Weighting::kTrajectory ? "trajectory" : "cost_to_go"; }

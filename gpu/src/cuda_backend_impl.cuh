@@ -105,7 +105,7 @@ class CudaBackend final : public RolloutBackend<T> {
       warps_per_block_ = (static_cast<long long>(k_) + per_warp - 1) / per_warp <= 2LL * sms ? 1 : 2;
       rollout_block_ = 32 * warps_per_block_;
       rollout_grid_ = (static_cast<long long>(k_) + per_warp * warps_per_block_ - 1) / (per_warp * warps_per_block_);
-      rollout_smem_ = align16(sizeof(Params)) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
+      rollout_smem_ = align16(staged_param_bytes<T>()) + sizeof(TeamRollout<T>) * per_warp * warps_per_block_;
     } else {
       // The chunked kernel while the lane kernel's one thread per rollout leaves the GPU short
       // of warps (up to four blocks of 32 rollouts per multiprocessor); past that the lane
@@ -139,7 +139,7 @@ class CudaBackend final : public RolloutBackend<T> {
       rollout_block_ = 128;
       while (rollout_block_ > 32 && (threads + rollout_block_ - 1) / rollout_block_ < 4LL * sms) rollout_block_ /= 2;
       rollout_grid_ = (threads + rollout_block_ - 1) / rollout_block_;
-      rollout_smem_ = align16(sizeof(Params));
+      rollout_smem_ = align16(staged_param_bytes<T>());
     }
     // Chunks of rollouts per block of the weighting kernels: enough blocks to fill the
     // device, at most 65535 chunks (grid.y).
@@ -368,6 +368,9 @@ class CudaBackend final : public RolloutBackend<T> {
     // 1 / sum (w / sum w)^2 = (sum w)^2 / sum w^2
     stats->ess = d.sum_w2 > 0.0f ? d.sum_w * d.sum_w / d.sum_w2 : 0.0f;
     stats->crashed = d.crashed;
+    stats->rollouts = k_;
+    stats->partial = false;
+    stats->updated = true;
     bool ok = ffinite(stats->ess);
     for (std::size_t n = 0; n < plan_floats_; ++n) ok = ok && ffinite(plan[n]);
     stats->finite = ok;

@@ -13,6 +13,7 @@
 
 #include <cuda_runtime.h>
 
+#include <cstddef>
 #include <cstdint>
 #include <type_traits>
 
@@ -28,6 +29,23 @@ struct IsForestCost<ForestCost<V>> : std::true_type {};
 
 template <class T>
 constexpr bool kForestTask = IsForestCost<typename T::Cost>::value;
+
+// The bytes of T::Params the kernels stage into shared memory and read: for the forest
+// tasks, everything before the obstacle grid. ObstacleGrid (costs/obstacles.hpp, the CPU
+// backend's culling index, ~10 KB) is the parameters' last member and no kernel reads it:
+// the cylinders are searched here (nearest_surface below), so it stays out of shared memory.
+template <class T>
+__host__ __device__ constexpr std::size_t staged_param_bytes() {
+  using P = typename T::Params;
+  if constexpr (kForestTask<T>) {
+    using C = typename T::Cost::Params;
+    static_assert(offsetof(P, cost) + sizeof(C) == sizeof(P), "the cost parameters come last");
+    static_assert(offsetof(C, obstacle_grid) + sizeof(ObstacleGrid) == sizeof(C), "the obstacle grid comes last");
+    return offsetof(P, cost) + offsetof(C, obstacle_grid);
+  } else {
+    return sizeof(P);
+  }
+}
 
 constexpr unsigned kAllLanes = 0xffffffffu;
 

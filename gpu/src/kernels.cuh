@@ -93,15 +93,17 @@ __device__ __forceinline__ void store_floats(float* dst, const float* src) {
   }
 }
 
-// Copies the task parameters into shared memory (read by every thread at every step).
-template <class Params>
-__device__ const Params* stage_params(const Params& src, unsigned char* smem) {
-  static_assert(sizeof(Params) % 4 == 0, "parameters are copied as 32-bit words");
+// Copies the task parameters the kernels read (staged_param_bytes) into shared memory (read
+// by every thread at every step).
+template <class T>
+__device__ const typename T::Params* stage_params(const typename T::Params& src, unsigned char* smem) {
+  constexpr std::size_t kBytes = staged_param_bytes<T>();
+  static_assert(kBytes % 4 == 0, "parameters are copied as 32-bit words");
   const auto* from = reinterpret_cast<const std::uint32_t*>(&src);
   auto* to = reinterpret_cast<std::uint32_t*>(smem);
-  for (unsigned w = threadIdx.x; w < sizeof(Params) / 4; w += blockDim.x) to[w] = from[w];
+  for (unsigned w = threadIdx.x; w < kBytes / 4; w += blockDim.x) to[w] = from[w];
   __syncthreads();
-  return reinterpret_cast<const Params*>(smem);
+  return reinterpret_cast<const typename T::Params*>(smem);
 }
 
 // Sum of N values over the block (blockDim.x a multiple of 32); the result is in thread 0.
@@ -198,7 +200,7 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<
   static_assert(G == 1 || G == 2 || G == 4 || G == 8, "lanes per rollout: 1, 2, 4 or 8");
   (void)io;
   extern __shared__ __align__(16) unsigned char smem[];
-  const typename T::Params& p = *stage_params(in->params, smem);
+  const typename T::Params& p = *stage_params<T>(in->params, smem);
   const int thread = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
   const int lane = thread % G;
   int k = thread / G;
@@ -256,8 +258,8 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T:
   using Vehicle = typename T::Vehicle;
   using Cost = typename T::Cost;
   extern __shared__ __align__(16) unsigned char smem[];
-  const typename T::Params& p = *stage_params(in->params, smem);
-  auto* teams = reinterpret_cast<TeamRollout<T>*>(smem + align16(sizeof(typename T::Params)));
+  const typename T::Params& p = *stage_params<T>(in->params, smem);
+  auto* teams = reinterpret_cast<TeamRollout<T>*>(smem + align16(staged_param_bytes<T>()));
 
   const int lane = static_cast<int>(threadIdx.x & 31), warp = static_cast<int>(threadIdx.x >> 5);
   const int warps = static_cast<int>(blockDim.x >> 5);

@@ -6,6 +6,7 @@
 
 #include "fixtures.hpp"
 
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <string>
@@ -87,16 +88,24 @@ TEST(NoAlloc, TaskControllerCyclesAllocateNothing) {
 }
 
 TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
-  const auto config = app::load_config(app::default_config_path("quadrotor_forest"),
-                                       {"mppi.rollouts=256", "mppi.horizon=50", "mppi.threads=2", "backend=cpu"});
-  ASSERT_EQ(config.mppi.rollouts, 256);
-  ASSERT_EQ(config.mppi.horizon, 50);
-  ASSERT_EQ(config.mppi.threads, 2);
-  auto c = app::make_controller(config);
-  ASSERT_NE(c, nullptr);
-  EXPECT_STREQ(c->backend(), "cpu");
-  EXPECT_EQ(c->task(), "quadrotor_forest");
-  EXPECT_EQ(allocations_over_cycles(*c), 0u);
+  for (const std::string simd : {"off", "auto"}) {
+    const auto config = app::load_config(app::default_config_path("quadrotor_forest"),
+                                         {"mppi.rollouts=256", "mppi.horizon=50", "mppi.threads=2", "backend=cpu",
+                                          "mppi.simd=" + simd});
+    ASSERT_EQ(config.mppi.rollouts, 256);
+    ASSERT_EQ(config.mppi.horizon, 50);
+    ASSERT_EQ(config.mppi.threads, 2);
+    auto c = app::make_controller(config);
+    ASSERT_NE(c, nullptr);
+    const simd::Target t = simd == "off" ? simd::Target::kScalar : simd::best();
+    EXPECT_EQ(std::string(c->backend()), t == simd::Target::kScalar ? std::string("cpu") : std::string("cpu-") + simd::name(t));
+    EXPECT_EQ(c->task(), "quadrotor_forest");
+    EXPECT_EQ(allocations_over_cycles(*c), 0u) << simd;
+    // The anytime cycle's chunked rollouts, with a stop flag that stays clear.
+    std::atomic<bool> stop{false};
+    c->set_stop_flag(&stop);
+    EXPECT_EQ(allocations_over_cycles(*c), 0u) << simd << " with a stop flag";
+  }
 }
 
 }  // namespace

@@ -99,7 +99,9 @@ void check_parity(const char* name, Weighting weighting) {
   auto sc = gpu_test::make_scenario<T>(parity_rollouts<T>(), 100);
   sc.settings.weighting = weighting;
   sc.settings.seed = 42;
-  CpuBackend<T> cpu(sc.settings);
+  MppiSettings scalar = sc.settings;
+  scalar.simd = "off";  // the reference: one sample at a time, the C library's math
+  CpuBackend<T> cpu(scalar);
   auto gpu = make_cuda_backend<T>(sc.settings);
   auto plan = gpu_test::initial_plan(sc.settings);
   Errors worst;

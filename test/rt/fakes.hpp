@@ -116,6 +116,7 @@ class FakeController final : public Controller {
     std::copy_n(plan_.data(), 4, u_out);
     shift();
   }
+  void set_stop_flag(const std::atomic<bool>* stop) override { stop_flag = stop; }
   void reset() override {
     ++resets;
     std::fill(plan_.begin(), plan_.end(), 3000.0f);
@@ -148,6 +149,7 @@ class FakeController final : public Controller {
   int restores = 0;  // set_plan calls (the loop restoring its last good plan)
   int shifts = 0;    // extra steps the loop shifted the plan by (time moved on)
   mutable int propagations = 0;
+  const std::atomic<bool>* stop_flag = nullptr;  // the anytime stop flag last given
   std::vector<float> last_x0;
   std::vector<std::pair<std::string, double>> params_set;
   TaskInputs inputs;

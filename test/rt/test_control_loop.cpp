@@ -330,17 +330,19 @@ TEST(ControlLoop, LockstepAnswersEveryTickWithOneCommand) {
   EXPECT_EQ(r.last().mode, Mode::kFailsafe);
 }
 
-TEST(ControlLoop, KeepsTheNearest64Obstacles) {
+TEST(ControlLoop, KeepsTheNearestObstaclesUpToCapacity) {
   Rig r;
   auto& o = r.inbox.obstacles_buffer();
-  o.count = 200;
-  for (int i = 0; i < 200; ++i) o.items[i] = Cylinder{static_cast<float>(200 - i), 0.0f, 0.5f, 0.0f, 0.0f};
+  constexpr int kCap = ObstacleSet::kCapacity;
+  const int n = kCap + 100;
+  o.count = n;
+  for (int i = 0; i < n; ++i) o.items[i] = Cylinder{static_cast<float>(n - i), 0.0f, 0.5f, 0.0f, 0.0f};
   r.inbox.offer_obstacles();
   r.state(1, 0.0f);  // vehicle at the origin
   r.cycle();
   const ObstacleSet& kept = r.ctl.inputs.obstacles;
-  ASSERT_EQ(kept.count, 64);
-  for (int i = 0; i < kept.count; ++i) EXPECT_LE(kept.items[i].x, 64.0f);
+  ASSERT_EQ(kept.count, kCap);
+  for (int i = 0; i < kept.count; ++i) EXPECT_LE(kept.items[i].x, static_cast<float>(kCap));
 }
 
 TEST(ControlLoop, ReferenceTimeIsStateTimeSinceReferenceEpoch) {
@@ -420,6 +422,64 @@ TEST(ControlLoop, DeadlineGuardKeepsCommandsFlowingThroughAStall) {
   EXPECT_EQ(tx.commands.back().mode, Mode::kNormal);
   for (std::size_t i = 1; i < tx.commands.size(); ++i) EXPECT_EQ(tx.commands[i].seq, tx.commands[i - 1].seq + 1);
   EXPECT_GE(loop.timing_total().misses, 1);
+  EXPECT_FALSE(tx.any_nonfinite());
+}
+
+TEST(ControlLoop, AnytimeStopsTheOptimizerBeforeTheDeadline) {
+  // Real clock, as the guard's. Iterations 3 and 5 work until the guard sets their stop flag
+  // (5 ms before the deadline), then report a partial update: 3 from enough rollouts (its
+  // command goes out), 5 from too few (no update: the held plan goes out). The others are
+  // never stopped.
+  rt::MonotonicClock clock;
+  FakeClock unused;
+  FakeController ctl(&unused);
+  RecordingTransport tx;
+  transport::Inbox inbox(expect16());
+  daemon::LoopSettings s;
+  s.deadline_guard = true;
+  s.anytime_margin_ns = 5 * kMs;
+  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
+  bool stopped[8] = {};
+  ctl.fault = [&](int n, std::vector<float>*, UpdateStats* st) {
+    if (n == 3 || n == 5) {
+      // Work until told to stop; give up after 200 ms (the test then fails below).
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
+      while (!(ctl.stop_flag != nullptr && ctl.stop_flag->load()) && std::chrono::steady_clock::now() < give_up)
+        std::this_thread::sleep_for(std::chrono::microseconds(100));
+      st->partial = true;
+      st->rollouts = 100;
+      st->updated = n == 3;
+    }
+    stopped[n] = ctl.stop_flag != nullptr && ctl.stop_flag->load();
+    return false;
+  };
+  std::atomic<bool> run{false};
+  for (int k = 1; k <= 7; ++k) {
+    auto& st = inbox.state_buffer();
+    st.seq = k;
+    st.nx = 16;
+    st.n = 16;
+    st.vehicle_count = 1;
+    st.model = 1;
+    st.recv_ns = clock.now_ns();
+    for (int i = 0; i < 16; ++i) st.x[i] = 1.0f;
+    inbox.offer_state();
+    ASSERT_TRUE(loop.step_realtime(run));
+  }
+  for (int n = 1; n <= 7; ++n) EXPECT_EQ(stopped[n], n == 3 || n == 5) << "iteration " << n;
+  EXPECT_EQ(loop.counters().partial_updates.load(), 2);
+  EXPECT_EQ(loop.counters().anytime_holds.load(), 1);
+  EXPECT_EQ(loop.counters().optimizer_errors.load() + loop.counters().optimizer_nonfinite.load(), 0);
+  // Unless a loaded machine preempted the loop past a deadline anyway, every cycle's own
+  // command went out: iteration 3's update, and for 5 the held plan (cycle 4's, shifted).
+  if (loop.counters().guard_takeovers.load() == 0) {
+    ASSERT_EQ(tx.commands.size(), 7u);
+    EXPECT_EQ(tx.commands[2].mode, Mode::kNormal);
+    EXPECT_FLOAT_EQ(tx.commands[2].u[0], 1030.0f);
+    EXPECT_EQ(tx.commands[4].mode, Mode::kHoldPlan);
+    EXPECT_FLOAT_EQ(tx.commands[4].u[0], 1041.0f);
+    EXPECT_EQ(tx.commands[5].mode, Mode::kNormal);
+  }
   EXPECT_FALSE(tx.any_nonfinite());
 }
 

@@ -3,6 +3,8 @@
 // owns the plan, the warm start and the smoothing.
 #pragma once
 
+#include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -18,22 +20,30 @@ struct UpdateStats {
   float ess = 0.0f;             // effective sample size 1 / sum w^2 of the step-0 weights
   int crashed = 0;              // rollouts that crashed somewhere in the horizon
   bool finite = true;           // every number of the update was finite
+  // Anytime cycle (RolloutBackend::set_stop_flag): the rollouts the update used (the first
+  // `rollouts` samples), whether the stop flag cut the cycle short, and whether the plan was
+  // updated at all (false when fewer than min_rollouts finished: the plan is left as it was).
+  int rollouts = 0;
+  bool partial = false;
+  bool updated = true;
 };
 
 // Costs at or above this are treated as "infinitely bad" but stay finite, so the min
 // subtraction never computes inf - inf.
 constexpr float kCostCeiling = 1e30f;
 
-MPPI_HD float sanitize_cost(float q) {
-  return (q == q) ? fmin_(fmax_(q, -kCostCeiling), kCostCeiling) : kCostCeiling;
+template <class V>
+MPPI_HD V sanitize_cost(const V& q) {
+  return select(q == q, fmin_(fmax_(q, V(-kCostCeiling)), V(kCostCeiling)), V(kCostCeiling));
 }
 
 // Unnormalised weight of a rollout whose cost exceeds the minimum by `excess` (>= 0).
 // Below e^-60 a weight is flushed to zero: it changes no sum at float precision, and
 // denormal products would make the weighted update many times slower on a CPU.
-MPPI_HD float unnormalised_weight(float excess, float inv_lambda) {
-  const float a = excess * inv_lambda;
-  return a > 60.0f ? 0.0f : fexp(-a);
+template <class V>
+MPPI_HD V unnormalised_weight(const V& excess, float inv_lambda) {
+  const V a = excess * inv_lambda;
+  return select(a > 60.0f, V(0.0f), fexp(-a));
 }
 
 template <int NU>
@@ -70,6 +80,13 @@ class RolloutBackend {
 
   // S~(tau_0,k) of every rollout of the last update (tests and tools; may allocate).
   virtual std::vector<float> rollout_costs() const = 0;
+
+  // The anytime cycle: the backend reads *stop between chunks of rollouts; once it is set,
+  // update() uses the rollouts finished so far (UpdateStats::rollouts, partial). The caller
+  // clears it before update() and sets it from another thread when the deadline nears
+  // (core keeps no clock). Null (the default) runs every rollout. A backend that cannot stop
+  // early (CUDA) ignores it.
+  virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
 
   // Bytes allocated at start-up (host, device).
   virtual std::size_t host_bytes() const = 0;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -32,6 +33,8 @@ class Controller {
  public:
   virtual ~Controller() = default;
   virtual const std::string& task() const = 0;
+  // The backend and, on the CPU, its SIMD target: "cpu-avx3", "cpu-avx2", "cpu-sse4",
+  // "cpu-neon", "cpu" (one sample at a time) or "cuda".
   virtual const char* backend() const = 0;
   virtual int nx() const = 0;
   virtual int nu() const = 0;
@@ -47,6 +50,12 @@ class Controller {
   virtual const UpdateStats& iterate(const float* x0, float* u_out) = 0;
   // Shifted previous plan, for a missed deadline or a rejected update.
   virtual void fallback(float* u_out) = 0;
+  // The anytime cycle: iterate() reads *stop between chunks of rollouts and, once it is set,
+  // updates from the rollouts finished (UpdateStats::rollouts, partial), or not at all below
+  // mppi.min_rollouts (UpdateStats::updated false: the held plan's u_0 goes out, shifted).
+  // The caller owns the flag: clear it before iterate(), set it from another thread. Null:
+  // off. CPU backend only (CUDA ignores it, as does this default).
+  virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
   virtual void reset() = 0;
   // Replace the plan (horizon x nu, clamped into the limits): e.g. restore the last good one.
   virtual void set_plan(const float* plan) = 0;
@@ -100,6 +109,7 @@ class TaskController final : public Controller {
 
   const UpdateStats& iterate(const float* x0, float* u_out) override { return mppi_.iterate(x0, params_, u_out); }
   void fallback(float* u_out) override { mppi_.fallback(u_out); }
+  void set_stop_flag(const std::atomic<bool>* stop) override { mppi_.set_stop_flag(stop); }
   void reset() override { mppi_.reset(); }
   void set_plan(const float* plan) override { mppi_.set_plan(plan); }
   void shift(int steps) override { mppi_.shift(steps); }

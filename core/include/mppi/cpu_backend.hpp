@@ -1,19 +1,67 @@
-// OpenMP rollout backend. Samples are spread over threads; every reduction over samples
-// runs in sample order inside one thread (threads split the time steps instead), so the
-// plan is bit-identical for any thread count and any run with the same seed.
+// OpenMP rollout backend. Samples run in SIMD batches (settings.simd: the best target this
+// CPU runs, or one named, or "off" for one sample at a time) spread over threads; every
+// reduction over samples has one fixed order whatever the thread count and the target
+// (cpu_kernel.hpp), and threads split the time steps for it, so the plan is bit-identical
+// for any thread count and any run with the same seed. Targets differ from each other and
+// from the scalar code only through the transcendental functions (a few ulp; see
+// simd/lanes.hpp and test/core/test_simd.cpp).
+//
+// Anytime: given a stop flag, the rollouts run in chunks of samples in sample order, the
+// flag read before each; a stopped update uses the samples 0..K'-1 finished so far, which
+// is exactly the update of a K'-sample backend.
 #pragma once
 
 #include <omp.h>
 
 #include <algorithm>
-#include <memory>
+#include <atomic>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
 #include <vector>
 
 #include "mppi/backend.hpp"
+#include "mppi/cpu_kernel.hpp"
 #include "mppi/rng.hpp"
 #include "mppi/sampling.hpp"
+#include "mppi/simd.hpp"
+#include "mppi/tasks.hpp"
 
 namespace mppi {
+namespace cpu {
+
+// The SIMD kernels of a named task for one target, defined in that target's translation
+// unit (core/src/simd/kernels.cpp.in); only for the targets this build compiles.
+template <class T, simd::Target kTarget>
+const KernelOps<T>* simd_kernel_ops();
+
+// The kernels of task T for target t: null when the binary has no SIMD kernels for T there
+// (a task not in tasks.hpp's list, or a target not built).
+template <class T>
+const KernelOps<T>* kernels_for(simd::Target t) {
+  if constexpr (!kNamedTask<T>) {
+    (void)t;
+    return nullptr;
+  } else {
+    switch (t) {
+#ifdef MPPID_SIMD_SSE4
+      case simd::Target::kSse4: return simd_kernel_ops<T, simd::Target::kSse4>();
+#endif
+#ifdef MPPID_SIMD_AVX2
+      case simd::Target::kAvx2: return simd_kernel_ops<T, simd::Target::kAvx2>();
+#endif
+#ifdef MPPID_SIMD_AVX3
+      case simd::Target::kAvx3: return simd_kernel_ops<T, simd::Target::kAvx3>();
+#endif
+#ifdef MPPID_SIMD_NEON
+      case simd::Target::kNeon: return simd_kernel_ops<T, simd::Target::kNeon>();
+#endif
+      default: return nullptr;
+    }
+  }
+}
+
+}  // namespace cpu
 
 template <class TaskT>
 class CpuBackend final : public RolloutBackend<TaskT> {
@@ -23,144 +71,194 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   using Base::kNu;
   using Base::kNx;
 
+  // Throws std::invalid_argument when settings.simd names a target this CPU does not run.
   explicit CpuBackend(const MppiSettings& s)
       : k_(s.rollouts),
         t_(s.horizon),
+        stride_((s.rollouts + cpu::kPartials - 1) / cpu::kPartials * cpu::kPartials),
         dt_(s.dt),
         substeps_(s.substeps),
         inv_lambda_(1.0f / s.lambda),
         weighting_(s.weighting),
         seed_(s.seed),
         threads_(s.threads > 0 ? s.threads : omp_get_max_threads()),
+        chunk_(resolved_chunk_rollouts(s)),
+        min_rollouts_(resolved_min_rollouts(s)),
         c_(make_sampler_constants<kNu>(s)),
-        cost_to_go_(static_cast<std::size_t>(k_) * t_),
-        du_(static_cast<std::size_t>(k_) * t_ * kNu),
-        crashed_(static_cast<std::size_t>(k_)),
-        weights_(static_cast<std::size_t>(k_)),
-        scratch_(static_cast<std::size_t>(k_) * threads_) {}
+        cost_(static_cast<std::size_t>(t_) * stride_),
+        du_(static_cast<std::size_t>(t_) * kNu * stride_),
+        crashed_(static_cast<std::size_t>(stride_)),
+        weights_(static_cast<std::size_t>(stride_)) {
+    const simd::Target asked = simd::resolve(s.simd);
+    const cpu::KernelOps<TaskT>* simd_ops = asked == simd::Target::kScalar ? nullptr : cpu::kernels_for<TaskT>(asked);
+    if (simd_ops != nullptr) {
+      ops_ = *simd_ops;
+      target_ = asked;
+      name_ = std::string("cpu-") + simd::name(asked);
+    }
+    // Chunks hold whole batches of the widest target, so a chunk is a prefix of samples.
+    chunk_ = std::max(cpu::kPartials, (chunk_ + cpu::kPartials - 1) / cpu::kPartials * cpu::kPartials);
+  }
 
-  const char* name() const override { return "cpu"; }
+  // Tests: these kernels (e.g. a target's with the C library's transcendentals) as `name`.
+  CpuBackend(const MppiSettings& s, const cpu::KernelOps<TaskT>& ops, const char* name) : CpuBackend(s) {
+    ops_ = ops;
+    name_ = name;
+  }
+
+  // "cpu" (scalar) or "cpu-<target>", e.g. "cpu-avx3".
+  const char* name() const override { return name_.c_str(); }
+  simd::Target target() const { return target_; }
+
+  void set_stop_flag(const std::atomic<bool>* stop) override { stop_ = stop; }
+
+  // Test hook: called between chunks (on one of the threads, the others waiting) with the
+  // number of rollouts finished. Only when a stop flag or a hook is set do rollouts run in
+  // chunks.
+  void set_chunk_hook(void (*hook)(void* ctx, int finished), void* ctx) {
+    hook_ = hook;
+    hook_ctx_ = ctx;
+  }
 
   void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan,
               UpdateStats* stats) override {
-    const NoiseKey key{seed_, cycle};
-#pragma omp parallel for schedule(static) num_threads(threads_)
-    for (int k = 0; k < k_; ++k) rollout(x0, params, key, k, plan);
+    cpu::Batch<TaskT> b;
+    b.params = &params;
+    b.x0 = x0;
+    b.plan = plan;
+    b.sampler = &c_;
+    b.key = NoiseKey{seed_, cycle};
+    b.horizon = t_;
+    b.stride = stride_;
+    b.dt = dt_;
+    b.substeps = substeps_;
+    b.inv_lambda = inv_lambda_;
+    b.trajectory = weighting_ == Weighting::kTrajectory;
+    b.cost = cost_.data();
+    b.du = du_.data();
+    b.crashed = crashed_.data();
+    b.weights = weights_.data();
 
-    if (weighting_ == Weighting::kTrajectory) {
-      normalised_weights(0);
-#pragma omp parallel for schedule(static) num_threads(threads_)
-      for (int i = 0; i < t_; ++i) weighted_update(i, weights_.data(), plan);
-    } else {
-#pragma omp parallel for schedule(static) num_threads(threads_)
-      for (int i = 0; i < t_; ++i) {
-        float* w = &scratch_[static_cast<std::size_t>(omp_get_thread_num()) * k_];
-        step_weights(i, w);
-        weighted_update(i, w, plan);
+    const int n = roll_out(b);
+    if (n < min_rollouts_ || n == 0) {
+      // Too few rollouts for an update: the plan stays as it was.
+      if (stats != nullptr) {
+        *stats = UpdateStats{};
+        stats->rollouts = n;
+        stats->partial = true;
+        stats->updated = false;
       }
-      normalised_weights(0);  // step-0 weights for the statistics
+      return;
     }
-    summarise(stats, plan);
+
+    float partial[cpu::kPartials];
+    const float best = ops_.step0_weights(b, n, partial);
+    const float sum0 = cpu::tree_sum(partial);
+    const auto* ops = &ops_;
+#pragma omp parallel for schedule(static) num_threads(threads_)
+    for (int i = 0; i < t_; ++i) {
+      float sums[(1 + kNu) * cpu::kPartials];
+      ops->step_sums(b, i, n, sums);
+      const float sw = cpu::tree_sum(sums);
+      for (int j = 0; j < kNu; ++j) {
+        const float acc = cpu::tree_sum(sums + (1 + j) * cpu::kPartials);
+        plan[i * kNu + j] = fclamp(plan[i * kNu + j] + acc / sw, c_.u_min[j], c_.u_max[j]);
+      }
+    }
+    summarise(stats, plan, n, best, sum0);
   }
 
-  std::vector<float> rollout_costs() const override {
-    std::vector<float> out(static_cast<std::size_t>(k_));
-    for (int k = 0; k < k_; ++k) out[k] = cost_to_go_[static_cast<std::size_t>(k) * t_];
-    return out;
-  }
+  // S~(tau_0,k) of every rollout of the last update (after a partial one, the first
+  // UpdateStats::rollouts are this cycle's).
+  std::vector<float> rollout_costs() const override { return std::vector<float>(cost_.begin(), cost_.begin() + k_); }
 
   std::size_t host_bytes() const override {
-    return (cost_to_go_.size() + du_.size() + weights_.size() + scratch_.size()) * sizeof(float) + crashed_.size();
+    return (cost_.size() + du_.size() + weights_.size()) * sizeof(float) + crashed_.size();
   }
 
  private:
-  void rollout(const float* x0, const Params& p, const NoiseKey& key, int k, const float* plan) {
-    float x[kNx];
-    float u[kNu];
-    for (int j = 0; j < kNx; ++j) x[j] = x0[j];
-    std::uint32_t crashed = 0;
-    float* q = &cost_to_go_[static_cast<std::size_t>(k) * t_];
-    float* du = &du_[static_cast<std::size_t>(k) * t_ * kNu];
-    for (int i = 0; i < t_; ++i) {
-      const float* pu = plan + i * kNu;
-      float* dui = du + i * kNu;
-      perturb<kNu>(c_, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, dui);
-      TaskT::advance(p, x, u, dt_, substeps_, crashed);
-      const float t = static_cast<float>(i + 1) * dt_;
-      q[i] = sanitize_cost(TaskT::running(p, x, t, &crashed) + control_cost<kNu>(c_, pu, dui));
+  // Runs the rollouts: all of them, or with a stop flag (or hook) chunk by chunk until it is
+  // set. Returns how many finished (a prefix of the samples).
+  int roll_out(const cpu::Batch<TaskT>& b) {
+    const auto* ops = &ops_;
+    const int lanes = ops_.lanes;
+    if (stop_ == nullptr && hook_ == nullptr) {
+      const int batches = (k_ + lanes - 1) / lanes;
+#pragma omp parallel for schedule(static) num_threads(threads_)
+      for (int c = 0; c < batches; ++c) ops->rollouts(b, c * lanes, std::min(k_, (c + 1) * lanes));
+      return k_;
     }
-    q[t_ - 1] = sanitize_cost(q[t_ - 1] + TaskT::terminal(p, x));
-    // Cost-to-go S~(tau_i,k), summed from the end.
-    for (int i = t_ - 2; i >= 0; --i) q[i] = sanitize_cost(q[i] + q[i + 1]);
-    crashed_[k] = crashed != 0;
-  }
-
-  // Unnormalised weights of step i into w; returns their sum (>= 1: the best sample has 1).
-  float step_weights(int i, float* w) const {
-    float best = kCostCeiling;
-    for (int k = 0; k < k_; ++k) best = std::min(best, cost_to_go_[static_cast<std::size_t>(k) * t_ + i]);
-    float sum = 0.0f;
-    for (int k = 0; k < k_; ++k) {
-      w[k] = unnormalised_weight(cost_to_go_[static_cast<std::size_t>(k) * t_ + i] - best, inv_lambda_);
-      sum += w[k];
+    int done = 0;
+    bool go = true;
+#pragma omp parallel num_threads(threads_)
+    {
+      for (int c0 = 0;; c0 += chunk_) {
+#pragma omp single
+        {
+          done = std::min(c0, k_);
+          if (c0 > 0 && hook_ != nullptr) hook_(hook_ctx_, done);
+          go = c0 < k_ && !(stop_ != nullptr && stop_->load(std::memory_order_acquire));
+        }
+        if (!go) break;
+        const int c1 = std::min(k_, c0 + chunk_);
+        const int batches = (c1 - c0 + lanes - 1) / lanes;
+#pragma omp for schedule(static)
+        for (int c = 0; c < batches; ++c) ops->rollouts(b, c0 + c * lanes, std::min(c1, c0 + (c + 1) * lanes));
+      }
     }
-    return sum;
+    return done;
   }
 
-  void normalised_weights(int i) {
-    const float sum = step_weights(i, weights_.data());
-    const float inv = 1.0f / sum;
-    for (auto& w : weights_) w *= inv;
-  }
-
-  // u_i += sum_k w_k du_{i,k} / sum_k w_k, with w unnormalised.
-  void weighted_update(int i, const float* w, float* plan) const {
-    float acc[kNu] = {};
-    float sum = 0.0f;
-    for (int k = 0; k < k_; ++k) {
-      const float* d = &du_[(static_cast<std::size_t>(k) * t_ + i) * kNu];
-      for (int j = 0; j < kNu; ++j) acc[j] += w[k] * d[j];
-      sum += w[k];
-    }
-    for (int j = 0; j < kNu; ++j) plan[i * kNu + j] = fclamp(plan[i * kNu + j] + acc[j] / sum, c_.u_min[j], c_.u_max[j]);
-  }
-
-  void summarise(UpdateStats* stats, const float* plan) const {
+  // Statistics of the step-0 weights of the first n rollouts, summed in the kernels' order.
+  void summarise(UpdateStats* stats, const float* plan, int n, float best, float sum0) const {
     if (stats == nullptr) return;
-    float best = kCostCeiling, total = 0.0f, sq = 0.0f;
+    const float inv = 1.0f / sum0;
+    float sq[cpu::kPartials] = {}, total[cpu::kPartials] = {};
     int finite = 0, crashed = 0;
-    for (int k = 0; k < k_; ++k) {
-      const float s = cost_to_go_[static_cast<std::size_t>(k) * t_];
-      best = std::min(best, s);
+    for (int k = 0; k < n; ++k) {
+      const float s = cost_[static_cast<std::size_t>(k)];
+      const float w = weights_[static_cast<std::size_t>(k)] * inv;
+      sq[k % cpu::kPartials] += w * w;
       if (s < kCostCeiling) {
-        total += s;
+        total[k % cpu::kPartials] += s;
         ++finite;
       }
-      crashed += crashed_[k];
-      sq += weights_[k] * weights_[k];
+      crashed += crashed_[static_cast<std::size_t>(k)];
     }
+    const float sum_sq = cpu::tree_sum(sq);
+    *stats = UpdateStats{};
     stats->min_cost = best;
-    stats->mean_cost = finite > 0 ? total / static_cast<float>(finite) : kCostCeiling;
-    stats->ess = sq > 0.0f ? 1.0f / sq : 0.0f;
+    stats->mean_cost = finite > 0 ? cpu::tree_sum(total) / static_cast<float>(finite) : kCostCeiling;
+    stats->ess = sum_sq > 0.0f ? 1.0f / sum_sq : 0.0f;
     stats->crashed = crashed;
+    stats->rollouts = n;
+    stats->partial = n < k_;
+    stats->updated = true;
     bool ok = ffinite(stats->ess);
     for (int i = 0; i < t_ * kNu; ++i) ok = ok && ffinite(plan[i]);
     stats->finite = ok;
   }
 
-  int k_, t_;
+  int k_, t_, stride_;
   float dt_;
   int substeps_;
   float inv_lambda_;
   Weighting weighting_;
   std::uint64_t seed_;
   int threads_;
+  int chunk_;
+  int min_rollouts_;
   SamplerConstants<kNu> c_;
-  std::vector<float> cost_to_go_;  // K x T, S~(tau_i,k)
-  std::vector<float> du_;          // K x T x NU, the applied variations
-  std::vector<unsigned char> crashed_;
-  std::vector<float> weights_;     // K, normalised step-0 weights
-  std::vector<float> scratch_;     // threads x K, per-step weights
+  std::vector<float> cost_;              // T x stride, S~(tau_i,k)
+  std::vector<float> du_;                // T x NU x stride, the applied variations
+  std::vector<unsigned char> crashed_;   // stride
+  std::vector<float> weights_;           // stride, unnormalised step-0 weights
+  cpu::KernelOps<TaskT> ops_ = cpu::kernel_ops<TaskT, cpu::ScalarLanes>();
+  simd::Target target_ = simd::Target::kScalar;
+  std::string name_ = "cpu";
+  const std::atomic<bool>* stop_ = nullptr;
+  void (*hook_)(void*, int) = nullptr;
+  void* hook_ctx_ = nullptr;
 };
 
 }  // namespace mppi

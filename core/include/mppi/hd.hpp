@@ -1,5 +1,17 @@
 // HD marks a function usable on the host and, under nvcc, on the device. Every model and
 // cost in core/ is written once with it, so the CPU and CUDA backends run the same code.
+//
+// The number-type layer. Models, costs, the sampler and the noise are templates on their
+// number type V: float here (one sample per CUDA thread, or per CPU loop iteration), or a
+// SIMD batch of samples on the CPU (mppi/simd/lanes.hpp: the same operations, lane-wise).
+// Code written for V uses only what both provide:
+//   arithmetic + - * / (a float operand converts to V), comparisons giving a mask_t<V>,
+//   fsin fcos fexp flog fsqrt fatan fatan2 ftan fabs_ fmin_ fmax_ fclamp fsq,
+//   select(mask, a, b), mask_and/mask_or/mask_not, any_of/all_of.
+// A branch on a per-sample value becomes a select of both results (`q = select(hit, q + w, q)`
+// is `if (hit) q += w;` exactly); a branch on a parameter stays a branch. For float, a mask
+// is a bool and every function below is the plain scalar one, so the float instantiation is
+// the code as it reads.
 #pragma once
 
 #if defined(__CUDACC__)
@@ -23,6 +35,7 @@ MPPI_HD float fexp(float a) { return ::expf(a); }
 MPPI_HD float flog(float a) { return ::logf(a); }
 MPPI_HD float fsqrt(float a) { return ::sqrtf(a); }
 MPPI_HD float fatan(float a) { return ::atanf(a); }
+MPPI_HD float fatan2(float y, float x) { return ::atan2f(y, x); }
 MPPI_HD float ftan(float a) { return ::tanf(a); }
 MPPI_HD float fabs_(float a) { return ::fabsf(a); }
 MPPI_HD float fmin_(float a, float b) { return a < b ? a : b; }
@@ -30,5 +43,23 @@ MPPI_HD float fmax_(float a, float b) { return a > b ? a : b; }
 MPPI_HD float fclamp(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 MPPI_HD float fsq(float a) { return a * a; }
 MPPI_HD bool ffinite(float a) { return a == a && a - a == 0.0f; }
+
+// Masks of scalar numbers are bools.
+MPPI_HD float select(bool m, float a, float b) { return m ? a : b; }
+MPPI_HD bool mask_and(bool a, bool b) { return a && b; }
+MPPI_HD bool mask_or(bool a, bool b) { return a || b; }
+MPPI_HD bool mask_not(bool a) { return !a; }
+MPPI_HD bool any_of(bool m) { return m; }
+MPPI_HD bool all_of(bool m) { return m; }
+
+// The mask type of number type V (bool for float).
+template <class V>
+using mask_t = decltype(V() < V());
+
+// Samples per number (1 for float); a SIMD number type specialises this.
+template <class V>
+struct LaneCount {
+  static constexpr int value = 1;
+};
 
 }  // namespace mppi

@@ -1,6 +1,8 @@
 // The MPPI optimizer of Algorithm 1 above a rollout backend: it owns the plan, runs one
 // update per control cycle, smooths the plan inside the limits, hands out u_0 and warm
-// starts the next cycle by shifting (u_{N-1} <- u_init).
+// starts the next cycle by shifting (u_{N-1} <- u_init). Before each update it lets the
+// task's cost prepare for the cycle from the plan's noise-free path (Task::prepare: the
+// forest cost's obstacle culling), on its own copy of the parameters.
 #pragma once
 
 #include <algorithm>
@@ -25,7 +27,9 @@ class Mppi {
       : settings_(s),
         backend_(std::move(backend)),
         plan_(static_cast<std::size_t>(s.horizon) * kNu),
-        scratch_(plan_.size()) {
+        scratch_(plan_.size()),
+        path_(static_cast<std::size_t>(s.horizon + 1) * Task::kVehicles * 2),
+        work_(std::make_unique<Params>()) {
     const std::string err = validate(s, kNu);
     if (!err.empty()) throw std::invalid_argument(err);
     if (!backend_) throw std::invalid_argument("backend: none given");
@@ -33,14 +37,29 @@ class Mppi {
   }
 
   // One control cycle from state x0: update the plan, smooth it, write u_0 to u_out and
-  // shift the plan for the next cycle. Returns the update's statistics.
+  // shift the plan for the next cycle. Returns the update's statistics. An anytime update
+  // stopped before min_rollouts (stats.updated false) leaves the plan as it was: u_0 of the
+  // held plan goes out and the plan shifts, as fallback() does.
   const UpdateStats& iterate(const float* x0, const Params& params, float* u_out) {
-    backend_->update(x0, params, cycle_++, plan_.data(), &stats_);
-    if (settings_.smoothing_window > 1) smooth();
+    const Params* p = &params;
+    if constexpr (Task::kUsesPath) {
+      *work_ = params;
+      Task::prepare(*work_, x0, plan_.data(), settings_.horizon, settings_.dt, settings_.substeps, path_.data());
+      p = work_.get();
+    }
+    backend_->update(x0, *p, cycle_++, plan_.data(), &stats_);
+    if (stats_.updated && settings_.smoothing_window > 1) smooth();
     std::copy_n(plan_.data(), kNu, u_out);
     shift();
     return stats_;
   }
+
+  // The anytime cycle (RolloutBackend::set_stop_flag).
+  void set_stop_flag(const std::atomic<bool>* stop) { backend_->set_stop_flag(stop); }
+
+  // The parameters the last update ran with, after Task::prepare (tasks whose cost uses the
+  // plan's path, e.g. the forest's obstacle grid; for the others, unused defaults).
+  const Params& prepared_params() const { return *work_; }
 
   // The fallback after a missed deadline or a bad update: the previous plan, shifted.
   void fallback(float* u_out) {
@@ -102,6 +121,8 @@ class Mppi {
   std::unique_ptr<RolloutBackend<Task>> backend_;
   std::vector<float> plan_;
   std::vector<float> scratch_;
+  std::vector<float> path_;       // the plan's noise-free path, xy per step and vehicle
+  std::unique_ptr<Params> work_;  // the parameters as prepared for this cycle
   UpdateStats stats_;
   std::uint32_t cycle_ = 0;
 };

@@ -1,5 +1,7 @@
 // Per-sample pieces of one MPPI iteration (Sec. II-III of the notes), shared by the CPU and
 // CUDA backends: the perturbed, limited control and the importance-sampled control cost.
+// Templates on the number type V (hd.hpp) and the sample index type S (rng.hpp): the plan
+// is shared by every sample of a step, so it stays float.
 #pragma once
 
 #include <cstdint>
@@ -22,22 +24,22 @@ struct SamplerConstants {
 
 // u = clamp(plan + noise); du = u - plan is the variation actually applied (the limits
 // are part of the sampling, so the update stays inside them).
-template <int NU>
-MPPI_HD void perturb(const SamplerConstants<NU>& c, const NoiseKey& key, std::uint32_t sample,
-                     std::uint32_t step, const float* plan_u, float* u, float* du) {
-  float n[NU];
+template <int NU, class S, class V>
+MPPI_HD void perturb(const SamplerConstants<NU>& c, const NoiseKey& key, S sample, std::uint32_t step,
+                     const float* plan_u, V* u, V* du) {
+  V n[NU];
   gaussian<NU>(key, sample, step, n);
   for (int j = 0; j < NU; ++j) {
-    u[j] = fclamp(plan_u[j] + c.noise_std[j] * n[j], c.u_min[j], c.u_max[j]);
+    u[j] = fclamp(plan_u[j] + c.noise_std[j] * n[j], V(c.u_min[j]), V(c.u_max[j]));
     du[j] = u[j] - plan_u[j];
   }
 }
 
 // Control terms of q~ (Eq. 33): 1/2 (1 - 1/nu) du'R du + u'R du + 1/2 u'R u, with u measured
 // from the nominal control.
-template <int NU>
-MPPI_HD float control_cost(const SamplerConstants<NU>& c, const float* plan_u, const float* du) {
-  float q = 0.0f;
+template <int NU, class V>
+MPPI_HD V control_cost(const SamplerConstants<NU>& c, const float* plan_u, const V* du) {
+  V q = 0.0f;
   for (int j = 0; j < NU; ++j) {
     const float u = plan_u[j] - c.u_nominal[j];
     q += c.r[j] * (c.inv_nu_term * du[j] * du[j] + u * du[j] + 0.5f * u * u);

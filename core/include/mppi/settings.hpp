@@ -30,7 +30,19 @@ struct MppiSettings {
   int smoothing_window = 1;     // moving average over the plan, odd; 1 = off
   std::uint64_t seed = 1;
   int threads = 0;              // CPU backend: 0 = all cores (OpenMP default)
+  // CPU backend: samples in SIMD lanes. "auto" (the best target this CPU runs), "off" (one
+  // sample at a time, the scalar reference), or a target: sse4, avx2, avx3 (x86), neon (Arm).
+  std::string simd = "auto";
+  // Anytime cycle (CPU backend, when given a stop flag): rollouts run in chunks of
+  // chunk_rollouts (0: K/8, rounded up to 16), and an update stopped early uses the chunks
+  // done if at least min_rollouts finished (0: K/4), else leaves the plan as it was.
+  int chunk_rollouts = 0;
+  int min_rollouts = 0;
 };
+
+// The chunk size and minimum of the anytime cycle, the defaults resolved.
+int resolved_chunk_rollouts(const MppiSettings& s);
+int resolved_min_rollouts(const MppiSettings& s);
 
 // Empty when valid, else "field: reason" for the first bad field. nu is the control
 // dimension the settings must match.

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "mppi/costs/ellipse.hpp"
@@ -25,6 +26,14 @@ using RateQuadrotorForest = Task<QuadrotorRate, ForestCost<QuadrotorRate>>;
 using RateQuadrotorTrack = Task<QuadrotorRate, TrackingCost<QuadrotorRate>>;
 using Team3Forest = Task<Quadrotor, ForestCost<Quadrotor>, 3>;
 using Team9Forest = Task<Quadrotor, ForestCost<Quadrotor>, 9>;
+
+// One of the named tasks above (the CPU backend has SIMD kernels for exactly these; the
+// list in core/CMakeLists.txt matches it).
+template <class T>
+constexpr bool kNamedTask =
+    std::is_same_v<T, CartpoleSwingup> || std::is_same_v<T, RacecarEllipse> || std::is_same_v<T, QuadrotorForest> ||
+    std::is_same_v<T, QuadrotorTrack> || std::is_same_v<T, RateQuadrotorForest> ||
+    std::is_same_v<T, RateQuadrotorTrack> || std::is_same_v<T, Team3Forest> || std::is_same_v<T, Team9Forest>;
 
 template <class T>
 struct TaskTag {

@@ -68,7 +68,8 @@ void read_mppi(const YAML::Node& m, MppiSettings& s) {
   if (!m || !m.IsMap()) fail("mppi", "missing section");
   static const std::set<std::string> known = {
       "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
-      "control_cost_scale", "weighting", "smoothing_window", "seed", "threads"};
+      "control_cost_scale", "weighting", "smoothing_window", "seed", "threads", "simd", "chunk_rollouts",
+      "min_rollouts"};
   for (const auto& kv : m) {
     const auto name = kv.first.as<std::string>();
     if (!known.count(name)) fail("mppi." + name, "unknown field");
@@ -92,6 +93,9 @@ void read_mppi(const YAML::Node& m, MppiSettings& s) {
   if (m["smoothing_window"]) s.smoothing_window = scalar<int>(m["smoothing_window"], "mppi.smoothing_window");
   if (m["seed"]) s.seed = scalar<std::uint64_t>(m["seed"], "mppi.seed");
   if (m["threads"]) s.threads = scalar<int>(m["threads"], "mppi.threads");
+  if (m["simd"]) s.simd = scalar<std::string>(m["simd"], "mppi.simd");
+  if (m["chunk_rollouts"]) s.chunk_rollouts = scalar<int>(m["chunk_rollouts"], "mppi.chunk_rollouts");
+  if (m["min_rollouts"]) s.min_rollouts = scalar<int>(m["min_rollouts"], "mppi.min_rollouts");
 }
 
 void read_params(const YAML::Node& root, const char* section, AppConfig& c) {

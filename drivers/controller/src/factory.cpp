@@ -1,3 +1,4 @@
+#include <stdexcept>
 #include <string>
 
 #include "mppi/app/config.hpp"
@@ -40,7 +41,13 @@ std::unique_ptr<Controller> make_controller(const AppConfig& config) {
 #ifdef MPPID_HAVE_CUDA
     if (backend == "cuda") b = make_cuda_backend<T>(config.mppi);
 #endif
-    if (!b) b = std::make_unique<CpuBackend<T>>(config.mppi);
+    if (!b) {
+      try {
+        b = std::make_unique<CpuBackend<T>>(config.mppi);
+      } catch (const std::invalid_argument& e) {
+        throw ConfigError(std::string("mppi.") + e.what());  // e.g. a SIMD target this CPU lacks
+      }
+    }
     out = std::make_unique<TaskController<T>>(config.task, config.mppi, params, std::move(b));
   });
   if (!out) throw ConfigError("task: unknown task '" + config.task + "'");

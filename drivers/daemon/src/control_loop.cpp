@@ -67,6 +67,7 @@ ControlLoop::~ControlLoop() {
 void ControlLoop::prepare() {
   if (s_.deadline_guard && !s_.lockstep && !guard_thread_.joinable()) {
     guard_plan_.assign(held_.size(), 0.0f);
+    anytime_ = s_.anytime_margin_ns > 0;
     guard_thread_ = std::thread([this] { guard_main(); });
   }
 }
@@ -216,9 +217,16 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     monitor_.record_age(age);
     bool good = false;
     const bool guarded = guard_thread_.joinable() && !lockstep;
+    if (anytime_) {
+      // This cycle's stop flag (guard_arm makes it cycle guard_id_ + 1), clear; none unguarded.
+      std::atomic<bool>* stop = guarded ? &anytime_stop_[(guard_id_ + 1) & 1u] : nullptr;
+      if (stop != nullptr) stop->store(false, std::memory_order_relaxed);
+      c_->set_stop_flag(stop);
+    }
     if (guarded) guard_arm(deadline_ns, state_seq);
     try {
       last_stats_ = c_->iterate(x0, u_.data());
+      if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
       if (!last_stats_.finite) {
         counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
       } else if (!gate_.pass(u_.data(), nu_)) {
@@ -257,6 +265,14 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       // The optimizer's plan may hold NaN: fly the held plan and warm-start the optimizer
       // from it (the last good plan, shifted in step with what went out).
       ++consecutive_bad_updates_;
+      stamp_timing(age, clock_->now_ns() - t0, 0);
+      published = publish_held(state_seq);
+      remember(sent_ns(now_state_ns, t0), u_.data());
+      c_->set_plan(held_.data());
+    } else if (!last_stats_.updated) {
+      // Anytime: stopped below mppi.min_rollouts, no update (not a bad one): the held plan.
+      counters_.anytime_holds.fetch_add(1, std::memory_order_relaxed);
+      consecutive_bad_updates_ = 0;
       stamp_timing(age, clock_->now_ns() - t0, 0);
       published = publish_held(state_seq);
       remember(sent_ns(now_state_ns, t0), u_.data());
@@ -599,6 +615,13 @@ void ControlLoop::guard_main() {
     }
     const std::uint64_t id = w >> 2;
     std::int64_t t = guard_deadline_.load(std::memory_order_relaxed);
+    if (anytime_) {
+      // Anytime: ask the optimizer, still at work on this cycle, to wrap up before t.
+      const std::int64_t early = t - s_.anytime_margin_ns;
+      while (clock.now_ns() < early && !guard_quit_.load(std::memory_order_relaxed)) clock.sleep_until(early);
+      if (guard_word_.load(std::memory_order_acquire) == ((id << 2) | kArmed))
+        anytime_stop_[id & 1u].store(true, std::memory_order_release);
+    }
     while (clock.now_ns() < t && !guard_quit_.load(std::memory_order_relaxed)) clock.sleep_until(t);
     std::uint64_t armed = (id << 2) | kArmed;
     if (!guard_word_.compare_exchange_strong(armed, (id << 2) | kGuardPublishing, std::memory_order_acq_rel))

@@ -76,6 +76,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   DaemonSettings d;
   d.loop.command_kind = command_kind_for(task);
   d.loop.deadline_guard = true;
+  d.loop.anytime_margin_ns = 3 * rt::kNsPerMs;
   d.expect_model = state_model_for(task);
   if (!section || section.IsNull()) return d;
   if (!section.IsMap()) throw ConfigError("daemon: expected a map");
@@ -83,7 +84,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency"});
+               "latency", "anytime_margin_ms"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -99,6 +100,9 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
       static_cast<int>(number(section, "watchdog_max_optimizer_errors", l.watchdog_max_optimizer_errors, 1, 1e6));
   if (section["lockstep"]) l.lockstep = scalar<bool>(section["lockstep"], "lockstep");
   if (section["deadline_guard"]) l.deadline_guard = scalar<bool>(section["deadline_guard"], "deadline_guard");
+  l.anytime_margin_ns =
+      std::llround(number(section, "anytime_margin_ms", static_cast<double>(l.anytime_margin_ns) / 1e6, 0.0,
+                          1000.0 / l.rate_hz) * 1e6);
   d.lockstep_trigger = text(section, "lockstep_trigger", d.lockstep_trigger);
   if (d.lockstep_trigger != "clock" && d.lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
   d.lcm_url = text(section, "lcm_url", d.lcm_url);

@@ -40,9 +40,9 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
                      v(c.publish_failures), v(c.failsafe_entries));
   out += fmt::format(
       "  optimizer nonfinite={} errors={} gate_rejects={} late_holds={} stale_cycles={} guard takeovers={} "
-      "commands={}\n",
+      "commands={} anytime partial_updates={} holds={}\n",
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.gate_rejects), v(c.late_holds), v(c.stale_cycles),
-      v(c.guard_takeovers), v(c.guard_commands));
+      v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds));
   out += fmt::format(
       "  states accepted={} rejected: nan={} duplicate={} out_of_order={} shape={} undecodable={} inputs={}\n",
       v(in.states), v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
@@ -65,13 +65,13 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   out += fmt::format(
       "\"commands_normal\":{},\"commands_hold\":{},\"commands_failsafe\":{},\"commands_blocked\":{},"
       "\"optimizer_nonfinite\":{},\"optimizer_errors\":{},\"late_holds\":{},\"stale_cycles\":{},"
-      "\"guard_takeovers\":{},\"guard_commands\":{},"
+      "\"guard_takeovers\":{},\"guard_commands\":{},\"partial_updates\":{},\"anytime_holds\":{},"
       "\"states\":{},\"rejected_nan\":{},\"rejected_duplicate\":{},\"rejected_out_of_order\":{},"
       "\"rejected_shape\":{},\"rejected_undecodable\":{},\"params_applied\":{},\"params_rejected\":{},"
       "\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
       v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.late_holds), v(c.stale_cycles),
-      v(c.guard_takeovers), v(c.guard_commands), v(in.states),
+      v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds), v(in.states),
       v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
       v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected), f.rss_start_kb, f.rss_end_kb);
   return out;

@@ -16,12 +16,15 @@ struct EllipseCost {
     float w_speed = 1.0f;
     float w_slip = 0.0f;        // optional sideslip penalty
   };
-  MPPI_HD static float vehicle(const Params& p, int, const float* x, float, bool*) {
-    const float d = fsq(x[Racecar::X] / p.semi_x) + fsq(x[Racecar::Y] / p.semi_y) - 1.0f;
+  template <class V>
+  MPPI_HD static V vehicle(const Params& p, int, const V* x, float, mask_t<V>*) {
+    const V d = fsq(x[Racecar::X] / p.semi_x) + fsq(x[Racecar::Y] / p.semi_y) - 1.0f;
     return p.w_track * d * d + p.w_speed * fsq(x[Racecar::VX] - p.target_speed) + p.w_slip * fsq(x[Racecar::BETA]);
   }
-  MPPI_HD static float pair(const Params&, const float*, const float*, bool*) { return 0.0f; }
-  MPPI_HD static float terminal(const Params&, int, const float*) { return 0.0f; }
+  template <class V>
+  MPPI_HD static V pair(const Params&, const V*, const V*, mask_t<V>*) { return V(0.0f); }
+  template <class V>
+  MPPI_HD static V terminal(const Params&, int, const V*) { return V(0.0f); }
 };
 
 }  // namespace mppi

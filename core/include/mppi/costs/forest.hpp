@@ -42,56 +42,70 @@ struct ForestCost {
     float floor_z = 0.0f;           // m, the floor of the predicted altitude
     float floor_lookahead = 0.0f;   // s
     float w_floor = 0.0f;
+    // Obstacle culling (ObstacleGrid): the grid covers the plan's path widened by
+    // obstacle_reach, in cells of obstacle_cell. It changes no cost (the search is exact);
+    // a rollout leaving the grid searches every obstacle. obstacle_reach 0: no grid.
+    float obstacle_reach = 8.0f;    // m
+    float obstacle_cell = 1.0f;     // m
     ObstacleSet obstacles;
+    ObstacleGrid obstacle_grid;     // rebuilt each cycle by prepare()
   };
 
-  MPPI_HD static float vehicle(const Params& p, int j, const float* x, float t, bool* crash) {
-    float pos[3];
+  template <class V>
+  MPPI_HD static V vehicle(const Params& p, int j, const V* x, float t, mask_t<V>* crash) {
+    V pos[3];
     Vehicle::position(x, pos);
-    return vehicle_at_distance(p, j, x, p.obstacles.nearest_surface(pos[0], pos[1], t), crash);
+    return vehicle_at_distance(p, j, x, p.obstacle_grid.nearest_surface(p.obstacles, pos[0], pos[1], t), crash);
   }
 
   // Every term of vehicle() given d, the distance to the nearest obstacle surface: a
   // backend may search the obstacles its own way (the CUDA one splits them over lanes).
-  MPPI_HD static float vehicle_at_distance(const Params& p, int j, const float* x, float d, bool* crash) {
-    float pos[3];
+  template <class V>
+  MPPI_HD static V vehicle_at_distance(const Params& p, int j, const V* x, const V& d, mask_t<V>* crash) {
+    V pos[3];
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
-    const float yaw = Vehicle::yaw(x);
-    float q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
-              p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
+    const V yaw = Vehicle::yaw(x);
+    V q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
+          p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
     if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
-    const float z_ahead = pos[2] + p.floor_lookahead * fmin_(x[5], 0.0f);
-    const float below = fmax_(p.floor_z - z_ahead, 0.0f);
-    q += p.w_floor * below * below;
-    const bool tilted = p.tilt_cos_min > -1.0f && Vehicle::tilt_cos(x) < p.tilt_cos_min;
-    const bool hit = d < p.vehicle_radius || pos[2] < p.ground_z + p.ground_margin || tilted;
-    if (hit) {
-      q += p.w_crash;
-      *crash = true;
+    if (p.w_floor > 0.0f) {
+      const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[5], V(0.0f));
+      const V below = fmax_(V(p.floor_z) - z_ahead, V(0.0f));
+      q += p.w_floor * below * below;
     }
-    return q;
+    mask_t<V> hit = mask_or(d < p.vehicle_radius, pos[2] < p.ground_z + p.ground_margin);
+    if (p.tilt_cos_min > -1.0f) hit = mask_or(hit, Vehicle::tilt_cos(x) < p.tilt_cos_min);
+    *crash = mask_or(*crash, hit);
+    return select(hit, q + p.w_crash, q);
   }
 
-  MPPI_HD static float pair(const Params& p, const float* xa, const float* xb, bool* crash) {
-    float a[3], b[3];
+  template <class V>
+  MPPI_HD static V pair(const Params& p, const V* xa, const V* xb, mask_t<V>* crash) {
+    V a[3], b[3];
     Vehicle::position(xa, a);
     Vehicle::position(xb, b);
-    const float d2 = fsq(a[0] - b[0]) + fsq(a[1] - b[1]) + fsq(a[2] - b[2]);
-    float q = p.w_separation * fexp(-d2 / p.separation_scale);
-    if (d2 < fsq(2.0f * p.vehicle_radius)) {
-      q += p.w_crash;
-      *crash = true;
-    }
-    return q;
+    const V d2 = fsq(a[0] - b[0]) + fsq(a[1] - b[1]) + fsq(a[2] - b[2]);
+    const V q = p.w_separation * fexp(-d2 / p.separation_scale);
+    const mask_t<V> hit = d2 < fsq(2.0f * p.vehicle_radius);
+    *crash = mask_or(*crash, hit);
+    return select(hit, q + p.w_crash, q);
   }
 
-  MPPI_HD static float terminal(const Params& p, int j, const float* x) {
-    if (p.w_terminal == 0.0f) return 0.0f;
-    float pos[3];
+  template <class V>
+  MPPI_HD static V terminal(const Params& p, int j, const V* x) {
+    if (p.w_terminal == 0.0f) return V(0.0f);
+    V pos[3];
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
     return p.w_terminal * (p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]));
+  }
+
+  // Once per cycle, before the rollouts (host): index the obstacles near the plan's
+  // noise-free path (xy of `n_points` points) for times [0, t_end] (ObstacleGrid).
+  static constexpr bool kUsesPath = true;
+  static void prepare(Params& p, const float* path_xy, int n_points, float t_end) {
+    p.obstacle_grid.build(p.obstacles, path_xy, n_points, t_end, p.obstacle_reach, p.obstacle_cell);
   }
 };
 

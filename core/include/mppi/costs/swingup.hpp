@@ -15,18 +15,19 @@ struct SwingupCost {
     float track_limit = 1e9f;   // |p| beyond this is a crash (off the rail)
     float w_crash = 0.0f;
   };
-  MPPI_HD static float vehicle(const Params& p, int, const float* x, float, bool* crash) {
-    const float c = 1.0f + fcos(x[Cartpole::THETA]);
-    float q = p.w_pos * fsq(x[Cartpole::X]) + p.w_angle * c * c + p.w_rate * fsq(x[Cartpole::THETADOT]) +
-              p.w_vel * fsq(x[Cartpole::XDOT]);
-    if (fabs_(x[Cartpole::X]) > p.track_limit) {
-      q += p.w_crash;
-      *crash = true;
-    }
-    return q;
+  template <class V>
+  MPPI_HD static V vehicle(const Params& p, int, const V* x, float, mask_t<V>* crash) {
+    const V c = 1.0f + fcos(x[Cartpole::THETA]);
+    const V q = p.w_pos * fsq(x[Cartpole::X]) + p.w_angle * c * c + p.w_rate * fsq(x[Cartpole::THETADOT]) +
+                p.w_vel * fsq(x[Cartpole::XDOT]);
+    const mask_t<V> off_rail = fabs_(x[Cartpole::X]) > p.track_limit;
+    *crash = mask_or(*crash, off_rail);
+    return select(off_rail, q + p.w_crash, q);
   }
-  MPPI_HD static float pair(const Params&, const float*, const float*, bool*) { return 0.0f; }
-  MPPI_HD static float terminal(const Params&, int, const float*) { return 0.0f; }
+  template <class V>
+  MPPI_HD static V pair(const Params&, const V*, const V*, mask_t<V>*) { return V(0.0f); }
+  template <class V>
+  MPPI_HD static V terminal(const Params&, int, const V*) { return V(0.0f); }
 };
 
 }  // namespace mppi

@@ -20,22 +20,25 @@ struct TrackingCost {
     float ground_z = 0.0f;
   };
 
-  MPPI_HD static float vehicle(const Params& p, int, const float* x, float t, bool* crash) {
-    float pos[3], ref_p[3], ref_v[3];
+  // The reference depends on time only, which every sample of a step shares: it is float.
+  template <class V>
+  MPPI_HD static V vehicle(const Params& p, int, const V* x, float t, mask_t<V>* crash) {
+    V pos[3];
+    float ref_p[3], ref_v[3];
     Vehicle::position(x, pos);
     p.reference.eval(p.time0 + t, ref_p, ref_v);
-    const float dyaw = Vehicle::yaw(x) - p.reference.yaw;
-    float q = p.w_pos * (fsq(pos[0] - ref_p[0]) + fsq(pos[1] - ref_p[1]) + fsq(pos[2] - ref_p[2])) +
-              p.w_vel * (fsq(x[3] - ref_v[0]) + fsq(x[4] - ref_v[1]) + fsq(x[5] - ref_v[2])) +
-              p.w_yaw * dyaw * dyaw;
-    if (pos[2] < p.ground_z) {
-      q += p.w_crash;
-      *crash = true;
-    }
-    return q;
+    const V dyaw = Vehicle::yaw(x) - p.reference.yaw;
+    const V q = p.w_pos * (fsq(pos[0] - ref_p[0]) + fsq(pos[1] - ref_p[1]) + fsq(pos[2] - ref_p[2])) +
+                p.w_vel * (fsq(x[3] - ref_v[0]) + fsq(x[4] - ref_v[1]) + fsq(x[5] - ref_v[2])) +
+                p.w_yaw * dyaw * dyaw;
+    const mask_t<V> below = pos[2] < p.ground_z;
+    *crash = mask_or(*crash, below);
+    return select(below, q + p.w_crash, q);
   }
-  MPPI_HD static float pair(const Params&, const float*, const float*, bool*) { return 0.0f; }
-  MPPI_HD static float terminal(const Params&, int, const float*) { return 0.0f; }
+  template <class V>
+  MPPI_HD static V pair(const Params&, const V*, const V*, mask_t<V>*) { return V(0.0f); }
+  template <class V>
+  MPPI_HD static V terminal(const Params&, int, const V*) { return V(0.0f); }
 };
 
 }  // namespace mppi

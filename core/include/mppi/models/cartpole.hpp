@@ -21,10 +21,11 @@ struct Cartpole {
     float motor_gain = 20.0f; // 1/s
   };
 
-  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
-    const float s = fsin(x[THETA]), c = fcos(x[THETA]);
-    const float w = x[THETADOT], f = x[FORCE];
-    const float den = p.cart_mass + p.pole_mass * s * s;
+  template <class V>
+  MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
+    const V s = fsin(x[THETA]), c = fcos(x[THETA]);
+    const V w = x[THETADOT], f = x[FORCE];
+    const V den = p.cart_mass + p.pole_mass * s * s;
     dx[X] = x[XDOT];
     dx[XDOT] = (f + p.pole_mass * s * (p.length * w * w + p.gravity * c)) / den;
     dx[THETA] = w;
@@ -34,17 +35,20 @@ struct Cartpole {
   }
 
   // Keeps the state on its manifold after an integration step (nothing to do here).
-  MPPI_HD static void project(float*) {}
+  template <class V>
+  MPPI_HD static void project(V*) {}
 
   // Where the cart is, for displays: (x, 0, 0).
-  MPPI_HD static void position(const float* x, float* pos) {
+  template <class V>
+  MPPI_HD static void position(const V* x, V* pos) {
     pos[0] = x[X];
-    pos[1] = 0.0f;
-    pos[2] = 0.0f;
+    pos[1] = V(0.0f);
+    pos[2] = V(0.0f);
   }
 
-  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
-    float dx[kNx];
+  template <class V>
+  MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
+    V dx[kNx];
     derivative(p, x, u, dx);
     for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
   }

@@ -32,21 +32,22 @@ struct Quadrotor {
     return fsqrt(p.mass * p.gravity / (4.0f * p.k_force));
   }
 
-  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
-    const float sphi = fsin(x[ROLL]), cphi_raw = fcos(x[ROLL]);
-    const float sth = fsin(x[PITCH]), cth = fcos(x[PITCH]);
-    const float spsi = fsin(x[YAW]), cpsi = fcos(x[YAW]);
+  template <class V>
+  MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
+    const V sphi = fsin(x[ROLL]), cphi_raw = fcos(x[ROLL]);
+    const V sth = fsin(x[PITCH]), cth = fcos(x[PITCH]);
+    const V spsi = fsin(x[YAW]), cpsi = fcos(x[YAW]);
     // The ZXY Euler map is singular at roll = +-90 deg; keep it finite there.
-    const float cphi = fabs_(cphi_raw) < 1e-3f ? (cphi_raw < 0.0f ? -1e-3f : 1e-3f) : cphi_raw;
+    const V cphi = select(fabs_(cphi_raw) < 1e-3f, select(cphi_raw < 0.0f, V(-1e-3f), V(1e-3f)), cphi_raw);
 
-    float force[4], moment[4];
+    V force[4], moment[4];
     for (int i = 0; i < 4; ++i) {
-      const float w = x[M1 + i];
+      const V w = x[M1 + i];
       force[i] = p.k_force * w * w;
       moment[i] = p.k_moment * w * w;
     }
-    const float thrust = force[0] + force[1] + force[2] + force[3];
-    const float a = thrust / p.mass;
+    const V thrust = force[0] + force[1] + force[2] + force[3];
+    const V a = thrust / p.mass;
 
     dx[PX] = x[VX];
     dx[PY] = x[VY];
@@ -57,14 +58,14 @@ struct Quadrotor {
     dx[VY] = a * (spsi * sth - cpsi * cth * sphi) - drag * x[VY];
     dx[VZ] = a * (cphi_raw * cth) - p.gravity - drag * x[VZ];
 
-    const float wx = x[WX], wy = x[WY], wz = x[WZ];
+    const V wx = x[WX], wy = x[WY], wz = x[WZ];
     dx[ROLL] = cth * wx + sth * wz;
     dx[PITCH] = wy + (sphi / cphi) * (sth * wx - cth * wz);
     dx[YAW] = (-sth * wx + cth * wz) / cphi;
 
-    const float tx = p.arm * (force[1] - force[3]);
-    const float ty = p.arm * (force[2] - force[0]);
-    const float tz = moment[0] - moment[1] + moment[2] - moment[3];
+    const V tx = p.arm * (force[1] - force[3]);
+    const V ty = p.arm * (force[2] - force[0]);
+    const V tz = moment[0] - moment[1] + moment[2] - moment[3];
     // omega_dot = I^-1 (tau - omega x I omega)
     dx[WX] = (tx - (wy * p.izz * wz - wz * p.iyy * wy)) / p.ixx;
     dx[WY] = (ty - (wz * p.ixx * wx - wx * p.izz * wz)) / p.iyy;
@@ -73,24 +74,29 @@ struct Quadrotor {
     for (int i = 0; i < 4; ++i) dx[M1 + i] = p.motor_gain * (u[i] - x[M1 + i]);
   }
 
-  // Explicit Euler, as Algorithm 1.
   // Keeps the state on its manifold after an integration step (nothing to do here).
-  MPPI_HD static void project(float*) {}
+  template <class V>
+  MPPI_HD static void project(V*) {}
 
-  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
-    float dx[kNx];
+  // Explicit Euler, as Algorithm 1.
+  template <class V>
+  MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
+    V dx[kNx];
     derivative(p, x, u, dx);
     for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
   }
 
-  MPPI_HD static void position(const float* x, float* pos) {
+  template <class V>
+  MPPI_HD static void position(const V* x, V* pos) {
     pos[0] = x[PX];
     pos[1] = x[PY];
     pos[2] = x[PZ];
   }
-  MPPI_HD static float yaw(const float* x) { return x[YAW]; }
+  template <class V>
+  MPPI_HD static V yaw(const V* x) { return x[YAW]; }
   // Cosine of the tilt: the world-z component of the body z axis (ZXY Euler angles).
-  MPPI_HD static float tilt_cos(const float* x) { return fcos(x[ROLL]) * fcos(x[PITCH]); }
+  template <class V>
+  MPPI_HD static V tilt_cos(const V* x) { return fcos(x[ROLL]) * fcos(x[PITCH]); }
 };
 
 }  // namespace mppi

@@ -25,17 +25,18 @@ struct QuadrotorRate {
 
   MPPI_HD static float hover_thrust(const Params& p) { return p.mass * p.gravity; }
 
-  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
-    const float qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
-    const float wx = x[WX], wy = x[WY], wz = x[WZ];
+  template <class V>
+  MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
+    const V qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
+    const V wx = x[WX], wy = x[WY], wz = x[WZ];
     dx[PX] = x[VX];
     dx[PY] = x[VY];
     dx[PZ] = x[VZ];
     // Body z axis in the world frame: third column of R(q).
-    const float bx = 2.0f * (qx * qz + qw * qy);
-    const float by = 2.0f * (qy * qz - qw * qx);
-    const float bz = 1.0f - 2.0f * (qx * qx + qy * qy);
-    const float a = u[THRUST] / p.mass;
+    const V bx = 2.0f * (qx * qz + qw * qy);
+    const V by = 2.0f * (qy * qz - qw * qx);
+    const V bz = 1.0f - 2.0f * (qx * qx + qy * qy);
+    const V a = u[THRUST] / p.mass;
     const float drag = p.drag / p.mass;
     dx[VX] = a * bx - drag * x[VX];
     dx[VY] = a * by - drag * x[VY];
@@ -52,31 +53,36 @@ struct QuadrotorRate {
   }
 
   // Back onto the unit quaternions after an integration step.
-  MPPI_HD static void project(float* x) {
-    const float n = fsqrt(x[QW] * x[QW] + x[QX] * x[QX] + x[QY] * x[QY] + x[QZ] * x[QZ]);
-    const float inv = n > 0.0f ? 1.0f / n : 1.0f;
+  template <class V>
+  MPPI_HD static void project(V* x) {
+    const V n = fsqrt(x[QW] * x[QW] + x[QX] * x[QX] + x[QY] * x[QY] + x[QZ] * x[QZ]);
+    const V inv = select(n > 0.0f, 1.0f / n, V(1.0f));
     for (int i = QW; i <= QZ; ++i) x[i] *= inv;
   }
 
   // Explicit Euler, then back onto the unit quaternions.
-  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
-    float dx[kNx];
+  template <class V>
+  MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
+    V dx[kNx];
     derivative(p, x, u, dx);
     for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
     project(x);
   }
 
-  MPPI_HD static void position(const float* x, float* pos) {
+  template <class V>
+  MPPI_HD static void position(const V* x, V* pos) {
     pos[0] = x[PX];
     pos[1] = x[PY];
     pos[2] = x[PZ];
   }
   // Cosine of the tilt: the world-z component of the body z axis.
-  MPPI_HD static float tilt_cos(const float* x) { return 1.0f - 2.0f * (x[QX] * x[QX] + x[QY] * x[QY]); }
+  template <class V>
+  MPPI_HD static V tilt_cos(const V* x) { return 1.0f - 2.0f * (x[QX] * x[QX] + x[QY] * x[QY]); }
   // Heading (yaw about world z) of the body x axis.
-  MPPI_HD static float yaw(const float* x) {
-    const float qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
-    return ::atan2f(2.0f * (qw * qz + qx * qy), 1.0f - 2.0f * (qy * qy + qz * qz));
+  template <class V>
+  MPPI_HD static V yaw(const V* x) {
+    const V qw = x[QW], qx = x[QX], qy = x[QY], qz = x[QZ];
+    return fatan2(2.0f * (qw * qz + qx * qy), 1.0f - 2.0f * (qy * qy + qz * qz));
   }
 };
 

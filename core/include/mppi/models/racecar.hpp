@@ -28,29 +28,33 @@ struct Racecar {
   };
 
   // Brush tire lateral force for slip angle alpha, normal load fz, longitudinal force fx.
-  MPPI_HD static float lateral_force(const Params& p, float alpha, float fz, float fx) {
+  // Past the slip angle gamma the tire slides: the force saturates at xi mu fz.
+  template <class V>
+  MPPI_HD static V lateral_force(const Params& p, const V& alpha, float fz, const V& fx) {
     const float mu_fz = p.friction * fz;
-    const float fx_c = fclamp(fx, -0.99f * mu_fz, 0.99f * mu_fz);
-    const float xi = fsqrt(mu_fz * mu_fz - fx_c * fx_c) / mu_fz;
-    const float gamma = fatan(3.0f * xi * mu_fz / p.cornering);
-    if (fabs_(alpha) >= gamma) return -xi * mu_fz * (alpha > 0.0f ? 1.0f : -1.0f);
-    const float ta = ftan(alpha);
+    const V fx_c = fclamp(fx, -0.99f * mu_fz, 0.99f * mu_fz);
+    const V xi = fsqrt(mu_fz * mu_fz - fx_c * fx_c) / mu_fz;
+    const V gamma = fatan(3.0f * xi * mu_fz / p.cornering);
+    const V sliding = -xi * mu_fz * select(alpha > 0.0f, V(1.0f), V(-1.0f));
+    const V ta = ftan(alpha);
     const float c = p.cornering;
-    return -c * ta + c * c / (3.0f * xi * mu_fz) * fabs_(ta) * ta -
-           c * c * c / (27.0f * xi * xi * mu_fz * mu_fz) * ta * ta * ta;
+    const V gripping = -c * ta + c * c / (3.0f * xi * mu_fz) * fabs_(ta) * ta -
+                       c * c * c / (27.0f * xi * xi * mu_fz * mu_fz) * ta * ta * ta;
+    return select(fabs_(alpha) >= gamma, sliding, gripping);
   }
 
-  MPPI_HD static void derivative(const Params& p, const float* x, const float* u, float* dx) {
+  template <class V>
+  MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
     const float wheelbase = p.front + p.rear;
     const float fz_front = p.mass * p.gravity * p.rear / wheelbase;
     const float fz_rear = p.mass * p.gravity * p.front / wheelbase;
-    const float vx = fmax_(x[VX], p.min_speed);
-    const float beta = x[BETA], r = x[R], delta = x[DELTA], fx = x[FX];
-    const float alpha_f = fatan(beta + p.front * r / vx) - delta;
-    const float alpha_r = fatan(beta - p.rear * r / vx);
-    const float fyf = lateral_force(p, alpha_f, fz_front, 0.0f);
-    const float fyr = lateral_force(p, alpha_r, fz_rear, fx);
-    const float spsi = fsin(x[PSI]), cpsi = fcos(x[PSI]);
+    const V vx = fmax_(x[VX], V(p.min_speed));
+    const V beta = x[BETA], r = x[R], delta = x[DELTA], fx = x[FX];
+    const V alpha_f = fatan(beta + p.front * r / vx) - delta;
+    const V alpha_r = fatan(beta - p.rear * r / vx);
+    const V fyf = lateral_force(p, alpha_f, fz_front, V(0.0f));
+    const V fyr = lateral_force(p, alpha_r, fz_rear, fx);
+    const V spsi = fsin(x[PSI]), cpsi = fcos(x[PSI]);
     dx[X] = x[VX] * cpsi - x[VY] * spsi;
     dx[Y] = x[VX] * spsi + x[VY] * cpsi;
     dx[PSI] = r;
@@ -63,16 +67,19 @@ struct Racecar {
   }
 
   // Keeps the state on its manifold after an integration step (nothing to do here).
-  MPPI_HD static void project(float*) {}
+  template <class V>
+  MPPI_HD static void project(V*) {}
 
-  MPPI_HD static void position(const float* x, float* pos) {
+  template <class V>
+  MPPI_HD static void position(const V* x, V* pos) {
     pos[0] = x[X];
     pos[1] = x[Y];
-    pos[2] = 0.0f;
+    pos[2] = V(0.0f);
   }
 
-  MPPI_HD static void step(const Params& p, float* x, const float* u, float dt) {
-    float dx[kNx];
+  template <class V>
+  MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
+    V dx[kNx];
     derivative(p, x, u, dx);
     for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
   }

@@ -63,6 +63,11 @@ struct LoopSettings {
   bool deadline_guard = false;
   int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
   LatencySettings latency;
+  // Anytime cycle (with the deadline guard): this long before the deadline the guard asks
+  // the optimizer to stop its rollouts (Controller::set_stop_flag), which then updates from
+  // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
+  // out on time. 0: off.
+  std::int64_t anytime_margin_ns = 0;
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -88,6 +93,8 @@ struct LoopCounters {
   std::atomic<std::int64_t> plan_skips{0};        // extra control steps the plan was shifted by
   std::atomic<std::int64_t> latency_rejected{0};  // cycle durations the estimator refused
   std::atomic<std::int64_t> repeated_ticks{0};    // lock-step ticks already answered, dropped
+  std::atomic<std::int64_t> partial_updates{0};   // anytime: updates from fewer than K rollouts
+  std::atomic<std::int64_t> anytime_holds{0};     // anytime: below min_rollouts, held plan published
 };
 
 class ControlLoop {
@@ -231,6 +238,11 @@ class ControlLoop {
   transport::Command guard_cmd_;
   rt::Wakeup guard_wake_;
   std::thread guard_thread_;
+  // Anytime: the stop flag of cycle id is anytime_stop_[id & 1]. The loop clears it before
+  // arming the cycle; the guard sets it at deadline - margin if the cycle is still armed. Two
+  // flags, so a guard preempted between that check and its store cannot stop the next cycle.
+  bool anytime_ = false;
+  std::atomic<bool> anytime_stop_[2] = {false, false};
 
   std::atomic<transport::Mode> mode_{transport::Mode::kFailsafe};
   transport::Mode last_status_mode_ = transport::Mode::kFailsafe;

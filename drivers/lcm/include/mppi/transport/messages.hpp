@@ -13,7 +13,7 @@ constexpr int kMaxStates = 16 * 32;   // 16 states x 32 vehicles
 constexpr int kMaxControls = 4 * 32;  // 4 controls x 32 vehicles
 constexpr int kMaxPlanPositions = 4096;  // predicted positions in one plan_t
 constexpr int kMaxVehicles = 32;
-constexpr int kMaxObstaclesIn = 1024;  // accepted per message; the nearest 64 are kept
+constexpr int kMaxObstaclesIn = 1024;  // accepted per message; the nearest ObstacleSet::kCapacity (256) are kept
 
 // Command modes, equal to mppi_lcm::command_t::MODE_*.
 enum class Mode : std::int8_t { kNormal = 0, kHoldPlan = 1, kFailsafe = 2 };
