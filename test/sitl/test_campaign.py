@@ -94,8 +94,10 @@ def test_local_and_ray_campaigns_agree(mppid_binary, tmp_path):
         # One optimizer thread a flight: two flights at a time on CI's two cores, and no cycle
         # slow enough (> 0.5 s) to make the simulator republish a state (not reproducible).
         # The plan is bit-identical for any thread count.
+        # A fixed latency charged (the daemon is told it): lock-step then repeats bit for bit;
+        # with the measured latency it would follow each run's own timing.
         p = sitl("campaign", "--scenarios", scen, "--seeds", "3-6", "--out", outs[engine], "--engine", engine,
-                 "--jobs", 2, "--set", "mppi.threads=1", timeout=600, check=0)
+                 "--jobs", 2, "--latency", 0.005, "--set", "mppi.threads=1", timeout=600, check=0)
         assert "4/4" in p.stderr  # the progress bar
     assert campaign.compare_campaigns(outs["local"], outs["ray"]) == []
     a, b = (json.loads((outs[e] / "summary.json").read_text()) for e in ("local", "ray"))

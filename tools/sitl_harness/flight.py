@@ -30,6 +30,7 @@ LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 # while the CPU is busy (the kernel caps this at net.core.rmem_max).
 LOGGER_RECV_BUF = 4 * 1024 * 1024
 SIM_FIFO_PRIORITY = 90
+LOGGER_FIFO_PRIORITY = 79
 _NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
 
 
@@ -214,13 +215,16 @@ class Flight:
             sim_cmd.append("--ideal")
         elif lockstep and spec.latency is not None:
             sim_cmd += ["--latency", f"{spec.latency:g}"]
+        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+                      str(self.out / "flight.lcmlog")]
         if _fifo_allowed():
             # The simulator stands in for the physical world: the controller's CPU load must
             # not slow its physics down, nor other load its clock and the latency it measures
             # (the daemon runs SCHED_FIFO 80, the simulator above).
             sim_cmd = ["chrt", "-f", str(SIM_FIFO_PRIORITY)] + sim_cmd
-        logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
-                      str(self.out / "flight.lcmlog")]
+            # The logger too, just below the daemon: a lock-step flight runs many times faster
+            # than real time and a logger starved meanwhile loses datagrams.
+            logger_cmd = ["chrt", "-f", str(LOGGER_FIFO_PRIORITY)] + logger_cmd
 
         t0 = time.monotonic()
         outcome = None
