@@ -64,6 +64,9 @@ class Controller {
   // Advance state x (nx floats) in place by `seconds` under the control u (nu floats) held
   // constant, with RK4 on the task's model and parameters: latency prediction.
   virtual void propagate(float* x, const float* u, float seconds) const = 0;
+  // The external acceleration (world frame, m/s^2) the model adds to every vehicle: the
+  // disturbance observer's estimate. False (and nothing set) for a model without one.
+  virtual bool set_external_accel(const float accel[3]) { (void)accel; return false; }
 
   // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
@@ -75,6 +78,11 @@ class Controller {
   virtual std::size_t host_bytes() const = 0;
   virtual std::size_t device_bytes() const = 0;
 };
+
+template <class P, class = void>
+constexpr bool has_external_accel = false;
+template <class P>
+constexpr bool has_external_accel<P, std::void_t<decltype(P::accel_z)>> = true;
 
 template <class T>
 class TaskController final : public Controller {
@@ -114,6 +122,17 @@ class TaskController final : public Controller {
   void set_plan(const float* plan) override { mppi_.set_plan(plan); }
   void shift(int steps) override { mppi_.shift(steps); }
   void propagate(float* x, const float* u, float seconds) const override { rk4_task<T>(params_, x, u, seconds); }
+  bool set_external_accel(const float accel[3]) override {
+    if constexpr (has_external_accel<typename T::Vehicle::Params>) {
+      params_.vehicle.accel_x = accel[0];
+      params_.vehicle.accel_y = accel[1];
+      params_.vehicle.accel_z = accel[2];
+      return true;
+    } else {
+      (void)accel;
+      return false;
+    }
+  }
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     using V = typename T::Vehicle;

@@ -24,6 +24,9 @@ void visit_fields(Quadrotor::Params& p, V&& v) {
   v("k_force", p.k_force, 1e-12f, 1.0f);
   v("k_moment", p.k_moment, 1e-14f, 1.0f);
   v("drag", p.drag, 0.0f, 100.0f);
+  v("accel_x", p.accel_x, -50.0f, 50.0f);
+  v("accel_y", p.accel_y, -50.0f, 50.0f);
+  v("accel_z", p.accel_z, -50.0f, 50.0f);
 }
 template <class V>
 void visit_fields(QuadrotorRate::Params& p, V&& v) {
@@ -31,6 +34,9 @@ void visit_fields(QuadrotorRate::Params& p, V&& v) {
   v("gravity", p.gravity, 0.0f, 20.0f);
   v("rate_tau", p.rate_tau, 1e-3f, 10.0f);
   v("drag", p.drag, 0.0f, 100.0f);
+  v("accel_x", p.accel_x, -50.0f, 50.0f);
+  v("accel_y", p.accel_y, -50.0f, 50.0f);
+  v("accel_z", p.accel_z, -50.0f, 50.0f);
 }
 template <class V>
 void visit_fields(Cartpole::Params& p, V&& v) {

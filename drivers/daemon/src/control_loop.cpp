@@ -45,7 +45,8 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       latency_(s_.latency.estimator),
       history_(nu_, controller->settings().u_init),
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
-      x_pred_(static_cast<std::size_t>(controller->nx())) {
+      x_pred_(static_cast<std::size_t>(controller->nx())),
+      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles()) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
@@ -54,6 +55,9 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
   status_.rollouts = c_->settings().rollouts;
   status_.horizon = horizon_;
   latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
+  // Only models with an external acceleration (the quadrotors) take the observer's estimate.
+  const float zero[3] = {0.0f, 0.0f, 0.0f};
+  observe_ = s_.disturbance.estimate && c_->set_external_accel(zero);
 }
 
 bool ControlLoop::is_loop_param(const std::string& key) { return key.rfind("daemon.", 0) == 0; }
@@ -187,6 +191,10 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       held_ = c_->plan();
       history_.reset();
       plan_timed_ = false;
+      if (observe_) {
+        observer_.reset();
+        c_->set_external_accel(observer_.estimate());
+      }
     }
     stamp_timing(have_state ? age : 0, clock_->now_ns() - t0, 0);
     if (publish_failsafe(state_seq)) remember(sent_ns(now_state_ns, t0), failsafe_.data());
@@ -204,6 +212,9 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     // Latency compensation: optimise from the state as it will be when this command acts.
     const float* x0 = x.x;
     std::int64_t lead = 0;
+    // A new state: the disturbance observer compares it with the last one predicted.
+    if (observe_ && state_seq != last_state_seq_used_ && observer_.update(*c_, history_, x.x, t_state))
+      c_->set_external_accel(observer_.estimate());
     if (ls.compensate) {
       align_plan(t_act);
       std::copy_n(x.x, x_pred_.size(), x_pred_.data());
@@ -521,6 +532,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.latency_expected_ms = f(static_cast<double>(latency_.estimate_ns()) * 1e-6);
   status_.lead_ms_mean = f(w.lead.mean_ms);
   status_.lead_ms_p99 = f(w.lead.p99_ms);
+  std::copy_n(observer_.estimate(), 3, status_.disturbance_accel);
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;

@@ -84,7 +84,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "anytime_margin_ms"});
+               "latency", "disturbance", "anytime_margin_ms"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -154,6 +154,14 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     const std::string st = text(n, "state_time", "sample", p);
     if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
     lat.use_sample_time = st == "sample";
+  }
+  if (const YAML::Node n = section["disturbance"]) {
+    if (!n.IsMap()) fail("disturbance", "expected a map");
+    check_known(n, "disturbance.", {"estimate", "time_constant_s", "limit"});
+    DisturbanceSettings& ds = l.disturbance;
+    if (n["estimate"]) ds.estimate = scalar<bool>(n["estimate"], "disturbance.estimate");
+    ds.time_constant_s = number(n, "time_constant_s", ds.time_constant_s, 0.02, 100.0, "disturbance.");
+    ds.limit = static_cast<float>(number(n, "limit", ds.limit, 0.0, 50.0, "disturbance."));
   }
   if (const YAML::Node r = section["realtime"]) {
     if (!r.IsMap()) fail("realtime", "expected a map");

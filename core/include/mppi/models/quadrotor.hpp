@@ -25,6 +25,9 @@ struct Quadrotor {
     float k_force = 6.11e-8f;   // N / rpm^2
     float k_moment = 1.5e-9f;   // N m / rpm^2
     float drag = 0.0f;          // linear drag, N s/m (0 in the paper; the SITL plant may differ)
+    // External acceleration, world frame, m/s^2: what the daemon's disturbance observer
+    // estimates (model mismatch, wind); 0 in the paper's model.
+    float accel_x = 0.0f, accel_y = 0.0f, accel_z = 0.0f;
   };
 
   // Motor speed at which the four motors hold the vehicle level.
@@ -54,9 +57,9 @@ struct Quadrotor {
     dx[PZ] = x[VZ];
     // Third column of R_WB times the collective thrust.
     const float drag = p.drag / p.mass;
-    dx[VX] = a * (cpsi * sth + cth * sphi * spsi) - drag * x[VX];
-    dx[VY] = a * (spsi * sth - cpsi * cth * sphi) - drag * x[VY];
-    dx[VZ] = a * (cphi_raw * cth) - p.gravity - drag * x[VZ];
+    dx[VX] = a * (cpsi * sth + cth * sphi * spsi) - drag * x[VX] + p.accel_x;
+    dx[VY] = a * (spsi * sth - cpsi * cth * sphi) - drag * x[VY] + p.accel_y;
+    dx[VZ] = a * (cphi_raw * cth) - p.gravity - drag * x[VZ] + p.accel_z;
 
     const V wx = x[WX], wy = x[WY], wz = x[WZ];
     dx[ROLL] = cth * wx + sth * wz;

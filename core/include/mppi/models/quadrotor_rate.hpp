@@ -21,6 +21,8 @@ struct QuadrotorRate {
     float gravity = 9.81f;    // m/s^2
     float rate_tau = 0.05f;   // s, first-order time constant of the autopilot's rate loop
     float drag = 0.0f;        // linear drag, N s/m
+    // External acceleration, world frame, m/s^2 (the daemon's disturbance observer).
+    float accel_x = 0.0f, accel_y = 0.0f, accel_z = 0.0f;
   };
 
   MPPI_HD static float hover_thrust(const Params& p) { return p.mass * p.gravity; }
@@ -38,9 +40,9 @@ struct QuadrotorRate {
     const V bz = 1.0f - 2.0f * (qx * qx + qy * qy);
     const V a = u[THRUST] / p.mass;
     const float drag = p.drag / p.mass;
-    dx[VX] = a * bx - drag * x[VX];
-    dx[VY] = a * by - drag * x[VY];
-    dx[VZ] = a * bz - p.gravity - drag * x[VZ];
+    dx[VX] = a * bx - drag * x[VX] + p.accel_x;
+    dx[VY] = a * by - drag * x[VY] + p.accel_y;
+    dx[VZ] = a * bz - p.gravity - drag * x[VZ] + p.accel_z;
     // q_dot = 1/2 q (x) (0, omega)
     dx[QW] = 0.5f * (-qx * wx - qy * wy - qz * wz);
     dx[QX] = 0.5f * (qw * wx + qy * wz - qz * wy);

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/command_gate.hpp"
@@ -63,6 +64,7 @@ struct LoopSettings {
   bool deadline_guard = false;
   int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
   LatencySettings latency;
+  DisturbanceSettings disturbance;
   // Anytime cycle (with the deadline guard): this long before the deadline the guard asks
   // the optimizer to stop its rollouts (Controller::set_stop_flag), which then updates from
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
@@ -125,6 +127,8 @@ class ControlLoop {
   rt::TimingSummary timing_total() const { return monitor_.total(); }
   rt::TimingSummary timing_window() const { return monitor_.window(); }
   std::int64_t latency_estimate_ns() const { return latency_estimate_ns_.load(std::memory_order_relaxed); }
+  // The disturbance observer's estimate (loop thread; tests and the final report).
+  const float* disturbance_estimate() const { return observer_.estimate(); }
   std::int64_t skipped_periods() const { return schedule_.skipped_periods(); }
   transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
   // For other threads while the loop runs (the histograms are the loop thread's alone).
@@ -219,6 +223,8 @@ class ControlLoop {
   bool plan_timed_ = false;       // plan_t0_ns_ is meaningful
   std::int64_t dt_ns_;
   std::vector<float> x_pred_;
+  DisturbanceObserver observer_;
+  bool observe_ = false;  // the model takes an external acceleration and estimation is on
   std::atomic<std::int64_t> latency_estimate_ns_{0};
 
   std::atomic<std::int64_t> cmd_seq_{0};  // shared by the loop and the guard
