@@ -6,7 +6,9 @@
 #include <cmath>
 
 #include "fakes.hpp"
+#include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/latency_estimator.hpp"
 
@@ -262,4 +264,59 @@ TEST(LatencyCompensation, ARepeatedLockstepTickIsNotAnsweredTwice) {
   tick(1);
   ASSERT_TRUE(r.loop.step_lockstep(r.run));
   EXPECT_EQ(r.ctl.iterations, 4);
+}
+
+TEST(DisturbanceObserver, FindsTheAccelerationTheModelMisses) {
+  // The fake model: x[0] moves at u[0]/s and nothing moves the velocities x[3..5]; the
+  // "plant" accelerates x[5] at -0.8 m/s^2 (a heavier vehicle). The estimate converges to it.
+  FakeClock clock;
+  FakeController c(&clock);
+  daemon::CommandHistory h(4, {0, 0, 0, 0});
+  daemon::DisturbanceSettings s;
+  s.time_constant_s = 0.2;
+  daemon::DisturbanceObserver obs(s, 1, 16);
+  float x[16] = {};
+  std::int64_t t = 0;
+  EXPECT_FALSE(obs.update(c, h, x, t));  // the first state has nothing to compare with
+  for (int k = 0; k < 200; ++k) {
+    t += 20 * kMs;
+    // The fake model ignores the estimate, so this is the integrator of a constant residual:
+    // the plant's velocity keeps falling behind the model's unchanged one.
+    x[5] -= 0.8f * 0.02f;
+    ASSERT_TRUE(obs.update(c, h, x, t));
+  }
+  EXPECT_NEAR(obs.estimate()[2], -s.limit, 1e-5f);  // a constant residual integrates to the limit
+  EXPECT_FLOAT_EQ(obs.estimate()[0], 0.0f);
+  // A gap longer than max_gap_ns restarts the comparison instead of dividing by it.
+  obs.reset();
+  EXPECT_FALSE(obs.update(c, h, x, t));
+  EXPECT_FALSE(obs.update(c, h, x, t + 500 * kMs));
+  EXPECT_FLOAT_EQ(obs.estimate()[2], 0.0f);
+}
+
+TEST(DisturbanceObserver, RealModelConvergesToTheMismatch) {
+  // The 16-state quadrotor at hover in the model; the plant is 5 % heavier: it sinks. The
+  // observer, whose estimate enters the model it predicts with, settles at the plant's
+  // missing acceleration, -g * 0.05 / 1.05.
+  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+                                        {"mppi.rollouts=16", "mppi.horizon=5", "mppi.threads=1", "mppi.simd=off"});
+  auto c = app::make_controller(cfg);
+  const float hover = cfg.mppi.u_init[0];
+  daemon::CommandHistory h(4, cfg.mppi.u_init);
+  daemon::DisturbanceObserver obs(daemon::DisturbanceSettings{}, 1, 16);
+  auto plant_cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+                                    {"model.mass=0.2625", "mppi.rollouts=16", "mppi.horizon=5", "mppi.simd=off"});
+  auto plant = app::make_controller(plant_cfg);
+  float x[16] = {};
+  x[2] = 2.0f;
+  for (int i = 12; i < 16; ++i) x[i] = hover;
+  const float u[4] = {hover, hover, hover, hover};
+  std::int64_t t = 0;
+  for (int k = 0; k < 250; ++k) {  // 5 s
+    if (obs.update(*c, h, x, t)) c->set_external_accel(obs.estimate());
+    plant->propagate(x, u, 0.02f);
+    t += 20 * kMs;
+  }
+  EXPECT_NEAR(obs.estimate()[2], -9.81f * 0.05f / 1.05f, 0.01f);
+  EXPECT_NEAR(obs.estimate()[0], 0.0f, 1e-4f);
 }

@@ -543,6 +543,8 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.rejected_undecodable = ld(ic.rejected_undecodable) + ld(ic.rejected_shape) + ld(ic.rejected_inputs);
   status_.rejected_params = ld(counters_.params_rejected) + ld(ic.params_dropped);
   status_.rejected_future = ld(counters_.future_states);
+  status_.partial_updates = ld(counters_.partial_updates);
+  status_.anytime_holds = ld(counters_.anytime_holds);
   status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);
   tx_->publish_status(status_);
   counters_.status_published.fetch_add(1, std::memory_order_relaxed);
