@@ -47,9 +47,13 @@ def _wrap(a):
 def _controller_stats(status, commands=()):
     """From the controller_status_t messages: misses, cycles, and the timing figures of
     timing.py (compute_ms_p99 over the flight's cycles; *_worst_window: the worst window)."""
-    if not status:
-        return {}
     msgs = [m for _, m in status]
+    if not msgs:
+        # No status in the log (a lock-step flight can end within one status period): the
+        # per-cycle figures still come from the commands.
+        t = timing.flight_timing([], [m for _, m in commands])
+        t.pop("compute_samples_ms", None)
+        return t
     last = msgs[-1]
     res = {
         "backend": last.backend,
