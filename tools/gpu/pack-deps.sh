@@ -12,6 +12,9 @@
 #   lib/libglib-2.0.so.0           libglib2.0-0 (liblcm and the lcm binaries need it)
 #   bin/busybox, bin/ip            busybox-static: `ip` brings up lo in the network
 #                                  namespaces of the daemon bench and the SITL flights
+#   usr/include/hwy, usr/lib/x86_64-linux-gnu/{libhwy*,cmake/hwy}
+#                                  libhwy-dev + libhwy1 (Google Highway): the SIMD CPU
+#                                  backend, for the CPU figures on the machine's 16 cores
 # --all adds the C++ libraries that image already has, for an image without them:
 #   Eigen, yaml-cpp (+ its shared library), CLI11, spdlog + fmt, Google Benchmark, and
 #   the GoogleTest sources (built in the tree through -DMPPID_GTEST_SOURCE).
@@ -43,7 +46,7 @@ PY="$ROOT/.venv/bin/python"
 log "wheel: $(cd "$OUT/wheels" && ls)"
 
 # ---- Debian 12 packages, unpacked -------------------------------------------------------
-debs=(librandom123-dev libglib2.0-0 busybox-static)
+debs=(librandom123-dev libglib2.0-0 busybox-static libhwy-dev libhwy1)
 if ((ALL)); then
   debs+=(libeigen3-dev libyaml-cpp-dev libyaml-cpp0.7 libcli11-dev libspdlog-dev libspdlog1.10 libfmt-dev libfmt9
          libbenchmark-dev libbenchmark1debian googletest)
@@ -58,6 +61,10 @@ cp -a "$R/usr/include/Random123" "$OUT/usr/include/"
 cp -a "$R"/usr/lib/x86_64-linux-gnu/libglib-2.0.so.0* "$OUT/lib/"
 cp -a "$R/bin/busybox" "$OUT/bin/busybox"
 ln -sf busybox "$OUT/bin/ip"
+mkdir -p "$OUT/usr/lib/x86_64-linux-gnu/cmake"
+cp -a "$R/usr/include/hwy" "$OUT/usr/include/"
+cp -a "$R"/usr/lib/x86_64-linux-gnu/libhwy.so* "$R"/usr/lib/x86_64-linux-gnu/libhwy_contrib.so* "$OUT/usr/lib/x86_64-linux-gnu/"
+cp -a "$R/usr/lib/x86_64-linux-gnu/cmake/hwy" "$OUT/usr/lib/x86_64-linux-gnu/cmake/"
 if ((ALL)); then
   for d in eigen3 yaml-cpp CLI spdlog fmt benchmark; do cp -a "$R/usr/include/$d" "$OUT/usr/include/"; done
   mkdir -p "$OUT/usr/lib/x86_64-linux-gnu" "$OUT/usr/share"

@@ -57,7 +57,7 @@ fail() { say "FAILED: $*"; note "- FAILED: $*"; status=1; }
 # ---- setup: tools and libraries from .devdeps, the lcm wheel, a .venv stand-in -------------
 [[ -d "$D" ]] || { echo "run-all.sh: $D missing: run tools/gpu/pack-deps.sh here and carry .devdeps" >&2; exit 2; }
 export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 PY="$(command -v python3)"
 if ! "$PY" -c 'import lcm' 2>/dev/null; then
   "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl \
@@ -125,6 +125,10 @@ if want bench; then
     "$B/bin/mppid-bench" --model team3 --backend cuda --rollouts 1200 --horizon 100 --iterations $it
     "$B/bin/mppid-bench" --model team9 --backend cuda --rollouts 6000 --horizon 100 --iterations $it
   } >"$RES/bench.jsonl" 2>"$RES/bench.err" || fail "mppid-bench (see bench.err)"
+  # The CPU backend on all of this machine's cores (issue 11): SIMD lanes against the scalar
+  # backend, which is a plain OpenMP loop over the same scalar model.
+  "$B/bin/mppid-bench" --model quadrotor --backend cpu --rollouts 16384 --horizon 100 --threads "$(nproc)"     --obstacles 48 --simd off,auto --iterations $((it / 10)) >"$RES/bench-cpu.jsonl" 2>>"$RES/bench.err" ||
+    fail "mppid-bench cpu (see bench.err)"
   # The issue's targets on the test scenario (sigma 20, 32 obstacles), one full update each.
   "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 \
     team9_forest:6000 >"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing"
