@@ -102,6 +102,11 @@ TEST(DaemonBinary, InvalidConfigExitsNonZeroNamingTheField) {
       {{"--config", kConfig, "--backend", "tpu"}, "backend"},
       {{"--config", kConfig, "--lcm-url", "nosuch://x"}, "lcm_url"},
       {{"--config", "/nonexistent/mppid.yaml"}, "/nonexistent/mppid.yaml"},
+      {{"--config", kConfig, "--set", "daemon.latency.quantile=2"}, "daemon.latency.quantile"},
+      {{"--config", kConfig, "--set", "daemon.latency.state_time=gps"}, "daemon.latency.state_time"},
+      {{"--config", kConfig, "--set", "daemon.disturbance.limit=-1"}, "daemon.disturbance.limit"},
+      {{"--config", kConfig, "--set", "cuda.mppi.rollouts=0"}, "cuda: mppi.rollouts"},
+      {{"--config", kConfig, "--set", "cuda.daemon.rate_hz=10"}, "cuda.daemon"},
   };
   for (const auto& c : cases) {
     const Result r = run(c.args);

@@ -290,3 +290,19 @@ TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
   }
   EXPECT_EQ(loop.timing_total().misses, 0);
 }
+
+TEST(Settings, TheCudaSectionIsWhatTheCudaBackendFliesWith) {
+  const std::string file = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
+  const app::AppConfig c = app::load_config(file, {"cuda.mppi.rollouts=16384", "cuda.cost.w_z=200"});
+  ASSERT_NE(c.cuda, nullptr);
+  EXPECT_EQ(c.for_backend("cuda").mppi.rollouts, 16384);
+  EXPECT_EQ(c.for_backend("cpu").mppi.rollouts, c.mppi.rollouts);
+  EXPECT_NE(c.mppi.rollouts, 16384);
+  bool has_wz = false;
+  for (const auto& [k, v] : c.for_backend("cuda").params) has_wz = has_wz || (k == "cost.w_z" && v == 200.0);
+  EXPECT_TRUE(has_wz);
+  // A command-line --set wins over the section, on either backend.
+  const app::AppConfig d = app::load_config(file, {"cuda.mppi.rollouts=16384", "mppi.rollouts=512"});
+  EXPECT_EQ(d.for_backend("cuda").mppi.rollouts, 512);
+  EXPECT_EQ(d.for_backend("cpu").mppi.rollouts, 512);
+}

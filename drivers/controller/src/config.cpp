@@ -114,11 +114,43 @@ std::string default_config_path(const std::string& task) {
   return std::string(MPPID_SOURCE_DIR) + "/config/tasks/" + task + ".yaml";
 }
 
-AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {
+namespace {
+
+// A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost).
+YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section, const std::string& name) {
+  if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost overrides");
+  YAML::Node out = YAML::Clone(root);
+  out.remove(name);
+  for (const auto& kv : section) {
+    const auto part = kv.first.as<std::string>();
+    if (part != "mppi" && part != "model" && part != "cost") fail(name + "." + part, "unknown section (mppi, model, cost)");
+    if (!kv.second.IsMap()) fail(name + "." + part, "expected a map");
+    if (!out[part] || out[part].IsNull()) out[part] = YAML::Node(YAML::NodeType::Map);
+    for (const auto& f : kv.second) out[part][f.first.as<std::string>()] = YAML::Clone(f.second);
+  }
+  return out;
+}
+
+AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool cuda_variant) {
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
+  const YAML::Node file = YAML::Clone(root);
   for (const auto& o : overrides) apply_override(root, o);
+  // The `cuda:` variant: the file with that section (after the overrides: --set cuda.x=...
+  // works) merged in, then the other overrides again (so a command-line --set wins over the
+  // section). Parsed, and so validated, now, whatever the machine.
+  std::shared_ptr<const AppConfig> cuda;
+  if (const YAML::Node section = root["cuda"]; section && !cuda_variant) {
+    std::vector<std::string> rest;
+    for (const auto& o : overrides)
+      if (o.rfind("cuda.", 0) != 0) rest.push_back(o);
+    try {
+      cuda = std::make_shared<const AppConfig>(parse_impl(merged_with(file, section, "cuda"), rest, true));
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("cuda: ") + e.what());
+    }
+  }
   static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
-                                                 "description"};
+                                                 "description", "cuda"};
   for (const auto& kv : root) {
     const auto name = kv.first.as<std::string>();
     if (!sections.count(name)) fail(name, "unknown section");
@@ -155,7 +187,14 @@ AppConfig parse_config(YAML::Node root, const std::vector<std::string>& override
   if (!param_error.empty()) throw ConfigError(param_error);
   const std::string err = validate(c.mppi, nu);
   if (!err.empty()) throw ConfigError("mppi." + err);
+  c.cuda = cuda;
   return c;
+}
+
+}  // namespace
+
+AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {
+  return parse_impl(root, overrides, false);
 }
 
 AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides) {

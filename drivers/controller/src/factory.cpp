@@ -24,9 +24,10 @@ std::string resolve_backend(const std::string& requested, std::string* why_not_c
   return requested;
 }
 
-std::unique_ptr<Controller> make_controller(const AppConfig& config) {
+std::unique_ptr<Controller> make_controller(const AppConfig& file_config) {
   std::string why;
-  const std::string backend = resolve_backend(config.backend, &why);
+  const std::string backend = resolve_backend(file_config.backend, &why);
+  const AppConfig& config = file_config.for_backend(backend);
   if (backend == "cuda" && !why.empty()) throw ConfigError("backend: cuda requested but " + why);
   if (backend != "cpu" && backend != "cuda") throw ConfigError("backend: must be cpu, cuda or auto");
   std::unique_ptr<Controller> out;

@@ -125,7 +125,8 @@ int main(int argc, char** argv) {
     return kExitConfig;
   }
   spdlog::info("task {} on {} backend: K={} T={} dt={} lambda={} nu={}, {} Hz{}", controller->task(),
-               controller->backend(), cfg.mppi.rollouts, cfg.mppi.horizon, cfg.mppi.dt, cfg.mppi.lambda, cfg.mppi.nu,
+               controller->backend(), controller->settings().rollouts, controller->settings().horizon,
+               controller->settings().dt, controller->settings().lambda, controller->settings().nu,
                ds.loop.rate_hz, ds.loop.lockstep ? ", lock-step" : "");
 
   // ---- transport --------------------------------------------------------------------
@@ -265,8 +266,8 @@ int main(int argc, char** argv) {
     mppi::daemon::RunFacts f;
     f.task = controller->task();
     f.backend = controller->backend();
-    f.rollouts = cfg.mppi.rollouts;
-    f.horizon = cfg.mppi.horizon;
+    f.rollouts = controller->settings().rollouts;
+    f.horizon = controller->settings().horizon;
     f.rate_hz = ds.loop.rate_hz;
     f.seconds = seconds;
     f.lockstep = ds.loop.lockstep;

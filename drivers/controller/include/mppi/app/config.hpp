@@ -27,6 +27,13 @@ struct AppConfig {
   MppiSettings mppi;
   std::vector<std::pair<std::string, double>> params;  // "model.NAME" / "cost.NAME" overrides
   YAML::Node root;                                   // the whole document (programs read their own section)
+  // The settings file's `cuda:` section (mppi, model, cost overrides: what the CUDA backend
+  // flies with instead, e.g. more rollouts), merged and validated at load; null if none.
+  std::shared_ptr<const AppConfig> cuda;
+  // The settings for a backend ("cpu" or "cuda"): *cuda for "cuda" when there is one.
+  const AppConfig& for_backend(const std::string& resolved) const {
+    return resolved == "cuda" && cuda ? *cuda : *this;
+  }
 };
 
 // Loads FILE and applies overrides "dotted.key=value" (YAML scalars or flow sequences, e.g.
