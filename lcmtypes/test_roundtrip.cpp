@@ -187,6 +187,7 @@ TEST(LcmTypes, ControllerStatus) {
   s.jitter_ms_p99 = 0.25f;
   s.cycles = 100'000;
   s.misses = 3;
+  s.late_start_misses = 2;
   s.consecutive_misses = 1;
   s.ess = 123.5f;
   s.min_cost = 17.25f;
@@ -216,6 +217,7 @@ TEST(LcmTypes, ControllerStatus) {
   EXPECT_EQ(d.jitter_ms_p99, s.jitter_ms_p99);
   EXPECT_EQ(d.cycles, 100'000);
   EXPECT_EQ(d.misses, 3);
+  EXPECT_EQ(d.late_start_misses, 2);
   EXPECT_EQ(d.consecutive_misses, 1);
   EXPECT_EQ(d.ess, s.ess);
   EXPECT_EQ(d.min_cost, s.min_cost);

@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # The main job. Installs what is missing and builds (tools/setup.sh), then flies the
 # 16-state quadrotor through a seeded 4 m forest in SITL: the simulator (mppid-sim) and the
-# daemon (mppid) talk LCM over loopback multicast inside a private network namespace, in
-# lock-step, on the CPU backend (CUDA when a GPU is present). Prints the score and where
-# the log and plots are.
+# daemon (mppid, SCHED_FIFO as in service) talk LCM over loopback multicast inside a private
+# network namespace, in real time, on the CPU backend. Prints the score and where the log
+# and plots are.
 #
-#   tools/fly.sh [tools/sitl run arguments]    e.g. tools/fly.sh --seed 7 --realtime
-#                                              or   tools/fly.sh --scenario rate_track_circle
+#   tools/fly.sh [--lockstep] [tools/sitl run arguments]
+#       e.g. tools/fly.sh --seed 7      tools/fly.sh --backend cuda
+#            tools/fly.sh --lockstep    (lock-step, the controller's measured latency charged)
+#            tools/fly.sh --scenario rate_track_circle
 #
 # Environment: MPPID_SETUP_ARGS passes arguments to setup.sh (e.g. "--no-apt").
 set -euo pipefail
@@ -22,8 +24,20 @@ args=("$@")
 for ((i = 0; i < ${#args[@]}; i++)); do
   [[ "${args[i]}" == "--out" ]] && out="${args[i + 1]}"
 done
+# Real time unless asked otherwise: a flight figure counts only with the controller's real
+# latency in it. --lockstep flies lock-step with that latency charged (measured), --ideal or
+# --latency S the other lock-step variants.
+clock=(--realtime)
+pass=()
+for a in "$@"; do
+  case "$a" in
+    --lockstep) clock=() ;;
+    --ideal|--latency|--realtime) clock=(); pass+=("$a") ;;
+    *) pass+=("$a") ;;
+  esac
+done
 rc=0
-tools/sitl run --scenario forest_4m --seed 1 --backend auto --out "$out" "$@" || rc=$?
+tools/sitl run --scenario forest_4m --seed 1 --backend cpu --out "$out" "${clock[@]}" "${pass[@]}" || rc=$?
 if [[ -d "$out" ]]; then
   echo "plots:"
   find "$out" -maxdepth 1 -name '*.png' -printf '  %p\n' | sort

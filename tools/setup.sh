@@ -54,6 +54,11 @@ APT_PACKAGES=(
   xvfb xauth iproute2 util-linux procps
   # daemon tests: capsh makes the OS refuse real-time, systemd-analyze verifies the unit
   libcap2-bin systemd
+  # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
+  rt-tests
+  # sanitizer and fuzz builds (tools/sanitize.sh, tools/fuzz): clang 14 with its sanitizer and
+  # libFuzzer runtimes, its OpenMP (and Archer, which lets TSan see OpenMP), llvm-symbolizer
+  clang-14 libclang-rt-14-dev libomp-14-dev llvm-14
 )
 
 missing_packages() {

@@ -1,15 +1,23 @@
 #!/usr/bin/env bash
-# Sets up and builds (tools/setup.sh), then runs every test: ctest over the build, then
-# pytest over test/ when it holds Python tests. Exits non-zero when anything failed.
+# Sets up and builds (tools/setup.sh), then runs every test: ctest over the build, pytest
+# over test/ (a real-time forest flight among them), a short soak with scheduled faults
+# (tools/soak, every fault once), then the sanitizer and fuzzing stage (tools/sanitize.sh:
+# ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests).
+# Exits non-zero when anything failed. This is what CI runs (.ci/run).
 #
-#   tools/test.sh [setup.sh arguments]     e.g. tools/test.sh --no-apt
+#   tools/test.sh [--quick] [setup.sh arguments]     e.g. tools/test.sh --no-apt
 #
-# Environment: CTEST_ARGS adds ctest arguments (e.g. "-L lcm"), PYTEST_ARGS pytest ones.
+#   --quick   ctest and pytest only (no soak, no sanitizer builds, no fuzzing)
+#
+# Environment: CTEST_ARGS adds ctest arguments (e.g. "-L lcm"), PYTEST_ARGS pytest ones,
+# MPPID_SOAK_MINUTES the soak's length (2.5: the schedule's seven faults once each).
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 BUILD_DIR="${MPPID_BUILD_DIR:-build}"
+quick=0
+if [[ "${1:-}" == "--quick" ]]; then quick=1; shift; fi
 
 bash tools/setup.sh "$@"
 
@@ -29,6 +37,13 @@ if [[ -d test ]] && [[ -n "$(find test -name 'test_*.py' -print -quit)" ]]; then
   }
 else
   echo "[test] no Python tests under test/"
+fi
+
+if ((!quick)); then
+  echo "[test] tools/soak --minutes ${MPPID_SOAK_MINUTES:-2.5}"
+  tools/soak --minutes "${MPPID_SOAK_MINUTES:-2.5}" --out results/soak-test || status=1
+  echo "[test] tools/sanitize.sh"
+  tools/sanitize.sh || status=1
 fi
 
 if ((status == 0)); then echo "[test] all passed"; else echo "[test] FAILED" >&2; fi

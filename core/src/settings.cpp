@@ -30,6 +30,8 @@ std::string validate(const MppiSettings& s, int nu) {
   if (!(s.control_cost_scale >= 0.0f) || !std::isfinite(s.control_cost_scale))
     return "control_cost_scale: must be >= 0";
   if (s.smoothing_window < 1 || s.smoothing_window % 2 == 0) return "smoothing_window: must be odd and >= 1";
+  if (s.noise_groups < 1 || s.noise_groups > nu || nu % s.noise_groups != 0)
+    return "noise_groups: must be >= 1 and divide the " + std::to_string(nu) + " control channels";
   if (s.threads < 0) return "threads: must be >= 0";
   if (!simd::parse_setting(s.simd, nullptr))
     return "simd: must be auto, off or a target (" + simd::target_names() + ")";

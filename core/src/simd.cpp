@@ -1,6 +1,7 @@
 #include "mppi/simd.hpp"
 
 #ifdef MPPID_HAVE_HWY
+#include <cstdint>
 #include <hwy/targets.h>
 #endif
 

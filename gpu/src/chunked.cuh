@@ -103,8 +103,32 @@ __device__ __forceinline__ float nearest_surface_moved(const ObstacleTable& o, c
   return best;
 }
 
+// The same through the obstacle grid (ObstacleGrid::nearest_surface's lookup, the cell's
+// list searched over the moved cylinders); outside the grid, or with none, every cylinder.
+// The list of a cell holds the nearest cylinder of every point in it, so the distance is
+// the full search's (and CpuBackend's, which searches the same grid).
+__device__ __forceinline__ float nearest_surface_listed(const ObstacleGrid& g, const ObstacleTable& o, const float* mx,
+                                                        const float* my, float px, float py) {
+  if (g.nx > 0) {
+    const float fx = (px - g.x0) * g.inv_cell;
+    const float fy = (py - g.y0) * g.inv_cell;
+    if (fx >= 0.0f && fx < static_cast<float>(g.nx) && fy >= 0.0f && fy < static_cast<float>(g.ny)) {
+      int cell;
+      store_cell_indices(fx, fy, g.nx, &cell);
+      float best = ObstacleSet::kFar;
+      const int end = g.first[cell + 1];
+      for (int r = g.first[cell]; r < end; ++r) {
+        const int n = g.refs[r];
+        best = fminf(ObstacleSet::surface_distance(Cylinder{mx[n], my[n], o.r[n], -0.0f, -0.0f}, px, py, 0.0f), best);
+      }
+      return best;
+    }
+  }
+  return nearest_surface_moved(o, mx, my, px, py);
+}
+
 // Task::running for a single vehicle at step s of the chunk; forest tasks search the moved
-// cylinders of that step.
+// cylinders of that step (through the grid).
 template <class T>
 __device__ __forceinline__ float running_chunked(const typename T::Params& p, const ObstacleTable* o,
                                                  const float* moved, int chunk, int s, const float* x, float t,
@@ -117,7 +141,7 @@ __device__ __forceinline__ float running_chunked(const typename T::Params& p, co
     return T::running_with(p, x, crashed, [&](int j, const float* xj, bool* hit) {
       float pos[3];
       Vehicle::position(xj, pos);
-      const float d = nearest_surface_moved(*o, mx, mx + ObstacleTable::kCap, pos[0], pos[1]);
+      const float d = nearest_surface_listed(p.cost.obstacle_grid, *o, mx, mx + ObstacleTable::kCap, pos[0], pos[1]);
       return ForestCost<Vehicle>::vehicle_at_distance(p.cost, j, xj, d, hit);
     });
   } else {

@@ -18,6 +18,7 @@
 // costs bit for bit).
 #pragma once
 
+#include <cstdint>
 #include <cuda_runtime.h>
 
 #include <algorithm>

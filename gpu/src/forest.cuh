@@ -78,35 +78,58 @@ __device__ __forceinline__ float nearest_surface(const ObstacleSet& set, float p
   return best;
 }
 
-// ForestCost<Vehicle>::vehicle, the obstacle search split over G lanes.
+// The obstacle grid the kernels search through (global memory: the cycle's copy of the
+// parameters on the device, never staged; a few hundred bytes of it are touched per block,
+// and they stay in L1), or null.
+template <class T>
+__device__ __forceinline__ const ObstacleGrid* device_grid(const typename T::Params& p) {
+  if constexpr (kForestTask<T>) {
+    return &p.cost.obstacle_grid;
+  } else {
+    (void)p;
+    return nullptr;
+  }
+}
+
+// ForestCost<Vehicle>::vehicle. One lane (G = 1) searches through the grid: core's own
+// ObstacleGrid::nearest_surface, so the distance is CpuBackend's float (the grid's list of a
+// cell holds the nearest cylinder of every point in it; outside, every cylinder). G > 1 lanes
+// split the whole set (nearest_surface above).
 template <class Vehicle, int G>
-__device__ __forceinline__ float forest_vehicle(const typename ForestCost<Vehicle>::Params& p, int j, const float* x,
-                                                float t, int lane, bool* crash) {
+__device__ __forceinline__ float forest_vehicle(const typename ForestCost<Vehicle>::Params& p, const ObstacleGrid* grid,
+                                                int j, const float* x, float t, int lane, bool* crash) {
   float pos[3];
   Vehicle::position(x, pos);
-  const float d = nearest_surface<G>(p.obstacles, pos[0], pos[1], t, lane);
+  float d;
+  if (G == 1 && grid != nullptr) {
+    d = grid->nearest_surface(p.obstacles, pos[0], pos[1], t);
+  } else {
+    d = nearest_surface<G>(p.obstacles, pos[0], pos[1], t, lane);
+  }
   return ForestCost<Vehicle>::vehicle_at_distance(p, j, x, d, crash);
 }
 
-// Cost::vehicle; for forest tasks through forest_vehicle, the cylinders split over G lanes.
+// Cost::vehicle; for forest tasks through forest_vehicle (grid: device_grid of the device's
+// parameters, or null to scan every cylinder).
 template <class T, int G = 1>
-__device__ __forceinline__ float vehicle_cost(const typename T::Params& p, int j, const float* x, float t, int lane,
-                                              bool* hit) {
+__device__ __forceinline__ float vehicle_cost(const typename T::Params& p, const ObstacleGrid* grid, int j,
+                                              const float* x, float t, int lane, bool* hit) {
   if constexpr (kForestTask<T>) {
-    return forest_vehicle<typename T::Vehicle, G>(p.cost, j, x, t, lane, hit);
+    return forest_vehicle<typename T::Vehicle, G>(p.cost, grid, j, x, t, lane, hit);
   } else {
     static_assert(G == 1, "only the forest cost splits over lanes");
     (void)lane;
+    (void)grid;
     return T::Cost::vehicle(p.cost, j, x, t, hit);
   }
 }
 
 // Task::running (task.hpp), the vehicle terms through vehicle_cost.
 template <class T, int G = 1>
-__device__ __forceinline__ float running_cost(const typename T::Params& p, const float* x, float t, int lane,
-                                              std::uint32_t* crashed) {
+__device__ __forceinline__ float running_cost(const typename T::Params& p, const ObstacleGrid* grid, const float* x,
+                                              float t, int lane, std::uint32_t* crashed) {
   return T::running_with(p, x, crashed, [&](int j, const float* xj, bool* hit) {
-    return vehicle_cost<T, G>(p, j, xj, t, lane, hit);
+    return vehicle_cost<T, G>(p, grid, j, xj, t, lane, hit);
   });
 }
 

@@ -212,6 +212,7 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<
     if (!active) k = K - 1;
   }
   const bool writer = active && lane == 0;
+  const ObstacleGrid* grid = device_grid<T>(in->params);
   const NoiseKey key = in->key;
   float x[NX], u[NU], du[NU];
   for (int n = 0; n < NX; ++n) x[n] = in->x0[n];
@@ -222,7 +223,7 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<
     perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
     T::advance(p, x, u, dt, substeps, crashed);
     const float t = static_cast<float>(i + 1) * dt;
-    q = sanitize_cost(running_cost<T, G>(p, x, t, lane, &crashed) + control_cost<NU>(c, pu, du));
+    q = sanitize_cost(running_cost<T, G>(p, grid, x, t, lane, &crashed) + control_cost<NU>(c, pu, du));
     if (writer && i < horizon - 1) S[static_cast<std::size_t>(i) * K + k] = q;
   }
   if (!writer) return;
@@ -270,6 +271,7 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T:
   const bool active = g < G && k < K;  // the other lanes only keep the warp's barriers
   TeamRollout<T>& r = teams[warp * G + (g < G ? g : 0)];
   const NoiseKey key = in->key;
+  const ObstacleGrid* grid = device_grid<T>(in->params);
   const float h = dt / static_cast<float>(substeps);
 
   float x[VNX];
@@ -306,8 +308,8 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T:
         if (((mask >> j) & 1u) == 0u)
           for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, uj, h);
         for (int n = 0; n < VNX; ++n) r.x[buf][j][n] = x[n];
-        bool hit = false;
-        r.q[buf][j] = vehicle_cost<T>(p, j, x, static_cast<float>(i + 1) * dt, 0, &hit);
+        bool hit = ((mask >> j) & 1u) != 0u;  // crashed before (Task::running_with)
+        r.q[buf][j] = vehicle_cost<T>(p, grid, j, x, static_cast<float>(i + 1) * dt, 0, &hit);
         if (hit) bits |= 1u << j;
       }
       __syncwarp();

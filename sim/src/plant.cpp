@@ -1,5 +1,6 @@
 #include "sim/plant.hpp"
 
+#include <cstdint>
 #include <mppi_lcm/command_t.hpp>
 #include <mppi_lcm/vehicle_state_t.hpp>
 
@@ -23,7 +24,9 @@ using mppi_lcm::vehicle_state_t;
 template <class Params>
 Params plant_params(const Scenario& s) {
   Params p;
-  for (const auto& [key, value] : s.params) {
+  for (const auto& kv : s.params) {
+    const std::string& key = kv.first;  // not a structured binding: C++17 lambdas cannot capture those
+    const double value = kv.second;
     bool found = false;
     mppi::visit_fields(p, [&](const char* name, float& field, float lo, float hi) {
       if (key != name) return;
@@ -77,6 +80,7 @@ class ModelPlant : public Plant {
   void position(int v, double* pos) const override;
   double speed(int v) const override;
   std::vector<float> hover() const override;
+  std::vector<float> failsafe() const override { return hover(); }
   StateGroup group(int i) const override;
   void fix_published(float* x) const override;
 
@@ -158,6 +162,29 @@ template <> void ModelPlant<QuadrotorRate>::position(int v, double* pos) const {
 template <> double ModelPlant<QuadrotorRate>::speed(int v) const {
   const float* x = x_.data() + v * QuadrotorRate::kNx;
   return std::sqrt(double(x[3]) * x[3] + double(x[4]) * x[4] + double(x[5]) * x[5]);
+}
+// An autopilot's failsafe for a 13-state rate quadrotor view x: body rates that turn the
+// thrust axis back to vertical (P on the tilt, yaw rate 0) and the thrust that holds the
+// altitude (P on the vertical speed, divided by the tilt's cosine).
+void level_and_hold(const float* x, float mass, float gravity, float* u) {
+  using Q = QuadrotorRate;
+  const float qw = x[Q::QW], qx = x[Q::QX], qy = x[Q::QY], qz = x[Q::QZ];
+  const float r1[3] = {1.0f - 2.0f * (qy * qy + qz * qz), 2.0f * (qx * qy + qw * qz), 2.0f * (qx * qz - qw * qy)};
+  const float r2[3] = {2.0f * (qx * qy - qw * qz), 1.0f - 2.0f * (qx * qx + qz * qz), 2.0f * (qy * qz + qw * qx)};
+  const float b3[3] = {2.0f * (qx * qz + qw * qy), 2.0f * (qy * qz - qw * qx), 1.0f - 2.0f * (qx * qx + qy * qy)};
+  const float e[3] = {b3[1], -b3[0], 0.0f};  // b3 x e_z: the axis that turns b3 up
+  constexpr float kLevel = 4.0f, kClimb = 2.0f;
+  u[0] = std::max(0.0f, mass * (gravity - kClimb * x[Q::VZ]) / std::max(b3[2], 0.5f));
+  u[1] = kLevel * (r1[0] * e[0] + r1[1] * e[1] + r1[2] * e[2]);
+  u[2] = kLevel * (r2[0] * e[0] + r2[1] * e[1] + r2[2] * e[2]);
+  u[3] = 0.0f;
+}
+template <> std::vector<float> ModelPlant<QuadrotorRate>::failsafe() const {
+  std::vector<float> u(static_cast<std::size_t>(4 * vehicles_));
+  for (int v = 0; v < vehicles_; ++v)
+    level_and_hold(x_.data() + v * QuadrotorRate::kNx, p_.mass, p_.gravity, u.data() + 4 * v);
+  saturate(u.data());
+  return u;
 }
 template <> std::vector<float> ModelPlant<QuadrotorRate>::hover() const {
   std::vector<float> u(static_cast<std::size_t>(4 * vehicles_), 0.0f);
@@ -300,6 +327,13 @@ class RateBodyPlant : public Plant {
   std::vector<float> hover() const override {
     std::vector<float> u(static_cast<std::size_t>(4 * vehicles_), 0.0f);
     for (int v = 0; v < vehicles_; ++v) u[static_cast<std::size_t>(4 * v)] = p_.mass * p_.gravity;
+    return u;
+  }
+  std::vector<float> failsafe() const override {
+    std::vector<float> u(static_cast<std::size_t>(4 * vehicles_));
+    for (int v = 0; v < vehicles_; ++v)
+      level_and_hold(x_.data() + v * QuadrotorRate::kNx, p_.mass, p_.gravity, u.data() + 4 * v);
+    saturate(u.data());
     return u;
   }
   StateGroup group(int i) const override {

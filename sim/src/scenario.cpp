@@ -1,5 +1,6 @@
 #include "sim/scenario.hpp"
 
+#include <cstdint>
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
@@ -18,13 +19,19 @@ struct Context {
   }
 };
 
+// A map key's name; a list or map as a key is an error naming where it is.
+std::string key_name(const Context& c, const YAML::Node& key, const std::string& where) {
+  if (!key.IsScalar()) c.fail(where, "keys must be plain names (line " + std::to_string(key.Mark().line + 1) + ")");
+  return key.Scalar();
+}
+
 // Every section lists the keys it knows, so a typo is an error, not a silent default.
 void check_keys(const Context& c, const YAML::Node& n, const std::string& where,
                 const std::set<std::string>& known) {
   if (!n) return;
   if (!n.IsMap()) c.fail(where, "expected a mapping");
   for (const auto& kv : n) {
-    const auto key = kv.first.as<std::string>();
+    const auto key = key_name(c, kv.first, where);
     if (known.count(key) == 0) c.fail(where + "." + key, "unknown key");
   }
 }
@@ -47,6 +54,8 @@ void read_vec3(const Context& c, const YAML::Node& n, const std::string& where, 
   out = {v[0], v[1], v[2]};
 }
 
+constexpr double kMaxForestPoints = 20000;
+
 void positive(const Context& c, double v, const std::string& where) {
   if (!(v > 0.0) || !std::isfinite(v)) c.fail(where, "must be > 0");
 }
@@ -62,6 +71,10 @@ Vec3 Scenario::start_of(int v) const {
   return {start[0], start[1] + off, start[2]};
 }
 
+namespace {
+Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed);
+}  // namespace
+
 Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   const Context c{path};
   YAML::Node root;
@@ -70,6 +83,22 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   } catch (const YAML::Exception& e) {
     c.fail("file", e.what());
   }
+  return parse_scenario(c, root, seed);
+}
+
+Scenario load_scenario_text(const std::string& text, const std::string& label, std::uint64_t seed) {
+  const Context c{label};
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    c.fail("file", e.what());
+  }
+  return parse_scenario(c, root, seed);
+}
+
+namespace {
+Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed) {
   check_keys(c, root, "scenario",
              {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
               "success", "mppid"});
@@ -95,7 +124,7 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   if (plant["params"]) {
     if (!plant["params"].IsMap()) c.fail("plant.params", "expected a mapping");
     for (const auto& kv : plant["params"]) {
-      const auto key = kv.first.as<std::string>();
+      const auto key = key_name(c, kv.first, "plant.params");
       try {
         s.params[key] = kv.second.as<double>();
       } catch (const YAML::Exception&) {
@@ -113,7 +142,7 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   const auto timing = root["timing"];
   check_keys(c, timing, "timing",
              {"physics_hz", "state_hz", "actuation_delay", "controller_latency", "duration", "lockstep_timeout",
-              "startup_timeout", "obstacles_hz"});
+              "startup_timeout", "obstacles_hz", "command_timeout"});
   read(c, timing, "timing", "physics_hz", s.physics_hz);
   read(c, timing, "timing", "state_hz", s.state_hz);
   read(c, timing, "timing", "actuation_delay", s.actuation_delay);
@@ -131,12 +160,15 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   read(c, timing, "timing", "lockstep_timeout", s.lockstep_timeout);
   read(c, timing, "timing", "startup_timeout", s.startup_timeout);
   read(c, timing, "timing", "obstacles_hz", s.obstacles_hz);
+  read(c, timing, "timing", "command_timeout", s.command_timeout);
   if (s.physics_hz < 500.0) c.fail("timing.physics_hz", "must be >= 500");
   positive(c, s.state_hz, "timing.state_hz");
   positive(c, s.duration, "timing.duration");
   positive(c, s.lockstep_timeout, "timing.lockstep_timeout");
   positive(c, s.obstacles_hz, "timing.obstacles_hz");
   if (s.actuation_delay < 0.0) c.fail("timing.actuation_delay", "must be >= 0");
+  if (!(s.command_timeout >= 0.0) || !std::isfinite(s.command_timeout))
+    c.fail("timing.command_timeout", "must be >= 0 (0: off)");
   {
     // The physics step must divide the state period, so every state falls on a step.
     const double ratio = s.physics_hz / s.state_hz;
@@ -189,6 +221,16 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
     }
     positive(c, s.forest.spacing, "world.forest.spacing");
     positive(c, s.forest.radius, "world.forest.radius");
+    const ForestSpec& fs = s.forest;
+    for (double v : {fs.jitter, fs.radius_jitter, fs.clear_radius, fs.x_min, fs.x_max, fs.y_min, fs.y_max})
+      if (!std::isfinite(v)) c.fail("world.forest", "every value must be finite");
+    // The generator visits every lattice point and checks each new tree against the others:
+    // bound the work (a corridor of 1 km x 100 m at 3 m spacing is ~13,000 points).
+    const double points =
+        ((fs.x_max - fs.x_min) / fs.spacing + 1.0) * ((fs.y_max - fs.y_min) / (fs.spacing * 0.866) + 1.0);
+    if (!(points <= kMaxForestPoints))
+      c.fail("world.forest", "x_range, y_range and spacing make " + std::to_string(points) + " lattice points; at most " +
+                                 std::to_string(static_cast<long>(kMaxForestPoints)));
   }
   if (world && world["moving"]) {
     const auto m = world["moving"];
@@ -196,6 +238,9 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
     read(c, m, "world.moving", "count", s.moving.count);
     read(c, m, "world.moving", "speed", s.moving.speed);
     read(c, m, "world.moving", "radius", s.moving.radius);
+    if (s.moving.count < 0 || s.moving.count > 1024) c.fail("world.moving.count", "must be 0..1024");
+    if (!std::isfinite(s.moving.speed) || !std::isfinite(s.moving.radius))
+      c.fail("world.moving", "speed and radius must be finite");
   }
   if (world && world["obstacles"]) {
     for (const auto& o : world["obstacles"]) {
@@ -246,6 +291,7 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed) {
   generate_obstacles(s);
   return s;
 }
+}  // namespace
 
 void generate_obstacles(Scenario& s) {
   s.obstacles = s.fixed_obstacles;

@@ -1,5 +1,6 @@
 #include "sim/simulator.hpp"
 
+#include <cstdint>
 #include <lcm/lcm-cpp.hpp>
 #include <mppi_lcm/command_t.hpp>
 #include <mppi_lcm/obstacles_t.hpp>
@@ -20,6 +21,8 @@
 #include <stdexcept>
 #include <vector>
 
+#include "mppi/transport/lcm_decode.hpp"
+#include "sim/command_input.hpp"
 #include "sim/plant.hpp"
 #include "sim/rng.hpp"
 
@@ -99,7 +102,7 @@ class Simulation {
   int run();
 
  private:
-  void on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* msg);
+  void on_command(const lcm::ReceiveBuffer* rb, const std::string&);
   void publish_state(std::int64_t seq, double t, bool republish);
   void publish_world(double t);
   bool wait_for_command(std::int64_t seq, double t);
@@ -119,9 +122,14 @@ class Simulation {
   Rng wind_rng_, noise_rng_;
   int nu_total_ = 0;
   std::vector<float> u_applied_;
-  std::int8_t applied_mode_ = -1;
+  std::int8_t applied_mode_ = -1;  // -2: the simulator's own failsafe (timing.command_timeout)
+  double last_command_t_ = 0.0;
+  std::int64_t command_timeouts_ = 0;
+  std::int64_t realtime_pauses_ = 0;  // real time: re-anchored after falling > 0.1 s behind
+  double realtime_paused_s_ = 0.0;
   std::int64_t applied_seq_ = -1;
   std::deque<PendingCommand> pending_;
+  mppi_lcm::command_t command_in_;  // decode scratch
   std::vector<float> published_state_;
   std::vector<Obstacle> obstacles_;
   bool any_moving_ = false;
@@ -157,8 +165,16 @@ class Simulation {
   double time_to_goal_ = std::numeric_limits<double>::quiet_NaN();
 };
 
-void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* msg) {
+void Simulation::on_command(const lcm::ReceiveBuffer* rb, const std::string&) {
   ++commands_;
+  if (!mppi::transport::decode_message(rb->data, rb->data_size, &command_in_)) {
+    // Nothing in it can be trusted, not even which state it answers: counted, not answered.
+    ++rejected_commands_;
+    if (!o_.quiet && rejected_commands_ <= 5)
+      std::fprintf(stderr, "mppid-sim: undecodable command (%u bytes) rejected\n", rb->data_size);
+    return;
+  }
+  const mppi_lcm::command_t* msg = &command_in_;
   if (o_.lockstep && msg->state_seq != waiting_for_) {
     ++ignored_commands_;  // an answer to an older state (e.g. a republished one)
     return;
@@ -166,17 +182,13 @@ void Simulation::on_command(const lcm::ReceiveBuffer*, const std::string&, const
   // A malformed answer still answers its state (lock-step goes on, the previous control
   // stays applied); it is counted, and the score reports it.
   if (o_.lockstep) answered_ = true;
-  if (msg->n != nu_total_ || static_cast<int>(msg->u.size()) != nu_total_ ||
-      (msg->kind != plant_->command_kind() && msg->kind != mppi_lcm::command_t::KIND_GENERIC)) {
+  std::vector<float> u;
+  const CommandCheck check = check_command(*msg, *plant_, &u);
+  if (check != CommandCheck::kAccepted) {
     ++rejected_commands_;
     if (!o_.quiet && rejected_commands_ <= 5)
-      std::fprintf(stderr, "mppid-sim: command rejected (n=%d kind=%d, expected n=%d kind=%d)\n", msg->n,
-                   msg->kind, nu_total_, plant_->command_kind());
-    return;
-  }
-  std::vector<float> u = msg->u;
-  if (!plant_->saturate(u.data())) {
-    ++rejected_commands_;
+      std::fprintf(stderr, "mppid-sim: command rejected, %s (n=%d kind=%d, expected n=%d kind=%d)\n", to_string(check),
+                   msg->n, msg->kind, nu_total_, plant_->command_kind());
     return;
   }
   double reaches = now_;  // when the command reaches the plant, in simulated time
@@ -508,6 +520,8 @@ void Simulation::write_summary(Outcome outcome, double t_end) {
   std::fprintf(f, ",\"states\":%lld,\"commands\":%lld,\"ignored_commands\":%lld,\"rejected_commands\":%lld,",
                static_cast<long long>(states_), static_cast<long long>(commands_),
                static_cast<long long>(ignored_commands_), static_cast<long long>(rejected_commands_));
+  std::fprintf(f, "\"command_timeouts\":%lld,\"realtime_pauses\":%lld,\"realtime_paused_s\":%.3f,",
+               static_cast<long long>(command_timeouts_), static_cast<long long>(realtime_pauses_), realtime_paused_s_);
   std::fprintf(f, "\"wall_s\":%.3f,\"lockstep\":%s,\"collisions\":[", seconds_since(run_start_),
                o_.lockstep ? "true" : "false");
   for (std::size_t i = 0; i < collisions_.size(); ++i) {
@@ -554,14 +568,34 @@ int Simulation::run() {
       }
     }
     if (!o_.lockstep) {
-      // Real time: the physics follows the wall clock; commands arrive meanwhile.
-      pump_until(run_start_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(now_)));
+      // Real time: the physics follows the wall clock; commands arrive meanwhile. Fallen
+      // more than 0.1 s behind (stopped, SIGSTOP, or starved of CPU), it does not race the
+      // gap with no controller in the loop: the clock is re-anchored (and the reference's
+      // epoch with it), so the world paused while the simulator did.
+      const auto target = run_start_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(now_));
+      const auto lag = Clock::now() - target;
+      if (lag > std::chrono::milliseconds(100)) {
+        run_start_ += lag;
+        const std::int64_t lag_us = std::chrono::duration_cast<std::chrono::microseconds>(lag).count();
+        ref_t0_ += lag_us;
+        run_start_wall_us_ += lag_us;  // states keep their sample time on the wall clock: now, not before the pause
+        ++realtime_pauses_;
+        realtime_paused_s_ += std::chrono::duration<double>(lag).count();
+      }
+      pump_until(target + (lag > std::chrono::milliseconds(100) ? lag : Clock::duration::zero()));
     }
     while (!pending_.empty() && pending_.front().apply_time <= now_ + 0.5 * h) {
       u_applied_ = std::move(pending_.front().u);
       applied_mode_ = pending_.front().mode;
       applied_seq_ = pending_.front().seq;
       pending_.pop_front();
+      last_command_t_ = now_;
+    }
+    if (s_.command_timeout > 0.0 && now_ - last_command_t_ > s_.command_timeout) {
+      // The autopilot's offboard-loss failsafe, as it were: level and hold, every step.
+      if (applied_mode_ != -2) ++command_timeouts_;
+      applied_mode_ = -2;
+      u_applied_ = plant_->failsafe();
     }
     if (step % per_state == 0) write_tick(step / per_state, now_);
     if (!collisions_.empty() && s_.stop_on_collision) {

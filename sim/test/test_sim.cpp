@@ -13,7 +13,7 @@ namespace {
 
 struct Decay {
   static constexpr int kNx = 1;
-  static constexpr int kNu = 1;
+  [[maybe_unused]] static constexpr int kNu = 1;  // the model interface; unused by rk4
   struct Params {
     float k = 1.0f;
   };

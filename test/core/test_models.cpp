@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mppi/costs/ellipse.hpp"
 #include "mppi/costs/forest.hpp"
 #include "mppi/costs/reference.hpp"
 #include "mppi/costs/tracking.hpp"
@@ -680,6 +681,37 @@ TEST(ForestCost, GoalYawSpeedTermsByHand) {
   EXPECT_NEAR(ForestCost<Quadrotor>::terminal(c, 0, x.data()), 2.0f * 62.5f, 1e-3f);
 }
 
+TEST(ForestCost, GoalPullTurnsLinearBeyondTheRadius) {
+  auto c = forest_cost_params();  // goal (10, 0, 1)
+  std::vector<float> x(16, 0.0f);
+  x[Q::PZ] = 1.0f;
+  bool crash = false;
+  auto cost_at = [&](float px, float py) {
+    x[Q::PX] = px;
+    x[Q::PY] = py;
+    return ForestCost<Quadrotor>::vehicle(c, 0, x.data(), 0.0f, &crash);
+  };
+  // Off (the paper's quadratic): 2.5 * 25 at 5 m.
+  EXPECT_NEAR(cost_at(5.0f, 0.0f), 2.5 * 25.0, 1e-4);
+  c.w_xy = 25.0f;
+  c.xy_linear_beyond = 2.0f;
+  // Inside the radius: the quadratic, unchanged (1.2 m: 25 * 1.44).
+  EXPECT_NEAR(cost_at(10.0f, 1.2f), 25.0 * 1.44, 1e-4);
+  // At the radius both shapes agree; beyond it, r (2 e - r): e = 5 (3-4-5) gives 2 * 8 = 16.
+  EXPECT_NEAR(cost_at(10.0f, 2.0f), 25.0 * 4.0, 1e-4);
+  EXPECT_NEAR(cost_at(7.0f, 4.0f), 25.0 * 16.0, 1e-3);
+  // Slope 2 w_xy r per metre, whatever the distance: 40 m and 41 m differ by 100.
+  EXPECT_NEAR(cost_at(-31.0f, 0.0f) - cost_at(-30.0f, 0.0f), 2.0 * 25.0 * 2.0, 1e-2);
+  // Continuous at the radius (no step a rollout could exploit).
+  EXPECT_NEAR(cost_at(10.0f, 2.0001f) - cost_at(10.0f, 1.9999f), 25.0 * 4.0 * 0.0002, 1e-2);
+  EXPECT_FALSE(crash);
+  // The terminal term uses the same shape.
+  c.w_terminal = 3.0f;
+  x[Q::PX] = 7.0f;
+  x[Q::PY] = 4.0f;
+  EXPECT_NEAR(ForestCost<Quadrotor>::terminal(c, 0, x.data()), 3.0 * 25.0 * 16.0, 1e-2);
+}
+
 TEST(ForestCost, GroundCrash) {
   const auto c = forest_cost_params();
   std::vector<float> x(16, 0.0f);
@@ -727,6 +759,45 @@ TEST(ForestCost, ObstacleProximityAndCrash) {
   EXPECT_NEAR(ForestCost<Quadrotor>::vehicle(c, 0, x.data(), 2.0f, &crash),
               2.5 * 25.0 + 350.0 * std::exp(-0.25 / 12.0) + 1000.0, 1e-3);
   EXPECT_TRUE(crash);
+}
+
+TEST(ForestCost, StickyCrashKeepsChargingAfterAMovingObstaclePassed) {
+  Team::Params p{};
+  for (int j = 0; j < 3; ++j) {
+    p.cost.goal[j][1] = 10.0f * static_cast<float>(j);
+    p.cost.goal[j][2] = 1.0f;
+  }
+  // One cylinder moving at 5 m/s in x, through vehicle 1's spot at t = 0.
+  p.cost.obstacles.count = 1;
+  p.cost.obstacles.items[0] = Cylinder{0.0f, 10.0f, 0.3f, 5.0f, 0.0f};
+  std::vector<float> x(48, 0.0f);
+  for (int j = 0; j < 3; ++j) {
+    x[j * 16 + Q::PY] = 10.0f * static_cast<float>(j);  // everyone at its goal
+    x[j * 16 + Q::PZ] = 1.0f;
+  }
+  auto obstacle_terms = [&](float t) {  // the obstacle terms of the three vehicles at time t
+    float q = 0.0f;
+    for (int j = 0; j < 3; ++j) {
+      const float dj = p.cost.obstacles.nearest_surface(x[j * 16 + Q::PX], x[j * 16 + Q::PY], t);
+      q += 350.0f * std::exp(-(dj * dj) / 12.0f);
+    }
+    return q;
+  };
+  for (float sticky : {0.0f, 1.0f}) {
+    p.cost.crash_sticky = sticky;
+    std::uint32_t crashed = 0;
+    // t = 0: inside the cylinder: a crash of vehicle 1, charged either way.
+    EXPECT_NEAR(Team::running(p, x.data(), 0.0f, &crashed), obstacle_terms(0.0f) + 1000.0f, 1e-2);
+    EXPECT_EQ(crashed, 0b010u);
+    // t = 1: the cylinder is 5 m on; the frozen vehicle is clear of it. Sticky: still charged.
+    const float later = Team::running(p, x.data(), 1.0f, &crashed);
+    EXPECT_NEAR(later, obstacle_terms(1.0f) + (sticky > 0.0f ? 1000.0f : 0.0f), 1e-2) << "sticky " << sticky;
+    EXPECT_EQ(crashed, 0b010u);
+    // A vehicle that never crashed is never charged (vehicle 1's bit alone carries it).
+    std::uint32_t none = 0;
+    EXPECT_NEAR(Team::running(p, x.data(), 1.0f, &none), obstacle_terms(1.0f), 1e-2);
+    EXPECT_EQ(none, 0u);
+  }
 }
 
 TEST(ForestCost, PairSeparationAndCollision) {
@@ -815,6 +886,92 @@ TEST(TrackingCost, RateQuadrotorYawFromQuaternion) {
   EXPECT_NEAR(TrackingCost<QuadrotorRate>::vehicle(c, 0, x.data(), 1.0f, &crash), 0.0f, 1e-4f);
   x[QR::PX] = 0.2f;  // 100 * 0.04 = 4
   EXPECT_NEAR(TrackingCost<QuadrotorRate>::vehicle(c, 0, x.data(), 1.0f, &crash), 4.0f, 1e-3f);
+}
+
+// ---------------------------------------------------------------------------------------
+// Race car on the ellipse (Sec. VI.B): the paper's q = 100 d^2 + (vx - 7)^2 and the
+// optional line, edge, track-limit and drift terms.
+// ---------------------------------------------------------------------------------------
+// A car on the major axis at residual d: x = 13 sqrt(1 + d), y = 0.
+std::vector<float> car_at(double d, float vx, float vy) {
+  std::vector<float> x(RC::kNx, 0.0f);
+  x[RC::X] = static_cast<float>(13.0 * std::sqrt(1.0 + d));
+  x[RC::VX] = vx;
+  x[RC::VY] = vy;
+  return x;
+}
+
+TEST(EllipseCost, PaperCostByHandAndExtrasOffByDefault) {
+  const EllipseCost::Params c;
+  bool crash = false;
+  // d = 0.2, vx = 5: 100 * 0.04 + (5 - 7)^2 = 8; a wild vy and |d| costs nothing more.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.2, 5.0f, -4.0f).data(), 0.0f, &crash), 8.0f, 1e-3f);
+  EXPECT_FALSE(crash);
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(2.0, 7.0f, 0.0f).data(), 0.0f, &crash), 400.0f, 0.05f);
+  EXPECT_FALSE(crash) << "the paper's cost has no track limit";
+}
+
+TEST(EllipseCost, LineEdgeTrackLimitAndDriftByHand) {
+  EllipseCost::Params c;
+  c.w_track = 10.0f;
+  c.line = 0.2f;
+  c.edge = 0.3f;
+  c.w_edge = 100.0f;
+  c.track_limit = 0.5f;
+  c.w_crash = 1000.0f;
+  c.drift = 0.25f;
+  c.w_drift = 10.0f;
+  bool crash = false;
+  // On the line at target speed, sliding less than the drift angle: nothing to pay.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.2, 7.0f, -1.5f).data(), 0.0f, &crash), 0.0f, 1e-3f);
+  EXPECT_FALSE(crash);
+  // d = 0.4: track 10 * 0.2^2 = 0.4, edge 100 * 0.1^2 = 1.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.4, 7.0f, 0.0f).data(), 0.0f, &crash), 1.4f, 1e-3f);
+  EXPECT_FALSE(crash);
+  // Inside, d = -0.4: track 10 * 0.6^2 = 3.6, edge on |d| too: 1.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(-0.4, 7.0f, 0.0f).data(), 0.0f, &crash), 4.6f, 1e-3f);
+  EXPECT_FALSE(crash);
+  // d = 0.6, past the limit: crashed, pays w_crash on top (track 0.16 * 10, edge 100 * 0.09).
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.6, 7.0f, 0.0f).data(), 0.0f, &crash), 1000.0f + 1.6f + 9.0f, 1e-2f);
+  EXPECT_TRUE(crash);
+  crash = false;
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(-0.55, 7.0f, 0.0f).data(), 0.0f, &crash),
+              1000.0f + 10.0f * 0.75f * 0.75f + 100.0f * 0.25f * 0.25f, 1e-2f);
+  EXPECT_TRUE(crash) << "off the inside edge";
+  crash = false;
+  // Sliding: vx = 4, vy = -3 (either side): |vy| - 0.25 * 4 = 2 over, 10 * 4 = 40.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.2, 4.0f, -3.0f).data(), 0.0f, &crash), 9.0f + 40.0f, 1e-3f);
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.2, 4.0f, 3.0f).data(), 0.0f, &crash), 9.0f + 40.0f, 1e-3f);
+  // A crab: vx = 0, vy = 5: the whole vy is over.
+  EXPECT_NEAR(EllipseCost::vehicle(c, 0, car_at(0.2, 0.0f, 5.0f).data(), 0.0f, &crash), 49.0f + 250.0f, 1e-3f);
+  EXPECT_FALSE(crash);
+}
+
+TEST(EllipseCost, RacingLineStadiumByHand) {
+  EllipseCost::Params c;
+  c.w_track = 0.0f;  // only the line term (vx = 7 = target speed)
+  c.w_line = 3.0f;
+  c.line_radius = 7.0f;
+  c.line_half = 2.5f;
+  auto at = [](float px, float py) {
+    std::vector<float> x(RC::kNx, 0.0f);
+    x[RC::X] = px;
+    x[RC::Y] = py;
+    x[RC::VX] = 7.0f;
+    return x;
+  };
+  bool crash = false;
+  auto q = [&](float px, float py) { return EllipseCost::vehicle(c, 0, at(px, py).data(), 0.0f, &crash); };
+  EXPECT_NEAR(q(9.5f, 0.0f), 0.0f, 1e-4f);    // the end's apex, 7 m beyond the centre (2.5, 0)
+  EXPECT_NEAR(q(-9.5f, 0.0f), 0.0f, 1e-4f);   // the other end
+  EXPECT_NEAR(q(0.0f, 7.0f), 0.0f, 1e-4f);    // on the straight
+  EXPECT_NEAR(q(1.0f, -8.0f), 3.0f, 1e-4f);   // 1 m outside the straight
+  EXPECT_NEAR(q(-2.0f, 6.0f), 3.0f, 1e-4f);   // 1 m inside it
+  EXPECT_NEAR(q(5.5f, 4.0f), 3.0f * 4.0f, 1e-4f);    // (3, 4) from the centre: 5 m, 2 m inside
+  EXPECT_NEAR(q(-8.5f, -8.0f), 3.0f * 9.0f, 1e-4f);  // (6, 8) from (-2.5, 0): 10 m, 3 m outside
+  EXPECT_FALSE(crash);
+  c.w_line = 0.0f;
+  EXPECT_EQ(q(-8.5f, -8.0f), 0.0f) << "off by default";
 }
 
 TEST(Reference, VelocityIsTheDerivativeOfPosition) {

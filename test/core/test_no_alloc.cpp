@@ -108,5 +108,15 @@ TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
   }
 }
 
+TEST(NoAlloc, DdpControllerCyclesAllocateNothing) {
+  // The MPC-DDP baseline, as the daemon builds it (controller: ddp).
+  const auto config = app::load_config(app::default_config_path("quadrotor_forest"),
+                                       {"controller=ddp", "mppi.horizon=50"});
+  auto c = app::make_controller(config);
+  ASSERT_NE(c, nullptr);
+  ASSERT_STREQ(c->backend(), "ddp");
+  EXPECT_EQ(allocations_over_cycles(*c), 0u);
+}
+
 }  // namespace
 }  // namespace mppi

@@ -2,6 +2,7 @@
 // float as the full scan at every point and time, inside the grid and out, for static and
 // moving cylinders; it drops the cylinders no point of the region can see; its lists are
 // short in a dense forest; it refuses what it cannot index (and stays exact).
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -23,6 +23,8 @@
 namespace mppi {
 namespace {
 
+using testing::quadrotor_settings;
+
 // ---------------------------------------------------------------------------------------
 // Fixtures
 // ---------------------------------------------------------------------------------------
@@ -233,6 +235,56 @@ TEST(ControlCost, NaturalVarianceDropsTheDuRDuTerm) {
   // = 1.25 * 0.70805 + 5 * 0.125 + 5 * 0.02 + 20 * 0.005 = 0.8850625 + 0.625 + 0.1 + 0.1 remains.
   const float zero[4] = {0, 0, 0, 0};
   EXPECT_NEAR(control_cost<4>(c4, plan, zero), 1.7100625f, 2e-5f);
+}
+
+// ---------------------------------------------------------------------------------------
+// Noise groups (MppiSettings::noise_groups)
+// ---------------------------------------------------------------------------------------
+
+TEST(NoiseGroups, EachSamplePerturbsOnlyItsGroupWithTheUngroupedNoise) {
+  constexpr int NU = 12;  // a team of three 4-channel vehicles
+  MppiSettings s = quadrotor_settings(16, 10, 100.0f, 60.0f);
+  for (auto* v : {&s.sigma, &s.u_min, &s.u_max, &s.u_init, &s.u_nominal}) {
+    const std::vector<float> one = *v;
+    for (int j = 1; j < 3; ++j) v->insert(v->end(), one.begin(), one.end());
+  }
+  const auto all = make_sampler_constants<NU>(s);
+  EXPECT_EQ(all.groups, 1);
+  s.noise_groups = 3;
+  EXPECT_EQ(validate(s, NU), "");
+  const auto grouped = make_sampler_constants<NU>(s);
+  EXPECT_EQ(grouped.groups, 3);
+  EXPECT_EQ(grouped.group_channels, 4);
+  const NoiseKey key{7u, 3u};
+  std::vector<float> plan(NU);
+  for (int j = 0; j < NU; ++j) plan[static_cast<std::size_t>(j)] = 3000.0f + 10.0f * static_cast<float>(j);
+  for (std::uint32_t k = 0; k < 9; ++k) {
+    for (std::uint32_t step : {0u, 5u}) {
+      float u_all[NU], du_all[NU], u[NU], du[NU];
+      perturb<NU>(all, key, k, step, plan.data(), u_all, du_all);
+      perturb<NU>(grouped, key, k, step, plan.data(), u, du);
+      for (int j = 0; j < NU; ++j) {
+        if (static_cast<std::uint32_t>(j / 4) == k % 3u) {
+          // Its own group: exactly the ungrouped draw (the grouping changes no channel's noise).
+          EXPECT_EQ(u[j], u_all[j]) << "sample " << k << " channel " << j;
+          EXPECT_EQ(du[j], du_all[j]);
+          EXPECT_NE(du[j], 0.0f);
+        } else {
+          EXPECT_EQ(u[j], plan[static_cast<std::size_t>(j)]) << "sample " << k << " channel " << j;
+          EXPECT_EQ(du[j], 0.0f);
+        }
+      }
+      // The control cost sees du = 0 on the other groups.
+      float du_masked[NU];
+      for (int j = 0; j < NU; ++j) du_masked[j] = static_cast<std::uint32_t>(j / 4) == k % 3u ? du_all[j] : 0.0f;
+      EXPECT_EQ(control_cost<NU>(grouped, plan.data(), du), control_cost<NU>(all, plan.data(), du_masked));
+    }
+  }
+  // Groups must divide the channels.
+  s.noise_groups = 5;
+  EXPECT_EQ(validate(s, NU), "noise_groups: must be >= 1 and divide the 12 control channels");
+  s.noise_groups = 0;
+  EXPECT_NE(validate(s, NU), "");
 }
 
 // ---------------------------------------------------------------------------------------

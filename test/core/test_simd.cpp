@@ -295,9 +295,7 @@ void check_step(const char* name, simd::Target target, const testing::SimdProbe<
   }
   EXPECT_LT(worst_state, kStepTolerance) << name << " " << simd::name(target) << ": Highway's math, state";
   EXPECT_LT(worst_cost, kStepTolerance) << name << " " << simd::name(target) << ": Highway's math, cost";
-  if (T::kVehicles > 1 || !std::is_same_v<typename T::Cost, EllipseCost>) {
-    EXPECT_GT(crash_lanes, 0) << name << ": no lane crashed: the crash terms went untested";
-  }
+  EXPECT_GT(crash_lanes, 0) << name << ": no lane crashed: the crash terms went untested";
 }
 
 TEST(SimdStep, EveryModelAndCostBitIdenticalWithLibmAndCloseWithHighway) {
@@ -309,6 +307,16 @@ TEST(SimdStep, EveryModelAndCostBitIdenticalWithLibmAndCloseWithHighway) {
     if constexpr (std::is_same_v<typename T::Cost, SwingupCost>) {
       p.cost.track_limit = 1.5f;  // off by default: on here, so the crash term is tested
       p.cost.w_crash = 50.0f;
+    }
+    if constexpr (std::is_same_v<typename T::Cost, EllipseCost>) {
+      p.cost.track_limit = 0.05f;  // off by default: on here (tight), so the crash, edge and drift terms are tested
+      p.cost.w_crash = 50.0f;
+      p.cost.edge = 0.02f;
+      p.cost.w_edge = 200.0f;
+      p.cost.line = 0.01f;
+      p.cost.drift = 0.05f;
+      p.cost.w_drift = 10.0f;
+      p.cost.w_line = 5.0f;
     }
     // The forest tasks run the culled search (a grid from a straight path) in the batch and
     // the full scan in the scalar code: the same distances.

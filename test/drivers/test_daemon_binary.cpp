@@ -1,12 +1,14 @@
 // The real mppid binary: invalid settings exit non-zero naming the field; SIGTERM stops
 // it within 100 ms with exit code 0 and a final status; --require-realtime exits
-// non-zero when the OS refuses, --realtime runs on.
+// non-zero when the OS refuses, --realtime runs on; an LCM URL that would leave the host
+// is warned about at start.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -106,7 +108,11 @@ TEST(DaemonBinary, InvalidConfigExitsNonZeroNamingTheField) {
       {{"--config", kConfig, "--set", "daemon.latency.state_time=gps"}, "daemon.latency.state_time"},
       {{"--config", kConfig, "--set", "daemon.disturbance.limit=-1"}, "daemon.disturbance.limit"},
       {{"--config", kConfig, "--set", "cuda.mppi.rollouts=0"}, "cuda: mppi.rollouts"},
-      {{"--config", kConfig, "--set", "cuda.daemon.rate_hz=10"}, "cuda.daemon"},
+      {{"--config", kConfig, "--set", "cuda.sim.duration=10"}, "cuda.sim"},
+      {{"--config", kConfig, "--set", "cuda.daemon.trigger=sometimes"}, "cuda: daemon.trigger"},
+      {{"--config", kConfig, "--controller", "ddp", "--set", "ddp.max_iterations=0"}, "ddp.max_iterations"},
+      {{"--config", kConfig, "--controller", "ddp", "--set", "ddp.speed_limit=-1"}, "ddp.speed_limit"},
+      {{"--config", kConfig, "--set", "controller=lqr"}, "controller"},
   };
   for (const auto& c : cases) {
     const Result r = run(c.args);
@@ -151,4 +157,29 @@ TEST(DaemonBinary, RequireRealtimeExitsWhenRefusedRealtimeRunsOn) {
   const Result lenient = shell(pre + base + "--realtime --duration 0.3'");
   EXPECT_EQ(lenient.code, 0) << lenient.err;
   EXPECT_NE(lenient.err.find("running on without full real-time"), std::string::npos) << lenient.err;
+}
+
+// The bus would leave the host (udpm with ttl > 0): mppid says so at start and runs on;
+// with ttl=0 it says nothing. Each run in its own network namespace, so nothing leaves.
+TEST(DaemonBinary, WarnsWhenItsLcmUrlWouldLeaveTheHost) {
+  auto netns_run = [](const std::string& url) {
+    const std::string cmd = "unshare -n sh -c 'ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec " + kBin +
+                            " --config " + kConfig + " --lcm-url \"" + url + "\" --duration 0.3'";
+    Proc p = spawn({"/bin/sh", "-c", cmd}, "url");
+    Result r{wait_exit(p.pid, 20000), slurp(p.out_path), slurp(p.err_path)};
+    std::remove(p.out_path.c_str());
+    std::remove(p.err_path.c_str());
+    return r;
+  };
+  const Result leaving = netns_run("udpm://239.255.76.67:7667?ttl=1");
+  if (leaving.err.find("unshare failed") != std::string::npos && std::getenv("CI") == nullptr)
+    GTEST_SKIP() << "no network namespace here (needs root): " << leaving.err;
+  EXPECT_EQ(leaving.code, 0) << leaving.err;
+  EXPECT_NE(leaving.err.find("lcm_url udpm://239.255.76.67:7667?ttl=1: ttl=1: multicast datagrams leave this host"),
+            std::string::npos)
+      << leaving.err;
+  const Result local = netns_run("udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_EQ(local.code, 0) << local.err;
+  EXPECT_NE(local.err.find("ready:"), std::string::npos) << local.err;
+  EXPECT_EQ(local.err.find("leave"), std::string::npos) << local.err;
 }

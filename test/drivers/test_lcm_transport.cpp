@@ -2,6 +2,7 @@
 // the loop publishing through it, parameter updates over the channel, a prompt stop on a
 // quiet bus, and the real controller behind it. Waits poll a condition with a deadline;
 // no sleep is an assertion.
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -305,4 +306,22 @@ TEST(Settings, TheCudaSectionIsWhatTheCudaBackendFliesWith) {
   const app::AppConfig d = app::load_config(file, {"cuda.mppi.rollouts=16384", "mppi.rollouts=512"});
   EXPECT_EQ(d.for_backend("cuda").mppi.rollouts, 512);
   EXPECT_EQ(d.for_backend("cpu").mppi.rollouts, 512);
+}
+
+// A live update rebuilds the controller from with_mppi(settings): the CUDA backend must get
+// them too, not the cuda: section's (found on the H100: live updates were silently ignored by
+// a CUDA controller whose task file has a cuda: section).
+TEST(Settings, WithMppiReachesTheCudaSectionToo) {
+  const std::string file = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
+  const app::AppConfig c = app::load_config(file, {"cuda.mppi.rollouts=16384"});
+  ASSERT_NE(c.cuda, nullptr);
+  MppiSettings s = c.for_backend("cuda").mppi;
+  s.rollouts = 256;
+  s.horizon = 45;
+  const app::AppConfig n = c.with_mppi(s);
+  EXPECT_EQ(n.for_backend("cuda").mppi.rollouts, 256);
+  EXPECT_EQ(n.for_backend("cuda").mppi.horizon, 45);
+  EXPECT_EQ(n.for_backend("cpu").mppi.rollouts, 256);
+  EXPECT_EQ(n.for_backend("cuda").params, c.for_backend("cuda").params);  // model/cost kept
+  EXPECT_EQ(c.for_backend("cuda").mppi.rollouts, 16384);                 // the original untouched
 }

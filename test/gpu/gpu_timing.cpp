@@ -1,9 +1,12 @@
 // mppid-gpu-timing: time one full CUDA update (state and plan up, sample, roll out, weigh,
 // update, plan down) with steady_clock around RolloutBackend::update(), and print JSON.
-//   mppid-gpu-timing [--iters N] [--warmup N] CASE...     CASE = task:K[:T]
+//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] CASE...     CASE = task:K[:T]
+// The forest tasks run with the obstacle grid the optimizer builds each cycle (Task::prepare
+// from the plan), as in the daemon; --no-grid: every search scans all 32 cylinders.
 // e.g. mppid-gpu-timing quadrotor_forest:16384 team9_forest:6000 team3_forest:1200
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
@@ -25,10 +28,11 @@ struct Result {
 };
 
 template <class T>
-Result time_case(const std::string& name, int k, int t, int iters, int warmup) {
+Result time_case(const std::string& name, int k, int t, int iters, int warmup, bool grid) {
   auto sc = mppi::gpu_test::make_scenario<T>(k, t);
   auto backend = mppi::make_cuda_backend<T>(sc.settings);
   auto plan = mppi::gpu_test::initial_plan(sc.settings);
+  if (grid) mppi::gpu_test::prepare(sc, plan);  // the obstacle grid, as the optimizer builds it
   const auto plan0 = plan;
   mppi::UpdateStats stats;
   std::vector<double> us;
@@ -62,13 +66,15 @@ Result time_case(const std::string& name, int k, int t, int iters, int warmup) {
 
 int main(int argc, char** argv) {
   int iters = 1000, warmup = 50;
+  bool grid = true;
   std::vector<std::string> cases;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
     if (arg == "--iters" && a + 1 < argc) iters = std::atoi(argv[++a]);
     else if (arg == "--warmup" && a + 1 < argc) warmup = std::atoi(argv[++a]);
+    else if (arg == "--no-grid") grid = false;
     else if (arg == "--help" || arg == "-h") {
-      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] task:K[:T]...\n");
+      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] task:K[:T]...\n");
       return 0;
     } else cases.push_back(arg);
   }
@@ -80,13 +86,17 @@ int main(int argc, char** argv) {
     return 2;
   }
   const char* graph = std::getenv("MPPID_CUDA_GRAPH");
+  // The kernel choices set from the environment (cuda_backend_impl.cuh), to label the run.
+  std::string env;
+  for (const char* k : {"MPPID_CUDA_KERNEL", "MPPID_CUDA_CHUNK", "MPPID_CUDA_WARPS", "MPPID_CUDA_NOISE", "MPPID_CUDA_LANES"})
+    if (const char* v = std::getenv(k)) env += std::string(env.empty() ? "" : " ") + k + "=" + v;
   char date[32];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   std::printf("{\n  \"device\": \"%s\",\n  \"date\": \"%s\",\n  \"cuda_graph\": %s,\n  \"iterations\": %d,\n"
-              "  \"warmup\": %d,\n  \"obstacles\": 32,\n  \"results\": [",
+              "  \"warmup\": %d,\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
               mppi::cuda_device_name().c_str(), date, graph != nullptr && std::string(graph) == "0" ? "false" : "true",
-              iters, warmup);
+              iters, warmup, grid ? "true" : "false", env.c_str());
   bool first = true;
   int status = 0;
   for (const auto& c : cases) {
@@ -99,7 +109,7 @@ int main(int argc, char** argv) {
     try {
       const bool known = mppi::visit_task(name, [&](auto tag) {
         using T = typename decltype(tag)::type;
-        r = time_case<T>(name, k, t, iters, warmup);
+        r = time_case<T>(name, k, t, iters, warmup, grid);
       });
       if (!known) throw std::runtime_error("unknown task " + name);
     } catch (const std::exception& e) {

@@ -219,4 +219,14 @@ inline std::vector<float> initial_plan(const MppiSettings& s) {
   return plan;
 }
 
+// Task::prepare as the optimizer runs it each cycle, from `plan`: for the forest tasks, the
+// obstacle grid over the plan's noise-free path, which both backends then search (without
+// it, every search scans every cylinder).
+template <class T>
+void prepare(Scenario<T>& sc, const std::vector<float>& plan) {
+  std::vector<float> path(static_cast<std::size_t>(sc.settings.horizon + 1) * T::kVehicles * 2);
+  T::prepare(sc.params, sc.x0.data(), plan.data(), sc.settings.horizon, sc.settings.dt, sc.settings.substeps,
+             path.data());
+}
+
 }  // namespace mppi::gpu_test

@@ -1,6 +1,7 @@
 // CUDA backend against the CPU reference (cpu_backend.hpp): per-rollout costs and the
 // updated plan for every task, bit-for-bit determinism, and clear errors. Every test skips
 // when no CUDA device is present (CI builds these with nvcc but has no GPU).
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -28,6 +29,17 @@ namespace {
 
 constexpr float kCostTolerance = 1e-5f;  // relative, per rollout
 constexpr float kPlanTolerance = 1e-4f;  // relative to max(1, |u|)
+// The plan is a weighted mean of the noise, with weights exp(-S_k / lambda): a cost error
+// dS_k moves a weight by the factor exp(-dS_k / lambda), and so the plan by at most about
+// 2 max|dS| / lambda times the largest noise sample (~5 sigma over 4096 Gaussian draws). With
+// a small lambda (the race car's 2) the ulp-level cost errors of the in-tolerance rollouts
+// alone can move the plan past 1e-4 (1.45e-4 measured on an H100); the plan is then held to
+// that bound, computed from the cost errors measured in the same update.
+double plan_tolerance(const MppiSettings& s, double max_abs_cost_err) {
+  float sigma_max = 0.0f;
+  for (float v : s.sigma) sigma_max = std::max(sigma_max, v);
+  return std::max(static_cast<double>(kPlanTolerance), 2.0 * max_abs_cost_err / s.lambda * 5.0 * sigma_max);
+}
 // CUDA's sinf/cosf/expf/logf differ from glibc's by an ulp on some arguments. A rollout
 // that crosses a crash threshold (ground, obstacle, another vehicle) near a step boundary,
 // or flips over (the Euler-angle map is singular at 90 degrees of roll), turns that ulp
@@ -52,6 +64,7 @@ struct Errors {
   int identical = 0;       // rollouts whose cost is bit-identical to the CPU's
   int over_tolerance = 0;  // rollouts outside kCostTolerance
   double cost_in_tolerance = 0.0;  // largest relative error among the others
+  double abs_in_tolerance = 0.0;   // largest absolute error among the others
 };
 
 template <class T>
@@ -68,7 +81,10 @@ Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cp
     const double rel = std::fabs(static_cast<double>(gc[k]) - cc[k]) / std::max(1.0, std::fabs(static_cast<double>(cc[k])));
     if (gc[k] == cc[k]) ++e.identical;
     if (rel > kCostTolerance) ++e.over_tolerance;
-    else e.cost_in_tolerance = std::max(e.cost_in_tolerance, rel);
+    else {
+      e.cost_in_tolerance = std::max(e.cost_in_tolerance, rel);
+      e.abs_in_tolerance = std::max(e.abs_in_tolerance, std::fabs(static_cast<double>(gc[k]) - cc[k]));
+    }
     if (rel > e.cost) {
       e.cost = rel;
       e.worst_rollout = static_cast<int>(k);
@@ -94,10 +110,11 @@ Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cp
   return e;
 }
 
-template <class T>
-void check_parity(const char* name, Weighting weighting) {
+template <class T, class Tweak>
+void check_parity(const char* name, Weighting weighting, Tweak&& tweak) {
   auto sc = gpu_test::make_scenario<T>(parity_rollouts<T>(), 100);
   sc.settings.weighting = weighting;
+  tweak(sc);
   sc.settings.seed = 42;
   MppiSettings scalar = sc.settings;
   scalar.simd = "off";  // the reference: one sample at a time, the C library's math
@@ -112,7 +129,8 @@ void check_parity(const char* name, Weighting weighting) {
         << e.worst_gpu << " (rel " << e.cost << "); " << e.identical << " bit-identical";
     std::printf("[parity] %s cycle %u: %d of %zu rollouts bit-identical, %d over tolerance\n", name, cycle, e.identical,
                 static_cast<std::size_t>(sc.settings.rollouts), e.over_tolerance);
-    EXPECT_LE(e.plan, kPlanTolerance) << name << " cycle " << cycle;
+    EXPECT_LE(e.plan, plan_tolerance(sc.settings, e.abs_in_tolerance))
+        << name << " cycle " << cycle << " (largest in-tolerance cost error " << e.abs_in_tolerance << ")";
     worst.cost = std::max(worst.cost, e.cost);
     worst.plan = std::max(worst.plan, e.plan);
     worst.over_tolerance = std::max(worst.over_tolerance, e.over_tolerance);
@@ -124,6 +142,11 @@ void check_parity(const char* name, Weighting weighting) {
               worst.plan);
   ::testing::Test::RecordProperty("max_rel_cost_error", std::to_string(worst.cost));
   ::testing::Test::RecordProperty("max_plan_error", std::to_string(worst.plan));
+}
+
+template <class T>
+void check_parity(const char* name, Weighting weighting) {
+  check_parity<T>(name, weighting, [](gpu_test::Scenario<T>&) {});
 }
 
 #define PARITY_TEST(T, name)                                                   \
@@ -144,9 +167,49 @@ TEST(CudaParity, QuadrotorForestTrajectoryWeighting) {
   SKIP_WITHOUT_CUDA();
   check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kTrajectory);
 }
+// The team9 task file's choices: one noise group per vehicle (each sample moves one
+// vehicle; the sampler is shared code, so the GPU draws the same gated noise) and the xy
+// goal pull linear beyond 2 m.
+TEST(CudaParity, Team9ForestNoiseGroupsAndLinearGoalPull) {
+  SKIP_WITHOUT_CUDA();
+  check_parity<Team9Forest>("team9_forest groups", Weighting::kCostToGo, [](gpu_test::Scenario<Team9Forest>& sc) {
+    sc.settings.noise_groups = Team9Forest::kVehicles;
+    sc.params.cost.w_xy = 25.0f;
+    sc.params.cost.xy_linear_beyond = 2.0f;
+  });
+}
 TEST(CudaParity, Team3ForestTrajectoryWeighting) {
   SKIP_WITHOUT_CUDA();
   check_parity<Team3Forest>("team3_forest", Weighting::kTrajectory);
+}
+
+// With the obstacle grid the optimizer builds each cycle (Task::prepare), as the daemon runs
+// them: the chunked kernel, the lane kernel at one lane per rollout and the team kernel search
+// the cell's list (the CPU the same grid); the costs must stay the CPU's.
+template <class T>
+void check_parity_with_grid(const char* name) {
+  check_parity<T>(name, Weighting::kCostToGo, [name](gpu_test::Scenario<T>& sc) {
+    gpu_test::prepare(sc, gpu_test::initial_plan(sc.settings));
+    ASSERT_GT(sc.params.cost.obstacle_grid.nx, 0) << name << ": the scenario should have a grid";
+    const auto& g = sc.params.cost.obstacle_grid;
+    // The lists are shorter than the set (else the test would not exercise the culling).
+    ASSERT_LT(g.first[g.nx * g.ny], g.nx * g.ny * sc.params.cost.obstacles.count) << name;
+  });
+}
+
+TEST(CudaParity, ObstacleGridEveryKernel) {
+  SKIP_WITHOUT_CUDA();
+  check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid");
+  check_parity_with_grid<RateQuadrotorForest>("quadrotor_rate_forest+grid");
+  check_parity_with_grid<Team3Forest>("team3_forest+grid");
+  check_parity_with_grid<Team9Forest>("team9_forest+grid");
+  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
+  for (const char* lanes : {"1", "2"}) {
+    setenv("MPPID_CUDA_LANES", lanes, 1);
+    check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, lane kernel");
+  }
+  unsetenv("MPPID_CUDA_LANES");
+  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // The lane kernel (rollout_single, the fallback when the chunked kernel's shared memory does
@@ -252,8 +315,8 @@ std::string error_of(F&& f) {
   return "(no std::runtime_error thrown)";
 }
 
+// Settings are validated on the host before any device call: these run without a GPU too.
 TEST(CudaErrors, ZeroRolloutsIsAClearError) {
-  SKIP_WITHOUT_CUDA();
   auto sc = gpu_test::make_scenario<QuadrotorForest>(0, 100);
   const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings); });
   std::printf("[error] K=0: %s\n", msg.c_str());
@@ -278,7 +341,6 @@ TEST(CudaErrors, AbsurdRolloutsFailAllocationClearly) {
 }
 
 TEST(CudaErrors, SettingsThatDoNotMatchTheTaskAreAClearError) {
-  SKIP_WITHOUT_CUDA();
   auto sc = gpu_test::make_scenario<QuadrotorForest>(1024, 100);
   sc.settings.sigma.pop_back();
   const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings); });

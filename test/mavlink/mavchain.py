@@ -28,13 +28,15 @@ IO_PRIO = ["chrt", "-f", "85"] if RT else []
 
 class Chain:
     def __init__(self, procs: Procs, out: Path, world=None, autopilot="px4", vehicle_params=(), router=False,
-                 bridge_sets=(), mppid=True, task="quadrotor_rate_track", mppid_sets=MPPID_SETS, bridge_config=None):
+                 bridge_sets=(), mppid=True, task="quadrotor_rate_track", mppid_sets=MPPID_SETS, bridge_config=None,
+                 vehicle_args=()):
         self.procs, self.out = procs, out
         self.world, self.autopilot, self.router = world, autopilot, router
         self.sock = str(out / "bridge.sock")
         self.link_msgs = []
         self._lcm_stop = threading.Event()
         self.vehicle_params, self.bridge_sets = list(vehicle_params), list(bridge_sets)
+        self.vehicle_args = list(vehicle_args)
         self.mppid, self.task, self.mppid_sets = mppid, task, list(mppid_sets)
         self.bridge_config = bridge_config or str(ROOT / "config" / "bridge" /
                                                   ("px4_sitl.yaml" if autopilot == "px4" else "ardupilot_sitl.yaml"))
@@ -48,7 +50,7 @@ class Chain:
             cmd += ["--world", ROOT / "sim" / "mavlink_vehicle" / "worlds" / f"{self.world}.yaml"]
         for kv in self.vehicle_params:
             cmd += ["--param", kv]
-        return self.procs.start("vehicle", IO_PRIO + cmd)
+        return self.procs.start("vehicle", IO_PRIO + cmd + self.vehicle_args)
 
     def start_router(self, extra_outs=()):
         cmd = [PYTHON, "-m", "MAVProxy.mavproxy", f"--master=udpin:127.0.0.1:{ROUTER_IN}",

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <stdexcept>
 #include <string>
@@ -21,11 +22,20 @@ class FakeClock final : public rt::Clock {
   std::int64_t now_ns() override { return t_.load(); }
   void sleep_until(std::int64_t t) override {
     sleeps.push_back(t);
-    if (t > t_.load()) t_.store(t);
+    if (t > t_.load()) t_.store(t + oversleep_ns);
+    oversleep_ns = 0;
+  }
+  // A pending post ends the wait at once (the states the test offered before the step); else
+  // the clock jumps to t, as a wait that no state ended.
+  bool sleep_until_or(rt::Wakeup& wake, std::int64_t t) override {
+    if (wake.try_wait()) return true;
+    sleep_until(t);
+    return false;
   }
   void advance(std::int64_t ns) { t_ += ns; }
   void set(std::int64_t t) { t_ = t; }
   std::vector<std::int64_t> sleeps;  // loop thread only
+  std::int64_t oversleep_ns = 0;     // the next sleep wakes this late (a stalled machine), once
 
  private:
   std::atomic<std::int64_t> t_{1'000'000'000};  // read by receive threads too
@@ -48,6 +58,10 @@ class RecordingTransport final : public transport::Transport {
     plans.push_back(p);
     return true;
   }
+  bool publish_param_result(const transport::ParamResult& r) override {
+    param_results.push_back(r);
+    return true;
+  }
   bool any_nonfinite() const {
     for (const auto& c : commands)
       for (int i = 0; i < c.n; ++i)
@@ -57,13 +71,15 @@ class RecordingTransport final : public transport::Transport {
   std::vector<transport::Command> commands;
   std::vector<transport::StatusReport> statuses;
   std::vector<transport::PlanView> plans;
+  std::vector<transport::ParamResult> param_results;
 };
 
 // nx = 16, nu = 4, plan of T steps. iterate() writes u = plan[0] where the plan's step i
 // is filled with (base + cycle + i) on every channel, then shifts; hooks script faults.
 class FakeController final : public Controller {
  public:
-  explicit FakeController(FakeClock* clock, int horizon = 10) : clock_(clock) {
+  // `base`: commands are base + 10 * iteration + step (so tests can tell controllers apart).
+  explicit FakeController(FakeClock* clock, int horizon = 10, float base = 1000.0f) : clock_(clock), base_(base) {
     s_.rollouts = 8;
     s_.horizon = horizon;
     s_.dt = 0.02f;
@@ -72,6 +88,11 @@ class FakeController final : public Controller {
     s_.u_max = {6000, 6000, 6000, 6000};
     s_.u_init = {3000, 3000, 3000, 3000};
     plan_.assign(static_cast<std::size_t>(horizon) * 4, 3000.0f);
+  }
+  // A fake built by a live-update factory: these settings (horizon included).
+  void use_settings(const MppiSettings& s) {
+    s_ = s;
+    plan_.assign(static_cast<std::size_t>(s.horizon) * 4, 3000.0f);
   }
   const std::string& task() const override { return name_; }
   const char* backend() const override { return "fake"; }
@@ -97,12 +118,13 @@ class FakeController final : public Controller {
     in_iterate_ = true;
     ++iterations;
     last_x0.assign(x0, x0 + 16);
+    plan_at_iterate.assign(plan_.begin(), plan_.end());
     if (compute_ns) clock_->advance(compute_ns(iterations));
     stats_ = UpdateStats{};
     stats_.ess = 5.0f;
     const int T = s_.horizon;
     for (int i = 0; i < T; ++i)
-      for (int j = 0; j < 4; ++j) plan_[static_cast<std::size_t>(i * 4 + j)] = 1000.0f + static_cast<float>(iterations * 10 + i);
+      for (int j = 0; j < 4; ++j) plan_[static_cast<std::size_t>(i * 4 + j)] = base_ + static_cast<float>(iterations * 10 + i);
     if (fault && fault(iterations, &plan_, &stats_)) {
       in_iterate_ = false;
       throw std::runtime_error("injected optimizer error");
@@ -134,6 +156,14 @@ class FakeController final : public Controller {
     x[0] += u[0] * seconds;
     ++propagations;
   }
+  // Live updates: takes over another fake's inputs and iteration count.
+  bool adopt(const Controller& from) override {
+    const auto* o = dynamic_cast<const FakeController*>(&from);
+    if (o == nullptr) return false;
+    inputs = o->inputs;
+    adopted_from = o;
+    return true;
+  }
   int predict(const float*, const float*, float*, int) const override { return 0; }
   const std::vector<float>& plan() const override { return plan_; }
   const MppiSettings& settings() const override { return s_; }
@@ -151,6 +181,8 @@ class FakeController final : public Controller {
   mutable int propagations = 0;
   const std::atomic<bool>* stop_flag = nullptr;  // the anytime stop flag last given
   std::vector<float> last_x0;
+  std::vector<float> plan_at_iterate;  // the plan as iterate() found it (warm start)
+  const Controller* adopted_from = nullptr;
   std::vector<std::pair<std::string, double>> params_set;
   TaskInputs inputs;
 
@@ -160,6 +192,7 @@ class FakeController final : public Controller {
     std::fill(plan_.end() - 4, plan_.end(), 3000.0f);
   }
   FakeClock* clock_;
+  float base_;
   std::string name_ = "quadrotor_forest";
   MppiSettings s_;
   std::vector<float> plan_;

@@ -1,6 +1,7 @@
 // The control loop on a fake clock with a scripted controller and a recording transport:
 // schedule and monitor, and every fault path (each asserts what was published, what was
 // counted, and that no non-finite value was published).
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -29,6 +30,18 @@ transport::Inbox::Expect expect16() {
   e.vehicles = 1;
   e.model = 1;
   e.restart_after_ns = 100 * kMs;
+  return e;
+}
+
+// The state trigger, with the inbox posting a wake-up per accepted state (as mppid sets it).
+daemon::LoopSettings state_trigger() {
+  daemon::LoopSettings s;
+  s.trigger = daemon::Trigger::kState;
+  return s;
+}
+transport::Inbox::Expect expect16_waking() {
+  auto e = expect16();
+  e.wake_on_state = true;
   return e;
 }
 
@@ -89,6 +102,92 @@ TEST(ControlLoop, OnTimeCyclesSleepOnTheAbsoluteGrid) {
   EXPECT_FALSE(r.tx.any_nonfinite());
 }
 
+// Trigger state: each state starts its cycle when it arrives, off the clock's grid, so the
+// state's wait for a cycle is gone (state sampled -> command out = the compute time).
+TEST(ControlLoop, StateTriggerStartsEachCycleWhenItsStateArrives) {
+  Rig r(state_trigger(), expect16_waking());
+  r.ctl.compute_ns = [](int) { return 2 * kMs; };
+  r.loop.start();
+  const std::int64_t t0 = r.clock.now_ns();
+  for (int k = 0; k < 10; ++k) {
+    r.clock.set(t0 + 7 * kMs + k * 20 * kMs + (k % 3) * 300'000);  // 7 ms off the grid, 0.3 ms jitter
+    r.fresh_cycle();
+    EXPECT_EQ(r.last().state_seq, k + 1);
+  }
+  ASSERT_EQ(r.tx.commands.size(), 10u);
+  for (const auto& c : r.tx.commands) EXPECT_EQ(c.mode, Mode::kNormal);
+  EXPECT_TRUE(r.clock.sleeps.empty()) << "a cycle waited for the clock";
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(t.misses, 0);
+  EXPECT_NEAR(t.latency.max_ms, 2.0, 0.011);
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 10);
+  EXPECT_EQ(r.loop.counters().clock_triggered.load(), 0);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+// The same script on the clock's grid: each state waits 13 ms for its cycle.
+TEST(ControlLoop, ClockTriggerMakesAStateWaitForTheGrid) {
+  Rig r;
+  r.ctl.compute_ns = [](int) { return 2 * kMs; };
+  r.loop.start();
+  const std::int64_t t0 = r.clock.now_ns();
+  r.cycle();  // the first release, at t0
+  for (int k = 0; k < 5; ++k) {
+    r.clock.set(t0 + 7 * kMs + k * 20 * kMs);
+    r.fresh_cycle();
+  }
+  EXPECT_NEAR(r.loop.timing_total().latency.max_ms, 15.0, 0.011);  // 13 ms wait + 2 ms
+}
+
+// States faster than the rate: one sooner than min_gap after a cycle's start starts none; the
+// next cycle then starts on a later state, or `grace` after its grid time without one (and
+// answers the newest state it has). After such a cycle the next state starts one at once
+// (a stream slower than the rate is followed state by state), and with no states at all the
+// cycles run on the grid.
+TEST(ControlLoop, StateTriggerRunsAtMostAtTheRateAndFallsBackAfterTheGrace) {
+  Rig r(state_trigger(), expect16_waking());
+  r.ctl.compute_ns = [](int) { return 1 * kMs; };
+  r.loop.start();
+  const std::int64_t t0 = r.clock.now_ns();
+  r.fresh_cycle();  // a state at t0: a cycle at t0
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 1);
+  r.clock.set(t0 + 5 * kMs);
+  r.state(++r.seq);  // 5 ms after the start: too soon (min_gap 0.75 -> 15 ms)
+  r.cycle();
+  // No later state: the cycle ran at the grid time + grace = t0 + 20 + 10 ms.
+  EXPECT_EQ(r.loop.counters().clock_triggered.load(), 1);
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 1);
+  ASSERT_EQ(r.clock.sleeps.size(), 1u);
+  EXPECT_EQ(r.clock.sleeps.back(), t0 + 30 * kMs);
+  EXPECT_EQ(r.last().state_seq, 2);
+  EXPECT_EQ(r.last().mode, Mode::kNormal);  // 25 ms old: inside the state timeout
+  // A state 3 ms after that cycle (states at 30 Hz) starts one at once.
+  r.clock.set(t0 + 33 * kMs);
+  r.state(++r.seq);
+  r.cycle();
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 2);
+  EXPECT_EQ(r.clock.sleeps.size(), 1u);
+  EXPECT_EQ(r.last().state_seq, 3);
+  // A state 15 ms after a state's cycle starts one too.
+  const std::int64_t start3 = t0 + 33 * kMs;
+  r.clock.set(start3 + 15 * kMs);
+  r.state(++r.seq);
+  r.cycle();
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 3);
+  EXPECT_EQ(r.clock.sleeps.size(), 1u);
+  // States stop: grace once, then cycles on the grid, holding, then the failsafe.
+  const std::int64_t start4 = start3 + 15 * kMs;
+  r.cycle();
+  EXPECT_EQ(r.clock.sleeps.back(), start4 + 30 * kMs);
+  r.cycle();
+  EXPECT_EQ(r.clock.sleeps.back(), start4 + 50 * kMs);
+  for (int k = 0; k < 30; ++k) r.cycle();
+  EXPECT_EQ(r.clock.sleeps.back(), start4 + 30 * kMs + 31 * 20 * kMs);
+  EXPECT_EQ(r.loop.counters().clock_triggered.load(), 33);
+  EXPECT_EQ(r.last().mode, Mode::kFailsafe);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
 TEST(ControlLoop, MonitorStatisticsMatchTheScriptedComputeTimes) {
   Rig r;
   r.ctl.compute_ns = [](int n) { return ((n - 1) % 10 + 1) * kMs; };  // 1..10 ms
@@ -123,6 +222,7 @@ TEST(ControlLoop, OptimizerStallPublishesHeldPlanSkipsAndReanchors) {
   EXPECT_EQ(r.tx.commands[3].mode, Mode::kNormal);
   const auto t = r.loop.timing_total();
   EXPECT_EQ(t.misses, 1);
+  EXPECT_EQ(t.late_start_misses, 0);  // the optimizer's own overrun
   EXPECT_EQ(t.max_consecutive_misses, 1);
   EXPECT_EQ(t.consecutive_misses, 0);
   EXPECT_EQ(r.loop.skipped_periods(), 2);
@@ -132,6 +232,21 @@ TEST(ControlLoop, OptimizerStallPublishesHeldPlanSkipsAndReanchors) {
   EXPECT_EQ(r.clock.sleeps.back() - r.clock.sleeps[r.clock.sleeps.size() - 2], 20 * kMs);
   EXPECT_EQ(starts[3] - end3, 2 * kMs);         // cycle 4 ran immediately, took 2 ms
   EXPECT_EQ(starts[4] - starts[3], 20 * kMs);   // then back on a 20 ms grid
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+TEST(ControlLoop, ALateWakeIsAMissTheMachineCausedNotAnOverrun) {
+  Rig r;
+  r.ctl.compute_ns = [](int) { return 5 * kMs; };
+  for (int k = 0; k < 6; ++k) {
+    if (k == 3) r.clock.oversleep_ns = 17 * kMs;  // woken 17 ms late, 5 ms of work: 2 ms past
+    r.fresh_cycle();
+  }
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(t.misses, 1);
+  EXPECT_EQ(t.late_start_misses, 1);
+  EXPECT_EQ(r.tx.statuses.back().misses, 1);
+  EXPECT_EQ(r.tx.statuses.back().late_start_misses, 1);
   EXPECT_FALSE(r.tx.any_nonfinite());
 }
 
@@ -346,7 +461,9 @@ TEST(ControlLoop, KeepsTheNearestObstaclesUpToCapacity) {
 }
 
 TEST(ControlLoop, ReferenceTimeIsStateTimeSinceReferenceEpoch) {
-  Rig r;
+  daemon::LoopSettings s;
+  s.latency.compensate = false;  // with it, the reference is taken at the actuation time (test_latency.cpp)
+  Rig r(s);
   auto& ref = r.inbox.reference_buffer();
   ref.kind = 1;
   ref.radius = 2.0f;

@@ -1,6 +1,7 @@
 // Latency compensation: the estimator of the controller's own latency, the history of sent
 // commands the state is predicted through, and the loop using both (fake clock, scripted
 // controller whose model the tests follow by hand: x[0] moves at u[0] units per second).
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -175,6 +176,26 @@ TEST(LatencyCompensation, OptimisesFromTheStatePredictedToTheActuationTime) {
   EXPECT_NEAR(t.lead.max_ms, 27.0, 0.02);
   EXPECT_NEAR(t.age.max_ms, 12.0, 0.02);
   EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+// A moving reference (circle, figure-eight) is evaluated at the time of the predicted state,
+// not at the sample time: otherwise a tracking task lags its reference by the lead (in real
+// time on the 2-core VM: RMSE 0.071 m instead of 0.046 m in lock-step on the 5 m/s circle).
+TEST(LatencyCompensation, AMovingReferenceIsTakenAtTheActuationTime) {
+  LoopRig r(fixed_latency(5 * kMs, 10 * kMs));
+  r.ctl.compute_ns = [](int) { return 5 * kMs; };
+  auto& ref = r.inbox.reference_buffer();
+  ref.kind = 1;  // circle
+  ref.radius = 2.0f;
+  ref.speed = 1.0f;
+  ref.vehicle_count = 1;
+  ref.t0_utime = (r.clock.now_ns() + 1000 * rt::kNsPerS) / 1000 - 2'000'000;  // 2 s ago on the wall clock
+  r.inbox.offer_reference();
+  r.state(3 * kMs);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  // Sampled 3 ms ago: 1.997 s after the epoch; lead = 3 (age) + 5 (latency) + 10 (actuation).
+  EXPECT_NEAR(r.ctl.inputs.reference_time, 1.997f + 0.018f, 1e-4f);
+  EXPECT_EQ(r.tx.commands.back().lead_us, 18000);
 }
 
 TEST(LatencyCompensation, OffMeansTheMeasuredStateAsIs) {

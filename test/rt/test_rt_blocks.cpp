@@ -1,5 +1,6 @@
 // The real-time building blocks on their own: schedule, histogram, monitor, latest-value
 // slot, SPSC ring, command gate.
+#include <cstdint>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -77,6 +78,22 @@ TEST(DeadlineMonitor, CountsMissesRunsAndWindows) {
   EXPECT_EQ(m.window().compute.count, 0);
   EXPECT_EQ(m.window().misses, 3);  // counters run since start
   EXPECT_EQ(m.total().compute.count, 6);
+}
+
+TEST(DeadlineMonitor, AMissWhoseWorkFitInAPeriodStartedLate) {
+  DeadlineMonitor m(20 * kNsPerMs);
+  m.record(0, 5 * kNsPerMs, false);
+  // Woken 17 ms late, 5 ms of work: missed, though the work fit (the machine's fault).
+  m.record(37 * kNsPerMs, 42 * kNsPerMs, true);
+  // On time, 25 ms of work: the controller's own overrun.
+  m.record(60 * kNsPerMs, 85 * kNsPerMs, true);
+  // Exactly one period of work, late: still the start's fault.
+  m.record(95 * kNsPerMs, 115 * kNsPerMs, true);
+  const auto total = m.total();
+  EXPECT_EQ(total.misses, 3);
+  EXPECT_EQ(total.late_start_misses, 2);
+  EXPECT_EQ(m.late_start_misses(), 2);
+  EXPECT_EQ(m.window().late_start_misses, 2);
 }
 
 TEST(LatestValue, ReaderGetsNewestAndNothingTwice) {

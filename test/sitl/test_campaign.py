@@ -238,3 +238,41 @@ def test_ray_campaign_joins_an_existing_cluster(sim_binary, tmp_path):
         assert ray.get(ray.remote(lambda: 42).remote()) == 42  # still up
     finally:
         ray.shutdown()
+
+
+# ---- tools/sitl table: real time and lock-step side by side -----------------------------------
+def _fake_campaign(folder, clock, runs):
+    folder.mkdir()
+    (folder / "summary.json").write_text(json.dumps({"summary": {"clock": clock, "seeds": [51, 52]}, "runs": runs}))
+
+
+def test_table_puts_campaigns_side_by_side(tmp_path):
+    from sitl_harness.sidebyside import rows, table
+    run = lambda seed, ok, p99, misses, t, clear, reason: {  # noqa: E731
+        "scenario": "forest_4m", "seed": seed, "backend": "cpu-avx2", "success": ok, "reason": reason,
+        "compute_ms_p99": p99, "deadline_misses": misses, "time_to_goal": t, "min_clearance": clear}
+    _fake_campaign(tmp_path / "rt", "realtime", [run(51, True, 5.0, 0, 6.0, 0.2, "goal"),
+                                                 run(52, False, 9.0, 2, None, 0.0, "collision")])
+    _fake_campaign(tmp_path / "ls", "lockstep, measured latency charged", [run(51, True, 4.0, 0, 5.0, 0.3, "goal"),
+                                                                           run(52, True, 4.5, 0, 7.0, 0.1, "goal")])
+    r = rows(tmp_path / "rt")["rows"]["forest_4m"]
+    assert (r["success"], r["runs"], r["misses"], r["min_clearance"]) == (1, 2, 2, 0.0)
+    assert r["compute_p99_median"] == 7.0 and r["compute_p99_worst"] == 9.0
+    assert r["merit"] == "goal in 6.00 s"  # successful flights only
+    text = table([tmp_path / "rt", tmp_path / "ls"], ["real time", "lock-step"])
+    line = [ln for ln in text.splitlines() if ln.startswith("| forest_4m")][0]
+    assert "1/2 (collision)" in line and "2/2" in line and "goal in 6.00 s" in line and "goal in 6.00 s" in line.split("2/2")[1]
+    assert "seeds 51-52" in text
+    out = sitl("table", tmp_path / "rt", tmp_path / "nothing")
+    assert out.returncode == 2 and "no summary.json" in out.stderr
+
+
+def test_table_merges_folders_of_one_name(tmp_path):
+    from sitl_harness.sidebyside import table
+    run = lambda scen: {"scenario": scen, "seed": 51, "backend": "cpu", "success": True, "reason": "goal",  # noqa: E731
+                        "compute_ms_p99": 3.0, "deadline_misses": 0, "time_to_goal": 5.0}
+    _fake_campaign(tmp_path / "a", "realtime", [run("forest_4m")])
+    _fake_campaign(tmp_path / "b", "realtime", [run("cartpole_swingup")])
+    text = table([tmp_path / "a", tmp_path / "b"], ["real time", "real time"])
+    assert text.splitlines()[0].count("real time: success") == 1
+    assert "| forest_4m | 1/1" in text and "| cartpole_swingup | 1/1" in text

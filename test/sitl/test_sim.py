@@ -34,6 +34,23 @@ def test_every_scenario_loads_and_steps(sim_binary, tmp_path):
         assert (d / "truth.jsonl").read_text().count("\n") >= 2
 
 
+def test_command_timeout_hovers_the_plant(sim_binary, tmp_path):
+    """timing.command_timeout (soak_circle: 0.25 s): with no command the plant gets its hover
+    command once the timeout passes (truth mode -2) and holds its altitude; without it the
+    applied command is whatever came last (here: the initial hover, mode -1)."""
+    run_sim(sim_binary, "soak_circle", 1, tmp_path, duration=0.6)
+    summary = json.loads((tmp_path / "sim_summary.json").read_text())
+    assert summary["command_timeouts"] == 1 and not summary["collisions"]
+    rows = [json.loads(line) for line in (tmp_path / "truth.jsonl").read_text().splitlines() if '"x"' in line]
+    modes = {round(r["t"], 2): r["mode"] for r in rows}
+    assert modes[0.2] == -1 and modes[0.3] == -2
+    assert abs(rows[-1]["x"][2] - 2.0) < 0.05
+    off = tmp_path / "off"
+    off.mkdir()
+    run_sim(sim_binary, "rate_track_circle", 1, off, duration=0.6)
+    assert json.loads((off / "sim_summary.json").read_text())["command_timeouts"] == 0
+
+
 def test_a_seed_names_a_forest(sim_binary, tmp_path):
     (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir(), (tmp_path / "c").mkdir()
     a = run_sim(sim_binary, "forest_3m", 7, tmp_path / "a")["obstacles"]

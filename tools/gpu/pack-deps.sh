@@ -63,7 +63,7 @@ cp -a "$R/bin/busybox" "$OUT/bin/busybox"
 ln -sf busybox "$OUT/bin/ip"
 mkdir -p "$OUT/usr/lib/x86_64-linux-gnu/cmake"
 cp -a "$R/usr/include/hwy" "$OUT/usr/include/"
-cp -a "$R"/usr/lib/x86_64-linux-gnu/libhwy.so* "$R"/usr/lib/x86_64-linux-gnu/libhwy_contrib.so* "$OUT/usr/lib/x86_64-linux-gnu/"
+cp -a "$R"/usr/lib/x86_64-linux-gnu/libhwy*.so* "$OUT/usr/lib/x86_64-linux-gnu/"  # libhwy, _contrib, _test: hwy-config.cmake names all three
 cp -a "$R/usr/lib/x86_64-linux-gnu/cmake/hwy" "$OUT/usr/lib/x86_64-linux-gnu/cmake/"
 if ((ALL)); then
   for d in eigen3 yaml-cpp CLI spdlog fmt benchmark; do cp -a "$R/usr/include/$d" "$OUT/usr/include/"; done

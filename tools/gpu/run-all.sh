@@ -7,16 +7,25 @@
 #
 #   tools/gpu/run-all.sh [--stages setup,build,test,bench,daemon,campaign] [--quick]
 #                        [--forest-seeds 20] [--team-seeds 10] [--first-seed 51]
-#                        [--realtime-jobs 1] [--daemon-seconds 60] [--results DIR]
+#                        [--team-scenarios LIST] [--realtime-jobs 1] [--daemon-seconds 60]
+#                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR]
 #
-#   --stages          which stages (default: all; setup always runs). A machine kept warm
+#   --stages          which stages (default: all; setup always runs; also: cudatest = the CUDA
+#                     tests alone, timing = mppid-gpu-timing alone, with and without the
+#                     obstacle grid and over block shapes). A machine kept warm
 #                     between device calls keeps build-gpu/ (MPPID_GPU_BUILD: elsewhere) unless
 #                     the call's carried paths replace it, so a later call can run, e.g.,
 #                     --stages campaign alone without rebuilding.
 #   --quick           a short end-to-end check: daemon-bench 20 s, 2 seeds of forest_4m and 1
 #                     of each team scenario, fewer benchmark iterations
+#   --team-scenarios  the team campaign's scenarios (default team3_fixed,team3_moving,
+#                     team9_fixed,team9_moving)
 #   --realtime-jobs N real-time flights at once, each pinned to its own 1/N of the cores
 #                     (tools/sitl campaign --realtime-jobs; default 1: one at a time)
+#   --campaign-timeout S  each campaign stops after S seconds (its finished flights are kept),
+#                     so a device call ends in time to bring its results back
+#   --trigger T       the daemon's daemon.trigger in daemon-bench and the flights (default
+#                     state: each state starts its cycle; clock: the fixed-rate grid)
 # Reported results use seeds 51-70 (tuning uses 1-50): --first-seed 51 by default.
 # Exit status: non-zero when a stage failed (the others still run).
 set -uo pipefail
@@ -25,7 +34,8 @@ cd "$ROOT"
 D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
 B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"  # outside a carried folder, a warm machine keeps it
 STAGES="build,test,bench,daemon,campaign"
-QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60
+TEAM_SCEN=team3_fixed,team3_moving,team9_fixed,team9_moving
+QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGER=state CAMP_TIMEOUT=7200
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
 while (($#)); do
   case "$1" in
@@ -34,10 +44,13 @@ while (($#)); do
     --forest-seeds) FOREST_SEEDS="$2"; shift ;;
     --team-seeds) TEAM_SEEDS="$2"; shift ;;
     --first-seed) FIRST_SEED="$2"; shift ;;
+    --team-scenarios) TEAM_SCEN="$2"; shift ;;
     --realtime-jobs) RT_JOBS="$2"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
+    --trigger) TRIGGER="$2"; shift ;;
+    --campaign-timeout) CAMP_TIMEOUT="$2"; shift ;;
     --results) RES="$2"; shift ;;
-    -h|--help) sed -n '2,24s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,27s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "run-all.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -95,7 +108,7 @@ if want build; then
     say "build done"
   else
     fail "build (see configure.log, build.log)"
-    tail -30 "$RES/configure.log" "$RES/build.log" | tee -a "$LOG"
+    tail -n 30 "$RES/configure.log" "$RES/build.log" | tee -a "$LOG"
   fi
 fi
 export MPPID_BUILD_DIR="$B"
@@ -111,6 +124,40 @@ if want test; then
   note "- ctest, the rest: $(grep -E 'tests passed|tests failed' "$RES/ctest.log" | tail -1)"
   grep -hA40 'The following tests FAILED' "$RES/ctest-gpu.log" "$RES/ctest.log" | sed 's/^/    /' >>"$SUMMARY" || true
   say "tests done"
+fi
+
+if want cudatest; then
+  timeout 900 ctest --test-dir "$B" -L gpu -V >"$RES/ctest-gpu.log" 2>&1 || fail "ctest -L gpu"
+  grep -ho '\[parity\].*' "$RES/ctest-gpu.log" >"$RES/parity.txt" 2>/dev/null || true
+  note "- ctest, CUDA tests: $(grep -E 'tests passed|tests failed' "$RES/ctest-gpu.log" | tail -1)"
+  grep -hA40 'The following tests FAILED' "$RES/ctest-gpu.log" | sed 's/^/    /' >>"$SUMMARY" || true
+  say "CUDA tests done"
+fi
+
+# ---- the issue's kernel targets alone: with the obstacle grid (as the daemon runs), without,
+# and over the chunked kernel's block shapes ---------------------------------------------------
+if want timing; then
+  cases=(quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096 team3_forest:1200 team9_forest:6000)
+  {
+    "$B/bin/mppid-gpu-timing" --iters 1000 "${cases[@]}"
+    "$B/bin/mppid-gpu-timing" --iters 1000 --no-grid "${cases[@]}"
+    "$B/bin/mppid-gpu-timing" --iters 100 --warmup 5 quadrotor_forest:1048576 quadrotor_forest:65536
+    "$B/bin/mppid-gpu-timing" --iters 100 --warmup 5 --no-grid quadrotor_forest:1048576
+    for w in 2 8; do MPPID_CUDA_WARPS=$w "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384; done
+    for c in 2 8; do MPPID_CUDA_CHUNK=$c "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384; done
+  } >"$RES/gpu-timing-variants.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing variants"
+  note ""
+  note "| mppid-gpu-timing (test scenario) | K | grid | median us | p99 us |"
+  note "|---|---:|---|---:|---:|"
+  "$PY" - "$RES/gpu-timing-variants.json" >>"$SUMMARY" <<'PYEOF'
+import json, re, sys
+text = open(sys.argv[1]).read()
+for doc in re.findall(r"\{\n  \"device\".*?\n\}\n", text, re.S):
+    d = json.loads(doc)
+    for r in d["results"]:
+        print(f"| {r['task']} {d.get('env', '')} | {r['rollouts']} | {d.get('obstacle_grid')} | {r['median_us']} | {r['p99_us']} |")
+PYEOF
+  say "timing done"
 fi
 
 # ---- benchmarks: mppid-bench (README, Fig. 11) and the issue's targets ---------------------
@@ -159,9 +206,9 @@ fi
 # ---- the daemon with CUDA: state in -> command out ------------------------------------------
 if want daemon; then
   drivers/daemon/tools/daemon-bench --build "$B" --seconds "$DAEMON_S" --realtime --backend cuda \
-    -- --set mppi.rollouts=16384 >"$RES/daemon-bench.json" 2>"$RES/daemon-bench.err" || fail "daemon-bench (see daemon-bench.err)"
+    -- --set mppi.rollouts=16384 --set daemon.trigger="$TRIGGER" >"$RES/daemon-bench.json" 2>"$RES/daemon-bench.err" || fail "daemon-bench (see daemon-bench.err)"
   note ""
-  note "- daemon-bench --realtime --backend cuda, K=16384, ${DAEMON_S} s: \`$(tr -d '\n' <"$RES/daemon-bench.json" | head -c 3000)\`"
+  note "- daemon-bench --realtime --backend cuda, K=16384, trigger $TRIGGER, ${DAEMON_S} s: \`$(tr -d '\n' <"$RES/daemon-bench.json" | head -c 3000)\`"
   say "daemon-bench done"
 fi
 
@@ -169,15 +216,16 @@ fi
 if want campaign; then
   camp() {  # name scenarios seeds
     (($3 > 0)) || return 0
-    timeout 7200 tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$2" \
-      --seeds "$3" --first-seed "$FIRST_SEED" --out "$RES/$1" >"$RES/$1.log" 2>&1 || fail "campaign $1 (see $1.log)"
+    timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$2" \
+      --seeds "$3" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" --out "$RES/$1" >"$RES/$1.log" 2>&1 ||
+      fail "campaign $1 (see $1.log)"
     note ""
-    note "### $1 (seeds $FIRST_SEED..$((FIRST_SEED + $3 - 1)), real time, CUDA, realtime-jobs $RT_JOBS)"
+    note "### $1 (seeds $FIRST_SEED..$((FIRST_SEED + $3 - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER)"
     note ""
     cat "$RES/$1/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
   }
   camp campaign_forest forest_4m "$FOREST_SEEDS"
-  camp campaign_teams team3_fixed,team3_moving,team9_fixed,team9_moving "$TEAM_SEEDS"
+  camp campaign_teams "$TEAM_SCEN" "$TEAM_SEEDS"
   say "campaigns done"
 fi
 

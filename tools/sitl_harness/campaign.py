@@ -79,7 +79,7 @@ def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", re
 def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: str = "cpu", first_seed: int = 1,
                  controller: str = "mppid", realtime: bool = False, sets=(), engine: str = "local",
                  address: str | None = None, cpus_per_flight: float = 1.0, ideal: bool = False,
-                 latency: float | None = None, realtime_jobs: int = 1) -> dict:
+                 latency: float | None = None, realtime_jobs: int = 1, plots: bool = True) -> dict:
     """Flies every scenario (names or YAML files) over the seeds (a count from first_seed, or
     a list) on the engine; writes summary.json, summary.md, summary.png; returns the summary."""
     out = Path(out).resolve()
@@ -93,8 +93,9 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
     elif jobs is None and engine == "local":
         # Lock-step charging the measured latency: a second flight on the machine would
         # lengthen it. With --ideal, a fixed --latency or the stand-in, two at a time.
-        jobs = 2 if (ideal or latency is not None or controller != "mppid") else 1
+        jobs = 2 if (ideal or latency is not None or controller == "standin") else 1
     flights = make_jobs(resolved, seed_list, out, backend=backend, controller=controller, realtime=realtime, sets=sets,
+                        plots=plots,
                         ideal=ideal, latency=latency)
     eng = make_engine(engine, jobs=jobs, address=address, cpus_per_flight=cpus_per_flight,
                       pin=realtime and jobs > 1)

@@ -27,11 +27,14 @@ def main(argv=None) -> int:
                      help="lock-step without charging the controller's latency (algorithm studies only)")
     lat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
                      help="lock-step: charge this fixed latency instead of the measured one (repeatable runs)")
-    r.add_argument("--controller", choices=["mppid", "standin"], default="mppid",
-                   help="standin: a hover stand-in (tests the simulator without the daemon)")
+    r.add_argument("--controller", choices=["mppid", "ddp", "standin"], default="mppid",
+                   help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the simulator without the daemon)")
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
+    r.add_argument("--param", action="append", default=[], metavar="T:KEY=VALUE",
+                   help="a parameter update sent in flight, T seconds (state time) after the first state, e.g. "
+                        "2:mppi.rollouts=512; the answers go to score.json (param_results)")
     r.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit [s] (default from the scenario)")
     r.add_argument("--kill-controller-after", type=float, default=0.0, help=argparse.SUPPRESS)
     r.add_argument("--lcm-port", type=int, default=0, help=argparse.SUPPRESS)   # campaigns: one bus per flight
@@ -56,7 +59,8 @@ def main(argv=None) -> int:
                         "(default 1: one at a time)")
     c.add_argument("--cpus-per-flight", type=float, default=1.0, help="ray: CPUs a flight task asks for")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
-    c.add_argument("--controller", choices=["mppid", "standin"], default="mppid")
+    c.add_argument("--controller", choices=["mppid", "ddp", "standin"], default="mppid",
+                   help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline) or the stand-in")
     c.add_argument("--realtime", action="store_true")
     clat = c.add_mutually_exclusive_group()
     clat.add_argument("--ideal", action="store_true", help="lock-step without charging the controller's latency")
@@ -65,11 +69,22 @@ def main(argv=None) -> int:
     c.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay: its keys become --set pairs, before --set")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
+    c.add_argument("--no-plots", action="store_true",
+                   help="no per-flight plots (faster; `tools/sitl plot FOLDER` makes them later)")
 
     cmp_ = sub.add_parser("compare", help="two campaign folders: same outcomes? (lock-step: engine-independent)")
     cmp_.add_argument("a", type=Path)
     cmp_.add_argument("b", type=Path)
     cmp_.add_argument("--no-truth", action="store_true", help="skip comparing each flight's truth.jsonl path")
+
+    t = sub.add_parser("table", help="campaigns side by side (e.g. real time and lock-step): one row per scenario")
+    t.add_argument("folders", type=Path, nargs="+")
+    t.add_argument("--names", default=None, help="comma-separated column names, one per folder")
+
+    vs = sub.add_parser("versus", help="campaigns of different controllers side by side (markdown table)")
+    vs.add_argument("folders", type=Path, nargs="+", help="campaign folders (summary.json), same scenarios and seeds")
+    vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
+    vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
     o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
     o.add_argument("file", type=Path)
@@ -108,7 +123,15 @@ def main(argv=None) -> int:
             return 2
         spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
                           ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
-                          kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots)
+                          kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
+                          params=a.param)
+        try:
+            from .inject import parse_update
+            for u in a.param:
+                parse_update(u)
+        except ValueError as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
         try:
             paths.scenario_label(a.scenario)
         except FileNotFoundError as e:
@@ -152,7 +175,7 @@ def main(argv=None) -> int:
             summary = run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
                                    realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
                                    cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
-                                   realtime_jobs=a.realtime_jobs)
+                                   realtime_jobs=a.realtime_jobs, plots=not a.no_plots)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130
@@ -170,6 +193,30 @@ def main(argv=None) -> int:
         print(f"{runs} runs: " + ("identical outcomes" + ("" if a.no_truth else " and truth paths") if not diffs
                                   else f"{len(diffs)} differences"))
         return 0 if not diffs else 1
+    if a.cmd == "table":
+        from .sidebyside import table
+        names = [n.strip() for n in a.names.split(",")] if a.names else None
+        if names and len(names) != len(a.folders):
+            print("sitl: --names needs one name per folder", file=sys.stderr)
+            return 2
+        try:
+            print(table(a.folders, names))
+        except FileNotFoundError as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
+        return 0
+    if a.cmd == "versus":
+        from .versus import versus
+        labels = a.labels.split(",") if a.labels else [f.name for f in a.folders]
+        try:
+            table, rows = versus(a.folders, labels)
+        except (ValueError, FileNotFoundError, KeyError) as e:
+            print(f"sitl: versus: {e}", file=sys.stderr)
+            return 2
+        print(table, end="")
+        if a.json:
+            a.json.write_text(json.dumps(rows, indent=2))
+        return 0
     if a.cmd == "tune":
         from .tune import main_tune
         return main_tune(a)

@@ -31,6 +31,7 @@ LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 LOGGER_RECV_BUF = 4 * 1024 * 1024
 SIM_FIFO_PRIORITY = 90
 LOGGER_FIFO_PRIORITY = 79
+INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (seconds under load)
 _NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
 
 
@@ -57,12 +58,13 @@ class FlightSpec:
     realtime: bool = False
     ideal: bool = False              # lock-step without charging the controller's latency
     latency: float | None = None     # lock-step: charge this fixed latency [s] (and tell mppid)
-    controller: str = "mppid"        # mppid | standin
+    controller: str = "mppid"        # mppid | ddp (mppid --controller ddp: the MPC-DDP baseline) | standin
     wall_timeout: float = 0.0        # 0: from the scenario's duration
     sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
     kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
+    params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
 
 
 class Flight:
@@ -105,6 +107,17 @@ class Flight:
         self.procs[name] = p
         return p
 
+    def _wait_ready(self, name: str, timeout: float):
+        """Waits for `{"event": "ready"}` on a helper's log (it has subscribed), or fails."""
+        deadline = time.monotonic() + timeout
+        path = self.out / f"{name}.log"
+        while '"event": "ready"' not in path.read_text(errors="replace"):
+            if self.procs[name].poll() is not None:
+                raise FlightError(f"{name} exited at start (rc={self.procs[name].returncode}); see {name}.log")
+            if time.monotonic() > deadline:
+                raise FlightError(f"{name} not subscribed after {timeout:g} s; see {name}.log")
+            time.sleep(0.02)
+
     def _terminate(self, name: str, grace: float):
         p = self.procs.get(name)
         if p is None or p.poll() is not None:
@@ -135,7 +148,7 @@ class Flight:
                 signal.signal(sig, h)
 
     def _cleanup(self):
-        for name in ("sim", "controller"):
+        for name in ("sim", "controller", "inject"):
             self._terminate(name, 3.0)
         if "logger" in self.procs and self.procs["logger"].poll() is None:
             time.sleep(0.3)  # the logger drains what is still in its socket
@@ -179,7 +192,7 @@ class Flight:
         wall_timeout = spec.wall_timeout or (duration * 4 + 60 if not spec.realtime else duration + 30)
         lockstep = not spec.realtime
 
-        if spec.controller == "mppid":
+        if spec.controller in ("mppid", "ddp"):
             mppid = paths.find_binary("mppid")
             if mppid is None:
                 raise FlightError("mppid not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
@@ -193,7 +206,8 @@ class Flight:
             # As the systemd unit runs it (SCHED_FIFO, locked memory; it runs on with a
             # warning where the OS refuses), in lock-step too: there its measured latency is
             # what the simulator charges, and it must be the service's, not a busy machine's.
-            ctrl_cmd.append("--realtime")
+            if _fifo_allowed():
+                ctrl_cmd.append("--realtime")
             if lockstep:
                 ctrl_cmd.append("--lockstep")
                 if spec.latency is not None:
@@ -201,6 +215,8 @@ class Flight:
                     ms = f"{1e3 * spec.latency:g}"
                     ctrl_cmd += ["--set", f"daemon.latency.floor_ms={ms}", "--set", f"daemon.latency.ceiling_ms={ms}"]
             ctrl_cmd += ["--backend", spec.backend]
+            if spec.controller == "ddp":
+                ctrl_cmd += ["--controller", "ddp"]
             # The flight's seed also seeds the controller's sampling (a campaign over seeds
             # varies both the world and the noise); --set can still override it.
             ctrl_cmd += ["--set", f"mppi.seed={spec.seed}"]
@@ -215,6 +231,9 @@ class Flight:
             sim_cmd.append("--ideal")
         elif lockstep and spec.latency is not None:
             sim_cmd += ["--latency", f"{spec.latency:g}"]
+        inject_cmd = [sys.executable, "-m", "sitl_harness.inject", "--lcm-url", spec.lcm_url]
+        for u in spec.params:
+            inject_cmd += ["--at", str(u)]
         logger_cmd = [str(_lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
                       str(self.out / "flight.lcmlog")]
         if _fifo_allowed():
@@ -225,6 +244,9 @@ class Flight:
             # The logger too, just below the daemon: a lock-step flight runs many times faster
             # than real time and a logger starved meanwhile loses datagrams.
             logger_cmd = ["chrt", "-f", str(LOGGER_FIFO_PRIORITY)] + logger_cmd
+            # The parameter injector as the logger: at the normal policy a lock-step flight
+            # (SCHED_FIFO, both cores) would starve it of every state until the flight ends.
+            inject_cmd = ["chrt", "-f", str(LOGGER_FIFO_PRIORITY)] + inject_cmd
 
         t0 = time.monotonic()
         outcome = None
@@ -237,6 +259,10 @@ class Flight:
             for name in ("logger", "controller"):
                 if self.procs[name].poll() is not None:
                     raise FlightError(f"{name} exited at start (rc={self.procs[name].returncode}); see {name}.log")
+            if spec.params:
+                # Parameter updates at set state times, their answers logged (inject.log).
+                self._spawn("inject", inject_cmd)
+                self._wait_ready("inject", INJECT_READY_TIMEOUT_S)
             self._spawn("sim", sim_cmd)
             (self.out / "pids.json").write_text(json.dumps(
                 {"pgid": self.pgid, "holder": self.holder.pid, **{k: p.pid for k, p in self.procs.items()}}))
@@ -272,18 +298,23 @@ class Flight:
                 "niceness": os.getpriority(os.PRIO_PROCESS, 0),
                 "returncodes": {k: p.returncode for k, p in self.procs.items()},
                 "events": self.events,
-                "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd},
-                "controller_config": str(cfg) if spec.controller == "mppid" else None,
+                "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd,
+                             **({"inject": inject_cmd} if spec.params else {})},
+                "controller_config": str(cfg) if spec.controller in ("mppid", "ddp") else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
-                         "controller": spec.controller, "lcm_url": spec.lcm_url},
+                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params},
             }
             (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
 
 
 def _fifo_allowed() -> bool:
-    """Whether this process may start SCHED_FIFO children (root, or CAP_SYS_NICE)."""
+    """Whether this process may start SCHED_FIFO children (root, or CAP_SYS_NICE), and is
+    to: MPPID_NO_FIFO=1 keeps every process of the flight in the normal scheduler, for work
+    beside a real-time measurement (a soak, a benchmark) that must not be preempted."""
+    if os.environ.get("MPPID_NO_FIFO"):
+        return False
     try:
         return subprocess.run(["chrt", "-f", "1", "true"], stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL).returncode == 0

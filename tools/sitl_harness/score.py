@@ -61,6 +61,8 @@ def _controller_stats(status, commands=()):
         "horizon": last.horizon,
         "cycles": int(max(m.cycles for m in msgs)),
         "deadline_misses": int(max(m.misses for m in msgs)),
+        # Misses whose cycle's own work fit in a period: the loop woke late (the machine).
+        "deadline_misses_late_start": int(max(m.late_start_misses for m in msgs)),
         "status_messages": len(msgs),
         "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
     }
@@ -77,7 +79,7 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     world = logs.read_json(out / "world.json") or {}
     summary = logs.read_json(out / "sim_summary.json") or {}
     ticks, events = logs.read_truth(out)
-    lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS"})
+    lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS", "MPPI_PARAM_RESULT"})
     model = scen["plant"]["model"]
     res = {
         "scenario": paths.scenario_label(spec.scenario),
@@ -117,6 +119,11 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     cmd_t = np.array([t for t, _ in lcm.get("MPPI_COMMAND", [])], float) / 1e6
     if len(cmd_t) > 2:
         res["command_period_ms_p99"] = float(np.percentile(np.diff(cmd_t) * 1e3, 99))
+    if lcm.get("MPPI_PARAM_RESULT") or getattr(spec, "params", None):
+        # The controller's answers to parameter updates (tools/sitl run --param).
+        res["param_results"] = [{"update_seq": r.update_seq, "key": r.key, "value": r.value,
+                                 "applied": r.status == 0, "cycle": r.cycle, "reason": r.reason}
+                                for _, r in lcm.get("MPPI_PARAM_RESULT", [])]
     modes = [m.mode for _, m in lcm.get("MPPI_COMMAND", [])]
     if modes:
         res["commands_hold"] = int(sum(1 for m in modes if m == 1))

@@ -5,8 +5,8 @@ Definitions (all in ms):
   compute_ms_p99    99th percentile over the flight's cycles of the time from a cycle's
                     start to its command leaving (command_t.compute_us): every cycle counts
                     once, wherever it falls. Null when the log has no per-cycle times.
-  compute_ms_max, compute_ms_mean
-                    the longest and the mean of the same per-cycle times.
+  compute_ms_p50, compute_ms_max, compute_ms_mean
+                    the median, the longest and the mean of the same per-cycle times.
   state_age_ms_p99  the state's age at the start of the cycles that optimised from it
                     (command_t.age_us; 0 in lock-step, where the cycle starts on the tick).
   state_to_command_ms_p99
@@ -47,7 +47,7 @@ def status_timing(status_msgs) -> dict:
     Returns the keys of the module docstring plus `compute_samples_ms` (the per-cycle
     compute times, a list, or None), `timing_cycles` (cycles the figures cover),
     `timing_source` ("per-cycle status" or "status windows")."""
-    out = {k: None for k in ("compute_ms_p99", "compute_ms_max", "compute_ms_mean", "period_ms_p99", "jitter_ms_p99",
+    out = {k: None for k in ("compute_ms_p99", "compute_ms_p50", "compute_ms_max", "compute_ms_mean", "period_ms_p99", "jitter_ms_p99",
                              "compute_ms_p99_worst_window", "period_ms_p99_worst_window",
                              "jitter_ms_p99_worst_window")}
     out.update(compute_samples_ms=None, timing_cycles=0, timing_source=None)
@@ -92,6 +92,7 @@ def status_timing(status_msgs) -> dict:
         per, jit = per[np.isfinite(per)], jit[np.isfinite(jit)]
         if comp.size:
             out["compute_ms_p99"] = float(np.percentile(comp, 99))
+            out["compute_ms_p50"] = float(np.percentile(comp, 50))
             out["compute_samples_ms"] = comp.tolist()
             out["timing_source"] = "per-cycle status"
         if per.size:
@@ -109,7 +110,8 @@ def command_timing(command_msgs) -> dict:
         return {}
     comp = np.array([m.compute_us for m in fresh], float) / 1e3
     normal = [m for m in fresh if int(m.mode) == 0]
-    out = {"compute_ms_p99": float(np.percentile(comp, 99)), "compute_ms_max": float(comp.max()),
+    out = {"compute_ms_p99": float(np.percentile(comp, 99)), "compute_ms_p50": float(np.percentile(comp, 50)),
+           "compute_ms_max": float(comp.max()),
            "compute_ms_mean": float(comp.mean()), "compute_samples_ms": comp.tolist(),
            "timing_cycles": len(fresh), "timing_source": "per-cycle commands"}
     if normal:

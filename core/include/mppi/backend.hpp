@@ -58,6 +58,8 @@ SamplerConstants<NU> make_sampler_constants(const MppiSettings& s) {
     c.u_nominal[j] = s.u_nominal.empty() ? 0.0f : s.u_nominal[j];
   }
   c.inv_nu_term = 0.5f * (1.0f - 1.0f / s.nu);
+  c.groups = s.noise_groups > 1 ? s.noise_groups : 1;
+  c.group_channels = NU / c.groups;
   return c;
 }
 

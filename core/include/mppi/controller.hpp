@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -72,6 +73,15 @@ class Controller {
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
   virtual int predict(const float* x0, const float* plan, float* xyz, int capacity) const = 0;
 
+  // Live optimizer updates: a controller built with new optimizer settings takes over from
+  // `from` (the one running): the task's parameters as they stand (goals, obstacles,
+  // reference, model and cost values set at run time, the external acceleration) and the
+  // noise counter. Not the plan (its length may differ: the caller resamples it). False,
+  // and nothing taken, when `from` runs another task.
+  virtual bool adopt(const Controller& from) { (void)from; return false; }
+  // The counter that keys the next update's noise with the seed (Philox: seed, cycle).
+  virtual std::uint32_t noise_cycle() const { return 0; }
+
   virtual const std::vector<float>& plan() const = 0;
   virtual const MppiSettings& settings() const = 0;
   virtual std::vector<float> rollout_costs() const = 0;
@@ -83,6 +93,42 @@ template <class P, class = void>
 constexpr bool has_external_accel = false;
 template <class P>
 constexpr bool has_external_accel<P, std::void_t<decltype(P::accel_z)>> = true;
+
+// What the world says between cycles, into a task's parameters: goals and obstacles for the
+// forest costs, the reference for the tracking costs (every controller of a task uses this).
+template <class T>
+void apply_task_inputs(typename T::Params& params, const TaskInputs& in) {
+  using Cost = typename T::Cost;
+  if constexpr (std::is_same_v<Cost, ForestCost<typename T::Vehicle>>) {
+    for (int j = 0; j < T::kVehicles; ++j)
+      for (int d = 0; d < 3; ++d) params.cost.goal[j][d] = in.goals[j][d];
+    params.cost.obstacles = in.obstacles;
+  } else if constexpr (std::is_same_v<Cost, TrackingCost<typename T::Vehicle>>) {
+    params.cost.reference = in.reference;
+    params.cost.time0 = in.reference_time;
+  }
+}
+
+// Positions along `plan` (horizon x nu) from x0, rolled out without noise with the task's
+// Euler steps: horizon + 1 per vehicle, vehicle-major, xyz; 0 if `capacity` is too small.
+template <class T>
+int predict_positions(const typename T::Params& params, const MppiSettings& s, const float* x0, const float* plan,
+                      float* xyz, int capacity) {
+  using V = typename T::Vehicle;
+  const int per = s.horizon + 1;
+  if (capacity < per * T::kVehicles) return 0;
+  float x[T::kNx];
+  std::copy_n(x0, T::kNx, x);
+  auto put = [&](int i) {
+    for (int j = 0; j < T::kVehicles; ++j) V::position(x + j * T::kVehicleNx, xyz + 3 * (j * per + i));
+  };
+  put(0);
+  for (int i = 0; i < s.horizon; ++i) {
+    T::advance(params, x, plan + i * T::kNu, s.dt, s.substeps, 0u);
+    put(i + 1);
+  }
+  return per * T::kVehicles;
+}
 
 template <class T>
 class TaskController final : public Controller {
@@ -99,17 +145,7 @@ class TaskController final : public Controller {
   int horizon() const override { return mppi_.settings().horizon; }
   float dt() const override { return mppi_.settings().dt; }
 
-  void set_inputs(const TaskInputs& in) override {
-    using Cost = typename T::Cost;
-    if constexpr (std::is_same_v<Cost, ForestCost<typename T::Vehicle>>) {
-      for (int j = 0; j < T::kVehicles; ++j)
-        for (int d = 0; d < 3; ++d) params_.cost.goal[j][d] = in.goals[j][d];
-      params_.cost.obstacles = in.obstacles;
-    } else if constexpr (std::is_same_v<Cost, TrackingCost<typename T::Vehicle>>) {
-      params_.cost.reference = in.reference;
-      params_.cost.time0 = in.reference_time;
-    }
-  }
+  void set_inputs(const TaskInputs& in) override { apply_task_inputs<T>(params_, in); }
 
   std::string set_param(const std::string& key, double value) override {
     return set_task_param<T>(params_, key, value);
@@ -135,22 +171,17 @@ class TaskController final : public Controller {
   }
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
-    using V = typename T::Vehicle;
-    const MppiSettings& s = mppi_.settings();
-    const int per = s.horizon + 1;
-    if (capacity < per * T::kVehicles) return 0;
-    float x[T::kNx];
-    std::copy_n(x0, T::kNx, x);
-    auto put = [&](int i) {
-      for (int j = 0; j < T::kVehicles; ++j) V::position(x + j * T::kVehicleNx, xyz + 3 * (j * per + i));
-    };
-    put(0);
-    for (int i = 0; i < s.horizon; ++i) {
-      T::advance(params_, x, plan + i * T::kNu, s.dt, s.substeps, 0u);
-      put(i + 1);
-    }
-    return per * T::kVehicles;
+    return predict_positions<T>(params_, mppi_.settings(), x0, plan, xyz, capacity);
   }
+
+  bool adopt(const Controller& from) override {
+    const auto* o = dynamic_cast<const TaskController<T>*>(&from);
+    if (o == nullptr || o->name_ != name_) return false;
+    params_ = o->params_;
+    mppi_.set_cycle(o->mppi_.cycle());
+    return true;
+  }
+  std::uint32_t noise_cycle() const override { return mppi_.cycle(); }
 
   const std::vector<float>& plan() const override { return mppi_.plan(); }
   const MppiSettings& settings() const override { return mppi_.settings(); }

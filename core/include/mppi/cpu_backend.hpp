@@ -11,6 +11,7 @@
 // is exactly the update of a K'-sample backend.
 #pragma once
 
+#include <cstdint>
 #include <omp.h>
 
 #include <algorithm>

@@ -44,6 +44,24 @@ MPPI_HD float fclamp(float v, float lo, float hi) { return v < lo ? lo : (v > hi
 MPPI_HD float fsq(float a) { return a * a; }
 MPPI_HD bool ffinite(float a) { return a == a && a - a == 0.0f; }
 
+// The same functions in double, host and device: the DDP baseline (mppi/ddp/) differentiates
+// the models and costs by finite differences in double, through these same templates.
+MPPI_HD double fsin(double a) { return ::sin(a); }
+MPPI_HD double fcos(double a) { return ::cos(a); }
+MPPI_HD double fexp(double a) { return ::exp(a); }
+MPPI_HD double flog(double a) { return ::log(a); }
+MPPI_HD double fsqrt(double a) { return ::sqrt(a); }
+MPPI_HD double fatan(double a) { return ::atan(a); }
+MPPI_HD double fatan2(double y, double x) { return ::atan2(y, x); }
+MPPI_HD double ftan(double a) { return ::tan(a); }
+MPPI_HD double fabs_(double a) { return ::fabs(a); }
+MPPI_HD double fmin_(double a, double b) { return a < b ? a : b; }
+MPPI_HD double fmax_(double a, double b) { return a > b ? a : b; }
+MPPI_HD double fclamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+MPPI_HD double fsq(double a) { return a * a; }
+MPPI_HD bool ffinite(double a) { return a == a && a - a == 0.0; }
+MPPI_HD double select(bool m, double a, double b) { return m ? a : b; }
+
 // Masks of scalar numbers are bools.
 MPPI_HD float select(bool m, float a, float b) { return m ? a : b; }
 MPPI_HD bool mask_and(bool a, bool b) { return a && b; }

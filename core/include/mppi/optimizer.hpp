@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cstdint>
 #include <memory>
 #include <stdexcept>
 #include <vector>
@@ -96,6 +97,9 @@ class Mppi {
   RolloutBackend<Task>& backend() { return *backend_; }
   const RolloutBackend<Task>& backend() const { return *backend_; }
   std::uint32_t cycle() const { return cycle_; }
+  // The noise counter of the next update (an optimizer that takes over from another keeps
+  // its count, so the noise stream goes on and a replay can rebuild it).
+  void set_cycle(std::uint32_t c) { cycle_ = c; }
 
  private:
   // Centred moving average over time, the window shrinking at the ends. Each output is a

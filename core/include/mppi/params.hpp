@@ -73,6 +73,8 @@ void visit_fields(typename ForestCost<Vehicle>::Params& p, V&& v) {
   v("w_separation", p.w_separation, 0.0f, 1e6f);
   v("separation_scale", p.separation_scale, 1e-3f, 1e3f);
   v("w_terminal", p.w_terminal, 0.0f, 1e6f);
+  v("xy_linear_beyond", p.xy_linear_beyond, 0.0f, 1e4f);
+  v("crash_sticky", p.crash_sticky, 0.0f, 1.0f);
   v("ground_margin", p.ground_margin, 0.0f, 100.0f);
   v("tilt_cos_min", p.tilt_cos_min, -1.0f, 1.0f);
   v("floor_z", p.floor_z, -1e3f, 1e3f);
@@ -103,9 +105,19 @@ void visit_fields(EllipseCost::Params& p, V&& v) {
   v("semi_x", p.semi_x, 0.1f, 1e3f);
   v("semi_y", p.semi_y, 0.1f, 1e3f);
   v("w_track", p.w_track, 0.0f, 1e6f);
+  v("line", p.line, -1.0f, 10.0f);
   v("target_speed", p.target_speed, 0.0f, 100.0f);
   v("w_speed", p.w_speed, 0.0f, 1e6f);
   v("w_slip", p.w_slip, 0.0f, 1e6f);
+  v("track_limit", p.track_limit, 0.0f, 1e9f);
+  v("w_crash", p.w_crash, 0.0f, 1e9f);
+  v("edge", p.edge, 0.0f, 1e9f);
+  v("w_edge", p.w_edge, 0.0f, 1e9f);
+  v("w_line", p.w_line, 0.0f, 1e6f);
+  v("line_radius", p.line_radius, 0.0f, 1e3f);
+  v("line_half", p.line_half, 0.0f, 1e3f);
+  v("drift", p.drift, 0.0f, 1e9f);
+  v("w_drift", p.w_drift, 0.0f, 1e9f);
 }
 
 // Cost tables by task (the cost template parameter cannot be deduced from its Params).

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <Random123/philox.h>
+#include <cstdint>
 
 #include "mppi/hd.hpp"
 
@@ -15,6 +16,10 @@ struct NoiseKey {
   std::uint64_t seed;
   std::uint32_t cycle;
 };
+
+// The group of sample `sample` among `groups` (sample mod groups), as a float (a SIMD
+// index type overloads this, lane-wise).
+MPPI_HD float sample_group(std::uint32_t sample, std::uint32_t groups) { return static_cast<float>(sample % groups); }
 
 // Philox4x32 constants (Salmon et al. 2011), as Random123 defines them.
 constexpr std::uint32_t kPhiloxM0 = 0xD2511F53u, kPhiloxM1 = 0xCD9E8D57u;

@@ -28,6 +28,10 @@ struct MppiSettings {
   float control_cost_scale = 1.0f;  // multiplies the control terms of q~ (paper: 1)
   Weighting weighting = Weighting::kCostToGo;
   int smoothing_window = 1;     // moving average over the plan, odd; 1 = off
+  // Noise groups: the NU channels split into this many equal consecutive groups (a team:
+  // one per vehicle), and sample k perturbs only group k mod noise_groups (the others fly
+  // the plan). 1: every sample perturbs every channel (the paper's). See sampling.hpp.
+  int noise_groups = 1;
   std::uint64_t seed = 1;
   int threads = 0;              // CPU backend: 0 = all cores (OpenMP default)
   // CPU backend: samples in SIMD lanes. "auto" (the best target this CPU runs), "off" (one

@@ -71,12 +71,15 @@ struct Task {
   }
 
   // running() with the per-vehicle term computed by vehicle_cost(j, x_j, &hit): a backend
-  // may evaluate Cost::vehicle its own way (same terms, same order of the sum).
+  // may evaluate Cost::vehicle its own way (same terms, same order of the sum). hit comes in
+  // as the vehicle's crash state of the earlier steps and goes out or-ed with this step's.
   template <class V, class C, class VehicleCost>
   MPPI_HD static V running_with(const Params& p, const V* x, C* crashed, VehicleCost&& vehicle_cost) {
     V q = 0.0f;
     for (int j = 0; j < M; ++j) {
-      mask_t<V> hit = false;
+      // In: the vehicle crashed at an earlier step (a cost may keep charging for it); out:
+      // crashed now or before.
+      mask_t<V> hit = vehicle_crashed(*crashed, j);
       q += vehicle_cost(j, x + j * kVehicleNx, &hit);
       mark_crashed(crashed, j, hit);
     }

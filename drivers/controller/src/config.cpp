@@ -1,6 +1,7 @@
 #include "mppi/app/config.hpp"
 
 #include <cmath>
+#include <cstdint>
 #include <set>
 
 #include "mppi/params.hpp"
@@ -30,6 +31,15 @@ std::vector<float> floats(const YAML::Node& node, const std::string& field) {
     out.push_back(static_cast<float>(v));
   }
   return out;
+}
+
+// The name of a map key; a key that is itself a list or a map (YAML's "? [a, b]: ...") is
+// an error naming the section it is in, not a yaml-cpp conversion error naming nothing.
+std::string key_name(const YAML::Node& key, const std::string& section) {
+  if (!key.IsScalar())
+    fail(section, "keys must be plain names (line " + std::to_string(key.Mark().line + 1) + " is a " +
+                      (key.IsSequence() ? "list" : key.IsMap() ? "map" : "null") + ")");
+  return key.Scalar();
 }
 
 // Applies "a.b.c=value" to the tree.
@@ -69,9 +79,9 @@ void read_mppi(const YAML::Node& m, MppiSettings& s) {
   static const std::set<std::string> known = {
       "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
       "control_cost_scale", "weighting", "smoothing_window", "seed", "threads", "simd", "chunk_rollouts",
-      "min_rollouts"};
+      "min_rollouts", "noise_groups"};
   for (const auto& kv : m) {
-    const auto name = kv.first.as<std::string>();
+    const auto name = key_name(kv.first, "mppi");
     if (!known.count(name)) fail("mppi." + name, "unknown field");
   }
   for (const char* required : {"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"})
@@ -96,6 +106,43 @@ void read_mppi(const YAML::Node& m, MppiSettings& s) {
   if (m["simd"]) s.simd = scalar<std::string>(m["simd"], "mppi.simd");
   if (m["chunk_rollouts"]) s.chunk_rollouts = scalar<int>(m["chunk_rollouts"], "mppi.chunk_rollouts");
   if (m["min_rollouts"]) s.min_rollouts = scalar<int>(m["min_rollouts"], "mppi.min_rollouts");
+  if (m["noise_groups"]) s.noise_groups = scalar<int>(m["noise_groups"], "mppi.noise_groups");
+}
+
+void read_ddp(const YAML::Node& m, DdpSettings& d) {
+  if (!m.IsMap()) fail("ddp", "expected a map");
+  static const std::set<std::string> known = {
+      "max_iterations", "line_search_steps", "mu_init", "mu_min", "mu_max", "mu_factor", "fd_step",
+      "fd_hessian_step", "convexify", "r", "initial_plan", "obstacle_weight", "obstacle_margin", "obstacle_softness",
+      "ground_weight", "ground_margin", "ground_softness", "speed_weight", "speed_limit", "exp_cap", "obstacle_reach"};
+  for (const auto& kv : m) {
+    const auto name = key_name(kv.first, "ddp");
+    if (!known.count(name)) fail("ddp." + name, "unknown field");
+  }
+  auto num = [&](const char* name, double& field) {
+    if (m[name]) field = scalar<double>(m[name], std::string("ddp.") + name);
+  };
+  if (m["max_iterations"]) d.max_iterations = scalar<int>(m["max_iterations"], "ddp.max_iterations");
+  if (m["line_search_steps"]) d.line_search_steps = scalar<int>(m["line_search_steps"], "ddp.line_search_steps");
+  num("mu_init", d.mu_init);
+  num("mu_min", d.mu_min);
+  num("mu_max", d.mu_max);
+  num("mu_factor", d.mu_factor);
+  num("fd_step", d.fd_step);
+  num("fd_hessian_step", d.fd_hessian_step);
+  if (m["convexify"]) d.convexify = scalar<bool>(m["convexify"], "ddp.convexify");
+  if (m["r"]) d.r = floats(m["r"], "ddp.r");
+  if (m["initial_plan"]) d.initial_plan = floats(m["initial_plan"], "ddp.initial_plan");
+  num("obstacle_weight", d.obstacle_weight);
+  num("obstacle_margin", d.obstacle_margin);
+  num("obstacle_softness", d.obstacle_softness);
+  num("ground_weight", d.ground_weight);
+  num("ground_margin", d.ground_margin);
+  num("ground_softness", d.ground_softness);
+  num("speed_weight", d.speed_weight);
+  num("speed_limit", d.speed_limit);
+  num("exp_cap", d.exp_cap);
+  num("obstacle_reach", d.obstacle_reach);
 }
 
 void read_params(const YAML::Node& root, const char* section, AppConfig& c) {
@@ -103,7 +150,7 @@ void read_params(const YAML::Node& root, const char* section, AppConfig& c) {
   if (!node) return;
   if (!node.IsMap()) fail(section, "expected a map of name: number");
   for (const auto& kv : node) {
-    const std::string key = std::string(section) + "." + kv.first.as<std::string>();
+    const std::string key = std::string(section) + "." + key_name(kv.first, section);
     c.params.emplace_back(key, scalar<double>(kv.second, key));
   }
 }
@@ -116,16 +163,20 @@ std::string default_config_path(const std::string& task) {
 
 namespace {
 
-// A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost).
+// A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost, daemon).
 YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section, const std::string& name) {
-  if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost overrides");
+  if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
   YAML::Node out = YAML::Clone(root);
   out.remove(name);
   for (const auto& kv : section) {
     const auto part = kv.first.as<std::string>();
-    if (part != "mppi" && part != "model" && part != "cost") fail(name + "." + part, "unknown section (mppi, model, cost)");
+    if (part != "mppi" && part != "model" && part != "cost" && part != "daemon")
+      fail(name + "." + part, "unknown section (mppi, model, cost, daemon)");
     if (!kv.second.IsMap()) fail(name + "." + part, "expected a map");
     if (!out[part] || out[part].IsNull()) out[part] = YAML::Node(YAML::NodeType::Map);
+    // The file's own section must be a map to merge into (the daemon section is checked only
+    // here before mppid parses it; fuzz_settings found `daemon: 1` escaping as YAML::BadSubscript).
+    if (!out[part].IsMap()) fail(part, "expected a map");
     for (const auto& f : kv.second) out[part][f.first.as<std::string>()] = YAML::Clone(f.second);
   }
   return out;
@@ -135,24 +186,10 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
   const YAML::Node file = YAML::Clone(root);
   for (const auto& o : overrides) apply_override(root, o);
-  // The `cuda:` variant: the file with that section (after the overrides: --set cuda.x=...
-  // works) merged in, then the other overrides again (so a command-line --set wins over the
-  // section). Parsed, and so validated, now, whatever the machine.
-  std::shared_ptr<const AppConfig> cuda;
-  if (const YAML::Node section = root["cuda"]; section && !cuda_variant) {
-    std::vector<std::string> rest;
-    for (const auto& o : overrides)
-      if (o.rfind("cuda.", 0) != 0) rest.push_back(o);
-    try {
-      cuda = std::make_shared<const AppConfig>(parse_impl(merged_with(file, section, "cuda"), rest, true));
-    } catch (const ConfigError& e) {
-      throw ConfigError(std::string("cuda: ") + e.what());
-    }
-  }
   static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
-                                                 "description", "cuda"};
+                                                 "description", "cuda", "controller", "ddp"};
   for (const auto& kv : root) {
-    const auto name = kv.first.as<std::string>();
+    const auto name = key_name(kv.first, "(file)");
     if (!sections.count(name)) fail(name, "unknown section");
   }
   AppConfig c;
@@ -162,6 +199,12 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");
   if (c.backend != "cpu" && c.backend != "cuda" && c.backend != "auto") fail("backend", "must be cpu, cuda or auto");
   read_mppi(root["mppi"], c.mppi);
+  if (root["controller"]) c.controller = scalar<std::string>(root["controller"], "controller");
+  if (c.controller != "mppi" && c.controller != "ddp") fail("controller", "must be mppi or ddp");
+  if (const YAML::Node d = root["ddp"]; d && !d.IsNull()) {
+    read_ddp(d, c.ddp);
+    c.has_ddp = true;
+  }
   read_params(root, "model", c);
   read_params(root, "cost", c);
 
@@ -187,7 +230,21 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   if (!param_error.empty()) throw ConfigError(param_error);
   const std::string err = validate(c.mppi, nu);
   if (!err.empty()) throw ConfigError("mppi." + err);
-  c.cuda = cuda;
+  if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
+  // The `cuda:` variant: the file with that section (after the overrides: --set cuda.x=...
+  // works) merged in, then the other overrides again (so a command-line --set wins over the
+  // section). Parsed, and so validated, now, whatever the machine; after the file itself, so
+  // an error of the file (or of an override both share) is reported as the file's.
+  if (const YAML::Node section = root["cuda"]; section && !cuda_variant) {
+    std::vector<std::string> rest;
+    for (const auto& o : overrides)
+      if (o.rfind("cuda.", 0) != 0) rest.push_back(o);
+    try {
+      c.cuda = std::make_shared<const AppConfig>(parse_impl(merged_with(file, section, "cuda"), rest, true));
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("cuda: ") + e.what());
+    }
+  }
   return c;
 }
 

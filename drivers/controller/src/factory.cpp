@@ -3,6 +3,7 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/cpu_backend.hpp"
+#include "mppi/ddp/ddp_controller.hpp"
 #include "mppi/params.hpp"
 #include "mppi/tasks.hpp"
 #ifdef MPPID_HAVE_CUDA
@@ -24,7 +25,37 @@ std::string resolve_backend(const std::string& requested, std::string* why_not_c
   return requested;
 }
 
+namespace {
+
+std::unique_ptr<Controller> make_ddp_controller(const AppConfig& config) {
+  if (!config.has_ddp) throw ConfigError("ddp: missing section (controller: ddp needs the DDP settings of the task)");
+  std::unique_ptr<Controller> out;
+  bool supported = false;
+  visit_task(config.task, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    if constexpr (kDdpTask<T>) {
+      supported = true;
+      typename T::Params params{};
+      for (const auto& [key, value] : config.params) {
+        const std::string err = set_task_param<T>(params, key, value);
+        if (!err.empty()) throw ConfigError(err);
+      }
+      try {
+        out = std::make_unique<DdpController<T>>(config.task, config.mppi, config.ddp, params);
+      } catch (const std::invalid_argument& e) {
+        throw ConfigError(e.what());
+      }
+    }
+  });
+  if (!supported)
+    throw ConfigError("controller: ddp is built for cartpole_swingup and quadrotor_forest, not '" + config.task + "'");
+  return out;
+}
+
+}  // namespace
+
 std::unique_ptr<Controller> make_controller(const AppConfig& file_config) {
+  if (file_config.controller == "ddp") return make_ddp_controller(file_config);
   std::string why;
   const std::string backend = resolve_backend(file_config.backend, &why);
   const AppConfig& config = file_config.for_backend(backend);

@@ -2,6 +2,7 @@
 
 #include "mppi/daemon/daemon_settings.hpp"
 
+#include <cstdint>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -93,6 +94,7 @@ void ControlLoop::run(const std::atomic<bool>& stop, std::int64_t max_cycles) {
 
 bool ControlLoop::step_realtime(const std::atomic<bool>& stop) {
   if (!started_) start();
+  if (s_.trigger == Trigger::kState) return step_state_triggered(stop);
   // Absolute-time sleep; an early return (a signal) re-checks stop and sleeps again.
   std::int64_t now = clock_->now_ns();
   while (now < schedule_.next_release_ns()) {
@@ -102,6 +104,40 @@ bool ControlLoop::step_realtime(const std::atomic<bool>& stop) {
   }
   if (stop.load(std::memory_order_relaxed)) return false;
   schedule_.begin(now);
+  cycle(now, schedule_.deadline_ns(), now, false);
+  return true;
+}
+
+bool ControlLoop::step_state_triggered(const std::atomic<bool>& stop) {
+  const std::int64_t period = schedule_.period_ns(), next = schedule_.next_release_ns();
+  const auto part = [&](double f) { return static_cast<std::int64_t>(f * static_cast<double>(period)); };
+  // next is a period after the last cycle's start (or the end of a late cycle, or the start).
+  // A new state starts a cycle if it came min_gap periods after the last start, or at once
+  // after a cycle the grace started (states slower than the rate: each one is awaited). With
+  // none, the grace runs out: after a state's cycle `grace` past the grid time, after the
+  // grace's own cycle on the grid (no state: the stale path at rate_hz).
+  const std::int64_t earliest = grace_started_ ? INT64_MIN : next - period + part(s_.state_trigger_min_gap);
+  const std::int64_t latest = grace_started_ ? next : next + part(s_.state_trigger_grace);
+  std::int64_t now = clock_->now_ns();
+  for (;;) {
+    if (stop.load(std::memory_order_relaxed)) return false;
+    const std::int64_t got = in_->last_state_recv_ns();
+    if (got >= earliest && got > trigger_recv_ns_) {
+      counters_.state_triggered.fetch_add(1, std::memory_order_relaxed);
+      trigger_recv_ns_ = got;
+      grace_started_ = false;
+      break;
+    }
+    if (now >= latest) {
+      counters_.clock_triggered.fetch_add(1, std::memory_order_relaxed);
+      trigger_recv_ns_ = got;  // an older state never starts a cycle later
+      grace_started_ = true;
+      break;
+    }
+    clock_->sleep_until_or(in_->state_wake, latest);  // each state (and a signal) re-checks
+    now = clock_->now_ns();
+  }
+  schedule_.begin_at(now);
   cycle(now, schedule_.deadline_ns(), now, false);
   return true;
 }
@@ -178,8 +214,10 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
   const std::int64_t age = !have_state ? INT64_MAX : std::max<std::int64_t>(0, now_state_ns - t_state);
   const std::int64_t state_seq = have_state ? x.seq : -1;
   const LatencySettings& ls = s_.latency;
-  // Expected latency of this cycle (start -> command out), then when its command acts.
-  const std::int64_t expected = latency_.estimate_ns();
+  // Expected latency of this cycle (start -> command out), then when its command acts. In
+  // whole microseconds: command_t's lead_us then gives t_act exactly (replay).
+  const std::int64_t expected =
+      (expected_override_ns_ >= 0 ? expected_override_ns_ : latency_.estimate_ns()) / rt::kNsPerUs * rt::kNsPerUs;
   const std::int64_t t_act = now_state_ns + expected + ls.transport_ns + ls.actuation_delay_ns;
 
   Mode published = Mode::kFailsafe;
@@ -222,6 +260,13 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       x0 = x_pred_.data();
       lead = t_act - t_state;
       monitor_.record_lead(lead);
+      // A moving reference is compared with the predicted state at the predicted state's time:
+      // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
+      if (have_reference_ && inputs_.reference.kind != Reference::kHold) {
+        inputs_.reference_time = static_cast<float>(static_cast<double>(x.sample_utime - reference_t0_utime_) * 1e-6 +
+                                                    static_cast<double>(lead) * 1e-9);
+        c_->set_inputs(inputs_);
+      }
     } else {
       plan_timed_ = false;
     }
@@ -344,6 +389,7 @@ void ControlLoop::apply_between_cycles(std::int64_t now_state_ns) {
   (void)now_state_ns;
   transport::ParamUpdate p;
   while (in_->params.pop(&p)) {
+    if (forward_live_param(p)) continue;  // the builder answers
     const std::string err = apply_param(p);
     if (err.empty()) {
       counters_.params_applied.fetch_add(1, std::memory_order_relaxed);
@@ -352,7 +398,9 @@ void ControlLoop::apply_between_cycles(std::int64_t now_state_ns) {
       counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
       spdlog::warn("parameter update seq {} rejected: {}", p.seq, err);
     }
+    answer_param(p, err.empty(), err);
   }
+  if (live_ != nullptr) service_live();
   const bool new_state = in_->state.update();
   const bool new_ref = in_->reference.update();
   const bool new_obs = in_->obstacles.update();
@@ -526,6 +574,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   if (w.period.count > 0 && w.period.mean_ms > 0.0) snap_rate_.store(1000.0 / w.period.mean_ms, std::memory_order_relaxed);
   status_.cycles = w.cycles;
   status_.misses = w.misses;
+  status_.late_start_misses = w.late_start_misses;
   status_.consecutive_misses = w.consecutive_misses;
   status_.state_to_command_ms_p99 = f(w.latency.p99_ms);
   status_.state_age_ms_p99 = f(w.age.p99_ms);

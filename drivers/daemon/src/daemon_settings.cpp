@@ -1,6 +1,7 @@
 #include "mppi/daemon/daemon_settings.hpp"
 
 #include <cmath>
+#include <cstdint>
 #include <set>
 
 #include "mppi/app/config.hpp"
@@ -52,7 +53,11 @@ std::string text(const YAML::Node& parent, const std::string& field, const std::
 
 void check_known(const YAML::Node& map, const std::string& prefix, const std::set<std::string>& known) {
   for (const auto& kv : map) {
-    const auto name = kv.first.as<std::string>();
+    if (!kv.first.IsScalar()) {  // a list or map as a key: name the section, not a yaml-cpp conversion
+      const std::string where = prefix.empty() ? "daemon" : "daemon." + prefix.substr(0, prefix.size() - 1);
+      throw ConfigError(where + ": keys must be plain names (line " + std::to_string(kv.first.Mark().line + 1) + ")");
+    }
+    const auto name = kv.first.Scalar();
     if (!known.count(name)) fail(prefix + name, "unknown field");
   }
 }
@@ -84,7 +89,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms"});
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -103,6 +108,15 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   l.anytime_margin_ns =
       std::llround(number(section, "anytime_margin_ms", static_cast<double>(l.anytime_margin_ns) / 1e6, 0.0,
                           1000.0 / l.rate_hz) * 1e6);
+  const std::string trigger = text(section, "trigger", "clock");
+  if (trigger != "clock" && trigger != "state") fail("trigger", "must be clock or state");
+  l.trigger = trigger == "state" ? Trigger::kState : Trigger::kClock;
+  if (const YAML::Node st = section["state_trigger"]) {
+    if (!st.IsMap()) fail("state_trigger", "expected a map");
+    check_known(st, "state_trigger.", {"min_gap", "grace"});
+    l.state_trigger_min_gap = number(st, "min_gap", l.state_trigger_min_gap, 0.05, 1.0, "state_trigger.");
+    l.state_trigger_grace = number(st, "grace", l.state_trigger_grace, 0.0, 10.0, "state_trigger.");
+  }
   d.lockstep_trigger = text(section, "lockstep_trigger", d.lockstep_trigger);
   if (d.lockstep_trigger != "clock" && d.lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
   d.lcm_url = text(section, "lcm_url", d.lcm_url);
@@ -119,7 +133,8 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   }
   if (const YAML::Node c = section["channels"]) {
     if (!c.IsMap()) fail("channels", "expected a map");
-    check_known(c, "channels.", {"state", "command", "status", "plan", "reference", "obstacles", "params", "clock"});
+    check_known(c, "channels.",
+                {"state", "command", "status", "plan", "reference", "obstacles", "params", "param_result", "clock"});
     auto& ch = d.channels;
     ch.state = text(c, "state", ch.state, "channels.");
     ch.command = text(c, "command", ch.command, "channels.");
@@ -128,6 +143,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     ch.reference = text(c, "reference", ch.reference, "channels.");
     ch.obstacles = text(c, "obstacles", ch.obstacles, "channels.");
     ch.params = text(c, "params", ch.params, "channels.");
+    ch.param_result = text(c, "param_result", ch.param_result, "channels.");
     ch.clock = text(c, "clock", ch.clock, "channels.");
   }
   // The default ceiling of the expected latency is one period: a cycle that needs longer
@@ -162,6 +178,15 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     if (n["estimate"]) ds.estimate = scalar<bool>(n["estimate"], "disturbance.estimate");
     ds.time_constant_s = number(n, "time_constant_s", ds.time_constant_s, 0.02, 100.0, "disturbance.");
     ds.limit = static_cast<float>(number(n, "limit", ds.limit, 0.0, 50.0, "disturbance."));
+  }
+  if (const YAML::Node n = section["live"]) {
+    if (!n.IsMap()) fail("live", "expected a map");
+    check_known(n, "live.", {"enabled", "max_horizon", "max_rollouts", "max_threads"});
+    LiveSettings& lv = d.live;
+    if (n["enabled"]) lv.enabled = scalar<bool>(n["enabled"], "live.enabled");
+    lv.max_horizon = static_cast<int>(number(n, "max_horizon", lv.max_horizon, 2, 100000, "live."));
+    lv.max_rollouts = static_cast<int>(number(n, "max_rollouts", lv.max_rollouts, 1, 1 << 26, "live."));
+    lv.max_threads = static_cast<int>(number(n, "max_threads", lv.max_threads, 0, 1024, "live."));
   }
   if (const YAML::Node r = section["realtime"]) {
     if (!r.IsMap()) fail("realtime", "expected a map");

@@ -2,6 +2,7 @@
 // The main thread owns signals (blocked everywhere else, taken with sigtimedwait), the
 // systemd watchdog and STATUS= line; the loop thread owns the controller and publishes.
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <spdlog/async.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -18,6 +19,8 @@
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
+#include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/lcm_url_check.hpp"
 #include "mppi/daemon/notifier.hpp"
 #include "mppi/daemon/stats_report.hpp"
 #include "mppi/rt/clock.hpp"
@@ -52,13 +55,16 @@ int main(int argc, char** argv) {
     ::execv("/proc/self/exe", argv);  // returns only on failure: then run on as we are
   }
   CLI::App app{"mppid: deterministic fixed-rate MPPI controller daemon"};
-  std::string config_path, backend, lcm_url, log_level = "info";
+  std::string config_path, backend, controller_kind, lcm_url, log_level = "info";
   std::vector<std::string> sets;
   bool lockstep = false, realtime = false, require_realtime = false, stats = false;
   double duration_s = 0.0;
   app.add_option("--config", config_path, "Settings file (YAML)")->required();
   app.add_option("--set", sets, "Override a setting: key.path=value (repeatable)");
   app.add_option("--backend", backend, "cpu | cuda | auto");
+  app.add_option("--controller", controller_kind,
+                 "mppi (default) | ddp: the MPC-DDP baseline (iLQR, the settings file's ddp: section)")
+      ->check(CLI::IsMember({"mppi", "ddp"}));
   app.add_option("--lcm-url", lcm_url, "LCM URL (overrides daemon.lcm_url)");
   app.add_flag("--lockstep", lockstep, "Run one cycle per sim_clock_t tick instead of the wall clock");
   app.add_flag("--realtime", realtime, "SCHED_FIFO, mlockall, CPU affinity (runs on if refused)");
@@ -92,16 +98,29 @@ int main(int argc, char** argv) {
   // ---- settings -------------------------------------------------------------------
   std::vector<std::string> overrides = sets;
   if (!backend.empty()) overrides.push_back("backend=" + backend);
+  if (!controller_kind.empty()) overrides.push_back("controller=" + controller_kind);
   mppi::app::AppConfig cfg;
   mppi::daemon::DaemonSettings ds;
   try {
     cfg = mppi::app::load_config(config_path, overrides);
-    ds = mppi::daemon::parse_daemon_settings(cfg.root["daemon"], cfg.task, static_cast<int>(cfg.mppi.u_init.size()));
+    // The daemon section of the backend that will fly (a `cuda:` section may set its own).
+    const int nu = static_cast<int>(cfg.mppi.u_init.size());
+    if (cfg.cuda) {  // checked whatever the machine, like the rest of the `cuda:` section
+      try {
+        mppi::daemon::parse_daemon_settings(cfg.cuda->root["daemon"], cfg.task, nu);
+      } catch (const mppi::app::ConfigError& e) {
+        throw mppi::app::ConfigError(std::string("cuda: ") + e.what());
+      }
+    }
+    const auto& flying = cfg.for_backend(mppi::app::resolve_backend(cfg.backend));
+    ds = mppi::daemon::parse_daemon_settings(flying.root["daemon"], cfg.task, nu);
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: {}", e.what());
     return kExitConfig;
   }
   if (!lcm_url.empty()) ds.lcm_url = lcm_url;
+  if (const std::string why = mppi::daemon::lcm_url_leaves_host(ds.lcm_url); !why.empty())
+    spdlog::warn("lcm_url {}: {}", ds.lcm_url, why);  // legal, but the bus would leave this machine
   if (lockstep) ds.loop.lockstep = true;
   // The deadline guard must preempt a stalled optimizer (and its OpenMP workers).
   if (realtime && ds.realtime.fifo_priority > 0) ds.loop.guard_fifo_priority = std::min(99, ds.realtime.fifo_priority + 2);
@@ -124,17 +143,24 @@ int main(int argc, char** argv) {
     spdlog::error("invalid settings: daemon.failsafe_u: expected {} numbers", nu);
     return kExitConfig;
   }
-  spdlog::info("task {} on {} backend: K={} T={} dt={} lambda={} nu={}, {} Hz{}", controller->task(),
-               controller->backend(), controller->settings().rollouts, controller->settings().horizon,
-               controller->settings().dt, controller->settings().lambda, controller->settings().nu,
-               ds.loop.rate_hz, ds.loop.lockstep ? ", lock-step" : "");
+  if (cfg.controller == "ddp")
+    spdlog::info("task {}: MPC-DDP (iLQR, at most {} iterations per cycle) T={} dt={}, {} Hz{}", controller->task(),
+                 cfg.ddp.max_iterations, controller->settings().horizon, controller->settings().dt, ds.loop.rate_hz,
+                 ds.loop.lockstep ? ", lock-step" : "");
+  else
+    spdlog::info("task {} on {} backend: K={} T={} dt={} lambda={} nu={}, {} Hz{}", controller->task(),
+                 controller->backend(), controller->settings().rollouts, controller->settings().horizon,
+                 controller->settings().dt, controller->settings().lambda, controller->settings().nu,
+                 ds.loop.rate_hz, ds.loop.lockstep ? ", lock-step" : "");
 
   // ---- transport --------------------------------------------------------------------
+  // The plan message buffer is sized once, for the longest horizon a live update may set.
+  const int max_plan_steps = ds.live.enabled ? std::max(controller->horizon(), ds.live.max_horizon) : controller->horizon();
   mppi::rt::MonotonicClock clock;
   std::unique_ptr<mppi::transport::LcmTransport> tx;
   try {
     tx = std::make_unique<mppi::transport::LcmTransport>(ds.lcm_url, ds.channels, &clock,
-                                                         controller->horizon() * nu, ds.receive_timeout_ms);
+                                                         max_plan_steps * nu, ds.receive_timeout_ms);
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: daemon.{}", e.what());
     return kExitConfig;
@@ -151,8 +177,27 @@ int main(int argc, char** argv) {
   expect.model = ds.expect_model;
   expect.restart_after_ns = ds.loop.state_timeout_ns;
   expect.tick_on_state = ds.loop.lockstep && ds.lockstep_trigger == "state";
+  expect.wake_on_state = !ds.loop.lockstep && ds.loop.trigger == mppi::daemon::Trigger::kState;
   auto inbox = std::make_unique<mppi::transport::Inbox>(expect);
-  mppi::daemon::ControlLoop loop(controller.get(), &clock, tx.get(), inbox.get(), ds.loop);
+  // Live optimizer updates: the builder thread makes controllers from the same settings
+  // with new mppi.* values; it owns the controller in service from here on. In lock-step the
+  // loop builds them itself at the next cycle (no deadline there), so the cycle an update
+  // takes effect at does not depend on how the builder thread was scheduled: a lock-step run
+  // with updates repeats, and a fast one cannot end before its updates were built.
+  std::unique_ptr<mppi::daemon::LiveOptimizer> live;
+  mppi::Controller* const initial = controller.get();
+  if (ds.live.enabled) {
+    live = std::make_unique<mppi::daemon::LiveOptimizer>(
+        std::move(controller),
+        [cfg](const mppi::MppiSettings& s) {
+          return mppi::app::make_controller(cfg.with_mppi(s));
+        },
+        ds.live,
+        ds.loop.lockstep ? mppi::daemon::LiveOptimizer::Mode::kSynchronous
+                         : mppi::daemon::LiveOptimizer::Mode::kBuilderThread);
+  }
+  mppi::daemon::ControlLoop loop(initial, &clock, tx.get(), inbox.get(), ds.loop);
+  loop.set_live_optimizer(live.get());
 
   // ---- loop thread: real-time set-up, warm-up, then cycles --------------------------
   std::atomic<bool> stop{false};
@@ -166,9 +211,9 @@ int main(int argc, char** argv) {
     try {
       // Warm-up: first-touch the backend's buffers and start its thread pool from this
       // (real-time) thread, so the worker threads inherit its policy.
-      std::vector<float> x0(static_cast<std::size_t>(controller->nx()), 0.0f), u(static_cast<std::size_t>(nu));
-      for (int i = 0; i < ds.warmup_iterations; ++i) controller->iterate(x0.data(), u.data());
-      controller->reset();
+      std::vector<float> x0(static_cast<std::size_t>(initial->nx()), 0.0f), u(static_cast<std::size_t>(nu));
+      for (int i = 0; i < ds.warmup_iterations; ++i) initial->iterate(x0.data(), u.data());
+      initial->reset();
     } catch (const std::exception& e) {
       warmup_error = e.what();
       ready = -1;
@@ -259,15 +304,17 @@ int main(int argc, char** argv) {
   tx->stop();
   const double seconds = static_cast<double>(mppi::rt::monotonic_ns() - t_start) * 1e-9;
   const auto total = loop.timing_total();
-  spdlog::info("final status published (status #{}); stopped after {} cycles, {} misses, {:.1f} ms after the stop request",
-               loop.counters().status_published.load(), total.cycles, total.misses,
-               static_cast<double>(mppi::rt::monotonic_ns() - t_stop) * 1e-6);
+  spdlog::info(
+      "final status published (status #{}); stopped after {} cycles, {} misses ({} late starts), {:.1f} ms after the "
+      "stop request",
+      loop.counters().status_published.load(), total.cycles, total.misses, total.late_start_misses,
+      static_cast<double>(mppi::rt::monotonic_ns() - t_stop) * 1e-6);
   if (stats) {
     mppi::daemon::RunFacts f;
-    f.task = controller->task();
-    f.backend = controller->backend();
-    f.rollouts = controller->settings().rollouts;
-    f.horizon = controller->settings().horizon;
+    f.task = loop.controller().task();
+    f.backend = loop.controller().backend();
+    f.rollouts = loop.controller().settings().rollouts;
+    f.horizon = loop.controller().horizon();
     f.rate_hz = ds.loop.rate_hz;
     f.seconds = seconds;
     f.lockstep = ds.loop.lockstep;

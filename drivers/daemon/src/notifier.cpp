@@ -1,5 +1,6 @@
 #include "mppi/daemon/notifier.hpp"
 
+#include <cstdint>
 #include <cstdlib>
 
 #ifdef MPPID_HAVE_SYSTEMD

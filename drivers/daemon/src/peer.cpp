@@ -4,6 +4,7 @@
 // command_t and controller_status_t; measures state-out -> command-in latency by
 // state_seq; injects faults on request; prints one `mppid-peer {json}` line at the end.
 #include <CLI/CLI.hpp>
+#include <cstdint>
 #include <lcm/lcm-cpp.hpp>
 
 #include <algorithm>

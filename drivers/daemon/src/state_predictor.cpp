@@ -1,6 +1,7 @@
 #include "mppi/daemon/state_predictor.hpp"
 
 #include <algorithm>
+#include <cstdint>
 
 namespace mppi::daemon {
 

@@ -1,5 +1,6 @@
 #include "mppi/daemon/stats_report.hpp"
 
+#include <cstdint>
 #include <spdlog/fmt/fmt.h>
 
 namespace mppi::daemon {
@@ -23,8 +24,8 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       "mppid stats: task={} backend={} K={} T={} rate={} Hz {} {} run={:.1f} s\n", f.task, f.backend, f.rollouts,
       f.horizon, f.rate_hz, f.lockstep ? "lock-step" : "real-time clock", f.realtime ? "SCHED_FIFO" : "SCHED_OTHER",
       f.seconds);
-  out += fmt::format("  cycles={} misses={} max_consecutive_misses={} skipped_periods={}\n", t.cycles, t.misses,
-                     t.max_consecutive_misses, loop.skipped_periods());
+  out += fmt::format("  cycles={} misses={} (late start {}) max_consecutive_misses={} skipped_periods={}\n", t.cycles,
+                     t.misses, t.late_start_misses, t.max_consecutive_misses, loop.skipped_periods());
   out += line("compute", t.compute);
   out += line("period", t.period);
   out += line("jitter |period-nominal|", t.jitter);
@@ -35,6 +36,9 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
                      "repeated ticks={}\n",
                      static_cast<double>(loop.latency_estimate_ns()) * 1e-6, v(c.latency_rejected), v(c.future_states),
                      v(c.plan_skips), v(c.repeated_ticks));
+  if (loop.settings().trigger == Trigger::kState)
+    out += fmt::format("  trigger state: cycles started by a state={}, by the grace running out={}\n",
+                       v(c.state_triggered), v(c.clock_triggered));
   out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} send_failures={} (failsafe entries {})\n",
                      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
                      v(c.publish_failures), v(c.failsafe_entries));
@@ -44,19 +48,20 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.gate_rejects), v(c.late_holds), v(c.stale_cycles),
       v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds));
   out += fmt::format(
-      "  states accepted={} rejected: nan={} duplicate={} out_of_order={} shape={} undecodable={} inputs={}\n",
+      "  states accepted={} rejected: nan={} duplicate={} out_of_order={} shape={} time={} undecodable={} inputs={}"
+      " (ticks rejected={})\n",
       v(in.states), v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
-      v(in.rejected_undecodable), v(in.rejected_inputs));
+      v(in.rejected_time), v(in.rejected_undecodable), v(in.rejected_inputs), v(in.ticks_rejected));
   out += fmt::format("  params applied={} rejected={} dropped={}  status={} plans={}\n", v(c.params_applied),
                      v(c.params_rejected), v(in.params_dropped), v(c.status_published), v(c.plans_published));
   out += fmt::format("  rss start={} kB end={} kB\n", f.rss_start_kb, f.rss_end_kb);
   out += "mppid-stats {";
   out += fmt::format(
       "\"task\":\"{}\",\"backend\":\"{}\",\"rollouts\":{},\"horizon\":{},\"rate_hz\":{},\"seconds\":{:.3f},"
-      "\"lockstep\":{},\"realtime\":{},\"cycles\":{},\"misses\":{},\"max_consecutive_misses\":{},"
-      "\"skipped_periods\":{},",
+      "\"lockstep\":{},\"realtime\":{},\"cycles\":{},\"misses\":{},\"late_start_misses\":{},"
+      "\"max_consecutive_misses\":{},\"skipped_periods\":{},",
       f.task, f.backend, f.rollouts, f.horizon, f.rate_hz, f.seconds, f.lockstep, f.realtime, t.cycles, t.misses,
-      t.max_consecutive_misses, loop.skipped_periods());
+      t.late_start_misses, t.max_consecutive_misses, loop.skipped_periods());
   out += json("compute", t.compute) + "," + json("period", t.period) + "," + json("jitter", t.jitter) + "," +
          json("latency", t.latency) + "," + json("age", t.age) + "," + json("lead", t.lead) + ",";
   out += fmt::format("\"latency_expected_ms\":{:.3f},\"future_states\":{},\"plan_skips\":{},\"repeated_ticks\":{},",
@@ -67,13 +72,15 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       "\"optimizer_nonfinite\":{},\"optimizer_errors\":{},\"late_holds\":{},\"stale_cycles\":{},"
       "\"guard_takeovers\":{},\"guard_commands\":{},\"partial_updates\":{},\"anytime_holds\":{},"
       "\"states\":{},\"rejected_nan\":{},\"rejected_duplicate\":{},\"rejected_out_of_order\":{},"
-      "\"rejected_shape\":{},\"rejected_undecodable\":{},\"params_applied\":{},\"params_rejected\":{},"
+      "\"rejected_shape\":{},\"rejected_time\":{},\"rejected_undecodable\":{},\"params_applied\":{},"
+      "\"params_rejected\":{},\"trigger\":\"{}\",\"state_triggered\":{},\"clock_triggered\":{},"
       "\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
       v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.late_holds), v(c.stale_cycles),
       v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds), v(in.states),
       v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
-      v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected), f.rss_start_kb, f.rss_end_kb);
+      v(in.rejected_time), v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected),
+      loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), f.rss_start_kb, f.rss_end_kb);
   return out;
 }
 

@@ -1,6 +1,7 @@
 #include "mppi/transport/inbox.hpp"
 
 #include <cmath>
+#include <cstdint>
 
 namespace mppi::transport {
 
@@ -21,13 +22,14 @@ const char* to_string(Reject r) {
     case Reject::kOutOfOrder: return "out-of-order seq";
     case Reject::kShape: return "wrong shape or model";
     case Reject::kUndecodable: return "undecodable";
+    case Reject::kTime: return "sample time out of range";
   }
   return "?";
 }
 
 Reject Inbox::offer_state() {
   const StateSample& s = state.back();
-  auto reject = [this](std::atomic<std::int64_t>& c, Reject r) {
+  auto reject = [](std::atomic<std::int64_t>& c, Reject r) {
     c.fetch_add(1, std::memory_order_relaxed);
     return r;
   };
@@ -36,6 +38,7 @@ Reject Inbox::offer_state() {
     return reject(counters.rejected_shape, Reject::kShape);
   for (int i = 0; i < s.n; ++i)
     if (!std::isfinite(s.x[i])) return reject(counters.rejected_nan, Reject::kNan);
+  if (s.sample_utime < 0 || s.sample_utime > kMaxUtime) return reject(counters.rejected_time, Reject::kTime);
   if (have_last_) {
     if (s.seq == last_seq_) return reject(counters.rejected_duplicate, Reject::kDuplicate);
     if (s.seq < last_seq_ && s.recv_ns - last_recv_ns_ < expect_.restart_after_ns)
@@ -46,6 +49,8 @@ Reject Inbox::offer_state() {
   last_recv_ns_ = s.recv_ns;
   state.publish();
   counters.states.fetch_add(1, std::memory_order_relaxed);
+  last_state_recv_ns_.store(last_recv_ns_, std::memory_order_release);
+  if (expect_.wake_on_state) state_wake.post();
   if (expect_.tick_on_state) {
     ClockTick t;
     t.seq = s.seq;
@@ -57,7 +62,8 @@ Reject Inbox::offer_state() {
 
 void Inbox::offer_reference() {
   const ReferenceInput& r = reference.back();
-  bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && std::isfinite(r.radius) &&
+  bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && r.t0_utime >= 0 && r.t0_utime <= kMaxUtime &&
+            std::isfinite(r.radius) &&
             std::isfinite(r.speed) && std::isfinite(r.yaw);
   for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.center[d]);
   for (int v = 0; ok && v < r.vehicle_count; ++v)
@@ -83,6 +89,10 @@ void Inbox::offer_param(const ParamUpdate& p) {
 }
 
 void Inbox::offer_tick(const ClockTick& t) {
+  if (t.sim_utime < 0 || t.sim_utime > kMaxUtime) {
+    counters.ticks_rejected.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
   if (!ticks.push(t)) {
     counters.ticks_dropped.fetch_add(1, std::memory_order_relaxed);
     return;

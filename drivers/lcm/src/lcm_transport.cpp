@@ -1,5 +1,6 @@
 #include "mppi/transport/lcm_transport.hpp"
 
+#include <cstdint>
 #include <pthread.h>
 #include <sched.h>
 #include <unistd.h>
@@ -12,16 +13,19 @@ namespace mppi::transport {
 
 LcmTransport::LcmTransport(const std::string& url, LcmChannels channels, rt::Clock* recv_clock, int max_plan_floats,
                            int receive_timeout_ms)
-    : lcm_(url), url_(url), ch_(std::move(channels)), recv_clock_(recv_clock), timeout_ms_(receive_timeout_ms) {
+    : lcm_(url),
+      url_(url),
+      ch_(std::move(channels)),
+      timeout_ms_(receive_timeout_ms),
+      decoder_(recv_clock) {
   if (!lcm_.good()) throw std::runtime_error("lcm_url: cannot open '" + url + "'");
   command_out_.u.reserve(kMaxControls);
   plan_out_.u.reserve(static_cast<std::size_t>(std::max(0, max_plan_floats)));
   plan_out_.pos.assign(kMaxPlanPositions, std::vector<float>(3, 0.0f));
-  state_in_.x.reserve(kMaxStates);
-  obstacles_in_.cylinders.reserve(kMaxObstaclesIn);
-  reference_in_.goals.reserve(kMaxVehicles);
   status_out_.backend.reserve(16);
   status_out_.task.reserve(64);
+  param_result_out_.key.reserve(sizeof(ParamResult::key));
+  param_result_out_.reason.reserve(sizeof(ParamResult::reason));
   // Largest message out: the plan (header plus floats); commands and status are small.
   buf_.resize(4096 + (static_cast<std::size_t>(std::max(0, max_plan_floats)) + 3 * kMaxPlanPositions) * sizeof(float));
 }
@@ -78,94 +82,21 @@ void LcmTransport::stop() {
   if (thread_.joinable()) thread_.join();
 }
 
-template <class Msg>
-bool LcmTransport::decode(Msg* msg, const lcm::ReceiveBuffer* rb) {
-  const auto size = static_cast<int>(rb->data_size);
-  // A wrong type fails the fingerprint; truncated or padded bytes fail the length check.
-  if (msg->decode(rb->data, 0, size) != size) {
-    inbox_->count_undecodable();
-    return false;
-  }
-  return true;
-}
-
+// Decoding and validation live in LcmDecoder (lcm_decode.cpp), reachable without a socket.
 void LcmTransport::on_state(const lcm::ReceiveBuffer* rb, const std::string&) {
-  const std::int64_t now = recv_clock_->now_ns();
-  if (!decode(&state_in_, rb)) return;
-  const auto& m = state_in_;
-  if (m.n != static_cast<std::int32_t>(m.x.size()) || m.n > kMaxStates || m.n < 0) {
-    inbox_->count_undecodable();
-    return;
-  }
-  StateSample& s = inbox_->state_buffer();
-  s.utime = m.utime;
-  s.seq = m.seq;
-  s.sample_utime = m.sample_utime;
-  s.recv_ns = now;
-  s.recv_utime = rt::wall_utime();
-  s.model = m.model;
-  s.vehicle_count = m.vehicle_count;
-  s.nx = m.nx;
-  s.n = m.n;
-  std::copy(m.x.begin(), m.x.end(), s.x);
-  inbox_->offer_state();
+  decoder_.state(rb->data, rb->data_size, inbox_);
 }
-
 void LcmTransport::on_reference(const lcm::ReceiveBuffer* rb, const std::string&) {
-  if (!decode(&reference_in_, rb)) return;
-  const auto& m = reference_in_;
-  if (m.vehicle_count < 0 || m.vehicle_count > kMaxVehicles) return inbox_->count_bad_input();
-  ReferenceInput& r = inbox_->reference_buffer();
-  r.seq = m.seq;
-  r.kind = m.kind;
-  std::copy_n(m.center, 3, r.center);
-  r.radius = m.radius;
-  r.speed = m.speed;
-  r.yaw = m.yaw;
-  r.t0_utime = m.t0_utime;
-  r.vehicle_count = m.vehicle_count;
-  for (int v = 0; v < m.vehicle_count; ++v)
-    for (int d = 0; d < 3; ++d) r.goals[v][d] = m.goals[static_cast<std::size_t>(v)][static_cast<std::size_t>(d)];
-  inbox_->offer_reference();
+  decoder_.reference(rb->data, rb->data_size, inbox_);
 }
-
 void LcmTransport::on_obstacles(const lcm::ReceiveBuffer* rb, const std::string&) {
-  if (!decode(&obstacles_in_, rb)) return;
-  const auto& m = obstacles_in_;
-  if (m.n < 0 || m.n > kMaxObstaclesIn) return inbox_->count_bad_input();
-  ObstacleInput& o = inbox_->obstacles_buffer();
-  o.seq = m.seq;
-  o.utime = m.utime;
-  o.count = m.n;
-  for (int i = 0; i < m.n; ++i) {
-    const auto& c = m.cylinders[static_cast<std::size_t>(i)];
-    o.items[i] = Cylinder{c.x, c.y, c.radius, c.vx, c.vy};
-  }
-  inbox_->offer_obstacles();
+  decoder_.obstacles(rb->data, rb->data_size, inbox_);
 }
-
 void LcmTransport::on_param(const lcm::ReceiveBuffer* rb, const std::string&) {
-  if (!decode(&param_in_, rb)) return;
-  ParamUpdate p;
-  p.seq = param_in_.seq;
-  p.value = param_in_.value;
-  if (param_in_.key.size() >= sizeof(p.key)) {
-    // Too long for any known key: let the loop reject it by name (truncated, marked).
-    std::memcpy(p.key, param_in_.key.data(), sizeof(p.key) - 4);
-    std::memcpy(p.key + sizeof(p.key) - 4, "...", 4);
-  } else {
-    std::memcpy(p.key, param_in_.key.c_str(), param_in_.key.size() + 1);
-  }
-  inbox_->offer_param(p);
+  decoder_.param(rb->data, rb->data_size, inbox_);
 }
-
 void LcmTransport::on_clock(const lcm::ReceiveBuffer* rb, const std::string&) {
-  if (!decode(&clock_in_, rb)) return;
-  ClockTick t;
-  t.seq = clock_in_.seq;
-  t.sim_utime = clock_in_.sim_utime;
-  t.step = clock_in_.step;
-  inbox_->offer_tick(t);
+  decoder_.clock(rb->data, rb->data_size, inbox_);
 }
 
 template <class Msg>
@@ -212,6 +143,7 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.jitter_ms_p99 = s.jitter_ms_p99;
   m.cycles = s.cycles;
   m.misses = s.misses;
+  m.late_start_misses = s.late_start_misses;
   m.consecutive_misses = s.consecutive_misses;
   m.state_to_command_ms_p99 = s.state_to_command_ms_p99;
   m.state_age_ms_p99 = s.state_age_ms_p99;
@@ -251,6 +183,20 @@ bool LcmTransport::publish_plan(const PlanView& p) {
   for (std::int32_t i = 0; i < p.npos; ++i)
     for (int d = 0; d < 3; ++d) m.pos[static_cast<std::size_t>(i)][static_cast<std::size_t>(d)] = p.pos[3 * i + d];
   return send(ch_.plan, m);
+}
+
+bool LcmTransport::publish_param_result(const ParamResult& r) {
+  auto& m = param_result_out_;
+  m.utime = rt::wall_utime();
+  ++m.seq;
+  m.update_seq = r.update_seq;
+  // Within the reserved capacity (the fields are bounded, NUL-terminated arrays).
+  m.key.assign(r.key, ::strnlen(r.key, sizeof(r.key)));
+  m.value = r.value;
+  m.status = r.applied ? mppi_lcm::param_result_t::STATUS_APPLIED : mppi_lcm::param_result_t::STATUS_REFUSED;
+  m.cycle = r.cycle;
+  m.reason.assign(r.reason, ::strnlen(r.reason, sizeof(r.reason)));
+  return send(ch_.param_result, m);
 }
 
 }  // namespace mppi::transport

@@ -56,7 +56,12 @@ def main(argv=None) -> int:
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
-    bridge = Bridge(s, lcm_url=a.lcm_url)
+    from .signing import SigningError
+    try:
+        bridge = Bridge(s, lcm_url=a.lcm_url)
+    except SigningError as e:
+        print(f"mppid-mavlink-bridge: {e}", file=sys.stderr)
+        return 2
     ctl = ControlServer(s["control"]["socket"], bridge.execute)
     bridge.start()
     ctl.start()

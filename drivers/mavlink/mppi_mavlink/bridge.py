@@ -26,7 +26,7 @@ from collections import OrderedDict
 os.environ.setdefault("MAVLINK20", "1")  # ODOMETRY and the SET_ATTITUDE_TARGET extensions
 from pymavlink import mavutil  # noqa: E402
 
-from . import frames, lcm_types  # noqa: E402
+from . import frames, lcm_types, signing  # noqa: E402
 from .thrust import ThrustMap  # noqa: E402
 
 log = logging.getLogger("mppi_mavlink")
@@ -91,6 +91,10 @@ class Bridge:
         self.s = settings
         m, l = settings["mavlink"], settings["lcm"]
         self.dialect = m["dialect"]
+        # MAVLink 2 signing (signing.py): the key is read, and its file's permissions
+        # checked, before anything is opened; SigningError says what is wrong.
+        self.signing_key = signing.load_key(m["signing_key_file"]) if m["signing_key_file"] else None
+        self.signing_dropped = {"rejected_unsigned": 0, "rejected_bad_signature": 0}  # of closed connections
         self.lcm_url = lcm_url or l["url"]
         self.mppi_lcm = lcm_types.import_mppi_lcm()
         self.link_t = lcm_types.import_link_type()
@@ -152,7 +156,8 @@ class Bridge:
         self.stream_since = None
         self.forward_times = []  # monotonic us of recent forwards (offboard pre-stream check)
         self.counters = dict(setpoints_sent=0, dropped_not_advanced=0, dropped_unhealthy=0, dropped_nonfinite=0,
-                             dropped_stale=0, dropped_refused=0, states_published=0)
+                             dropped_stale=0, dropped_refused=0, dropped_undecodable=0, states_published=0,
+                             states_rejected=0)
         self.streaming = False
         self.trace = open(settings["trace"]["file"], "a", buffering=1) if settings["trace"]["file"] else None
         self.link_seq = 0
@@ -165,9 +170,16 @@ class Bridge:
         conn = mavutil.mavlink_connection(url, baud=m["baud"], source_system=m["system_id"],
                                           source_component=m["component_id"],
                                           autoreconnect=False, robust_parsing=True)
+        if self.signing_key is not None:
+            signing.install(conn.mav, self.signing_key, m["signing_link_id"])
+        old = self.mav
+        if old is not None and self.signing_key is not None:
+            for k, v in signing.counters(old.mav).items():
+                self.signing_dropped[k] += v
         self.mav = conn
         self.conn_gen += 1
-        log.info("MAVLink connection %s open (%s dialect)", url, self.dialect)
+        log.info("MAVLink connection %s open (%s dialect, %s)", url, self.dialect,
+                 "signed" if self.signing_key is not None else "unsigned")
 
     def _reopen(self):
         url = self.s["mavlink"]["url"]
@@ -273,7 +285,11 @@ class Bridge:
             return
         if msg.frame_id not in (mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_FRD):
             return
-        q_ned = frames.quat_normalize(tuple(msg.q))
+        try:
+            q_ned = frames.quat_normalize(tuple(msg.q))
+        except ValueError:  # a zero or non-finite quaternion: no attitude, no state
+            self.counters["states_rejected"] += 1
+            return
         v = (msg.vx, msg.vy, msg.vz)
         if msg.child_frame_id in (mavlink.MAV_FRAME_BODY_FRD, mavlink.MAV_FRAME_BODY_NED):
             v = _rotate(q_ned, v)  # ODOMETRY's velocity is in the child (body) frame
@@ -290,8 +306,12 @@ class Bridge:
         if self.last_lpn is None or wall_us() - self.last_lpn[1] > 200_000:
             return
         p = self.last_lpn[0]
-        self._publish_state(msg.time_boot_ms * 1000, (p.x, p.y, p.z), (p.vx, p.vy, p.vz),
-                            frames.quat_normalize((msg.q1, msg.q2, msg.q3, msg.q4)),
+        try:
+            q_ned = frames.quat_normalize((msg.q1, msg.q2, msg.q3, msg.q4))
+        except ValueError:
+            self.counters["states_rejected"] += 1
+            return
+        self._publish_state(msg.time_boot_ms * 1000, (p.x, p.y, p.z), (p.vx, p.vy, p.vz), q_ned,
                             (msg.rollspeed, msg.pitchspeed, msg.yawspeed))
 
     def _publish_state(self, boot_us, p_ned, v_ned, q_ned, w_frd):
@@ -301,6 +321,7 @@ class Bridge:
         w = frames.frd_to_flu(w_frd)
         x = list(p) + list(v) + list(q) + list(w)
         if not all(math.isfinite(c) for c in x):
+            self.counters["states_rejected"] += 1
             return
         now_wall = wall_us()
         msg = self.mppi_lcm.vehicle_state_t()
@@ -331,7 +352,7 @@ class Bridge:
     def _on_status(self, channel, data):
         try:
             st = self.mppi_lcm.controller_status_t.decode(data)
-        except ValueError:
+        except (ValueError, struct.error):  # wrong type, or truncated: not a status
             return
         self.last_status_mono = mono_us()
         self.last_status_healthy = bool(st.healthy) and st.mode != 2
@@ -340,8 +361,8 @@ class Bridge:
         now = mono_us()
         try:
             cmd = self.mppi_lcm.command_t.decode(data)
-        except ValueError:
-            self.counters["dropped_refused"] += 1
+        except (ValueError, struct.error):  # wrong type (fingerprint), truncated, or n the bytes do not back
+            self.counters["dropped_undecodable"] += 1
             return
         reason = self._gate(cmd, now)
         if reason is not None:
@@ -365,6 +386,9 @@ class Bridge:
             return "refused"
         if cmd.kind != mppi_lcm.command_t.KIND_THRUST_RATES or cmd.n < 4 or len(cmd.u) < 4:
             return "refused"
+        if cmd.mode not in (mppi_lcm.command_t.MODE_NORMAL, mppi_lcm.command_t.MODE_HOLD_PLAN,
+                            mppi_lcm.command_t.MODE_FAILSAFE):
+            return "refused"  # a mode this bridge does not know is never forwarded
         if cmd.mode == mppi_lcm.command_t.MODE_FAILSAFE or (
                 cmd.mode == mppi_lcm.command_t.MODE_HOLD_PLAN and not self.s["forwarding"]["forward_hold_plan"]):
             return "unhealthy"
@@ -477,11 +501,17 @@ class Bridge:
         msg.dropped_nonfinite = c["dropped_nonfinite"]
         msg.dropped_stale = c["dropped_stale"]
         msg.dropped_refused = c["dropped_refused"]
+        msg.dropped_undecodable = c["dropped_undecodable"]
+        msg.states_rejected = c["states_rejected"]
         msg.hover_thrust = float(self.thrust.hover) if self.thrust else -1.0
         msg.hover_source = self.hover_source
         msg.battery_voltage = float(self.battery_voltage)
         msg.battery_remaining = int(max(-1, min(100, self.battery_remaining)))
         msg.error = self.refusal or ""
+        msg.signing = int(self.signing_key is not None)
+        sc = self.signing_counters()
+        msg.rejected_unsigned = sc["rejected_unsigned"]
+        msg.rejected_bad_signature = sc["rejected_bad_signature"]
         try:
             self.lc.publish(self.s["lcm"]["link_channel"], msg.encode())
         except OSError:
@@ -653,6 +683,15 @@ class Bridge:
             raise CommandError("hold: use the autopilot's own modes on ArduPilot (LOITER needs a position estimate)")
         return "holding"
 
+    def signing_counters(self) -> dict:
+        """Messages the signature check dropped, since start (0 on an unsigned link)."""
+        out = dict(self.signing_dropped)
+        mav = self.mav
+        if mav is not None and self.signing_key is not None:
+            for k, v in signing.counters(mav.mav).items():
+                out[k] += v
+        return out
+
     def status(self) -> dict:
         hb = self.last_hb_mono
         return {"link_up": self.link_up, "heartbeat_age_s": None if hb is None else round(time.monotonic() - hb, 3),
@@ -660,7 +699,8 @@ class Bridge:
                 "armed": self.armed, "mode": self.mode, "streaming": self.streaming,
                 "hover_thrust": self.thrust.hover if self.thrust else None, "hover_source": self.hover_source,
                 "refusal": self.refusal, "battery_voltage": self.battery_voltage,
-                "controller_healthy": self.last_status_healthy, **self.counters}
+                "controller_healthy": self.last_status_healthy, "signing": self.signing_key is not None,
+                **self.signing_counters(), **self.counters}
 
     def execute(self, line: str) -> dict:
         parts = line.split()

@@ -1,7 +1,10 @@
 """The bridge's control socket: a Unix stream socket, one request line in, one JSON line
 out (`{"ok": true, "message": "armed"}`). Requests: arm, disarm, takeoff [m], offboard,
 land, hold, status. A file-system socket, so it is reachable across network namespaces
-and guarded by file permissions (0660)."""
+and guarded by file permissions: owner only (0600), since whoever can connect can arm the
+vehicle. It is created with that mode (umask 0177 around bind), so it is never open to
+others, not even between bind and chmod; requests come from the bridge's own user (or
+root)."""
 from __future__ import annotations
 
 import json
@@ -22,8 +25,12 @@ class ControlServer:
         except FileNotFoundError:
             pass
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self.sock.bind(path)
-        os.chmod(path, 0o660)
+        old_umask = os.umask(0o177)
+        try:
+            self.sock.bind(path)
+        finally:
+            os.umask(old_umask)
+        os.chmod(path, 0o600)
         self.sock.listen(4)
         self.sock.settimeout(0.2)
         self.stop = threading.Event()

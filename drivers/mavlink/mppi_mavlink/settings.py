@@ -24,6 +24,8 @@ DEFAULTS = {
         "command_timeout_s": 1.0,         # per COMMAND_LONG attempt (COMMAND_ACK)
         "command_retries": 3,
         "mode_confirm_timeout_s": 2.0,    # mode seen in the HEARTBEAT after the ACK
+        "signing_key_file": None,         # MAVLink 2 signing key (signing.py); None: an unsigned link
+        "signing_link_id": 0,             # the link id in the bridge's signatures
     },
     "lcm": {
         "url": "udpm://239.255.76.67:7667?ttl=0",
@@ -138,5 +140,11 @@ def validate(s: dict):
     num("offboard", "prestream_s", 1.0, 60)
     num("offboard", "wait_s", 0.0, 60)
     num("takeoff", "altitude", 0.1, 1000)
+    num("mavlink", "signing_link_id", 0, 255)
+    if not isinstance(s["mavlink"]["signing_link_id"], int):
+        raise SettingsError("mavlink.signing_link_id: must be an integer in [0, 255]")
+    k = s["mavlink"]["signing_key_file"]
+    if k is not None and (not isinstance(k, str) or not k):
+        raise SettingsError(f"mavlink.signing_key_file: must be a file name or null, got {k!r}")
     if not isinstance(s["mavlink"]["url"], str) or not s["mavlink"]["url"]:
         raise SettingsError("mavlink.url: must be a pymavlink connection string")

@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
 
+#include "mppi/ddp/ddp_controller.hpp"
 #include "mppi/offline/plant.hpp"
 #include "mppi/params.hpp"
 #include "mppi/tasks.hpp"
@@ -41,10 +43,11 @@ float clearance(const std::vector<Cylinder>& forest, float px, float py) {
 }
 
 template <class T>
-Result fly_typed(TaskController<T>& c, const Scenario& s, const std::vector<std::pair<std::string, double>>& plant) {
+Result fly_typed(Controller& c, const typename T::Params& model, const Scenario& s,
+                 const std::vector<std::pair<std::string, double>>& plant) {
   using Vehicle = typename T::Vehicle;
   constexpr int nx1 = Vehicle::kNx, nu1 = Vehicle::kNu, m = T::kVehicles;
-  typename T::Params pp = c.params();
+  typename T::Params pp = model;
   for (const auto& [key, value] : plant) {
     const std::string err = set_task_param<T>(pp, key, value);
     if (!err.empty()) throw std::invalid_argument("plant " + err);
@@ -139,7 +142,9 @@ Result fly_typed(TaskController<T>& c, const Scenario& s, const std::vector<std:
   if constexpr (std::is_same_v<typename T::Vehicle, Cartpole>) {
     float worst = 0.0f;
     for (std::size_t n = 0; n < r.t.size(); ++n)
-      if (r.t[n] >= 4.0f) worst = std::max(worst, std::fabs(r.x[n * T::kNx + Cartpole::THETA] - 3.14159265f));
+      // Upright is pi modulo 2 pi: a pole that went over once more and stands at -pi is up.
+      if (r.t[n] >= 4.0f)
+        worst = std::max(worst, std::fabs(std::remainder(r.x[n * T::kNx + Cartpole::THETA] - 3.14159265f, 6.28318531f)));
     r.max_angle_error_late = worst;
   }
   if constexpr (kIsTracking<T>) r.tracking_rmse = static_cast<float>(std::sqrt(err2 / static_cast<double>(r.t.size())));
@@ -183,9 +188,14 @@ Result fly(Controller& controller, const Scenario& scenario, const std::vector<s
   bool done = false;
   visit_task(controller.task(), [&](auto tag) {
     using T = typename decltype(tag)::type;
-    auto* typed = dynamic_cast<TaskController<T>*>(&controller);
-    if (typed == nullptr) throw std::invalid_argument("fly: controller is not a TaskController");
-    r = fly_typed<T>(*typed, scenario, plant);
+    // The plant is the controller's model (its parameters), unless `plant` says otherwise.
+    const typename T::Params* model = nullptr;
+    if (auto* typed = dynamic_cast<TaskController<T>*>(&controller)) model = &typed->params();
+    if constexpr (kDdpTask<T>) {
+      if (auto* ddp = dynamic_cast<DdpController<T>*>(&controller)) model = &ddp->params();
+    }
+    if (model == nullptr) throw std::invalid_argument("fly: controller is neither MPPI nor DDP for task " + controller.task());
+    r = fly_typed<T>(controller, *model, scenario, plant);
     done = true;
   });
   if (!done) throw std::invalid_argument("fly: unknown task " + controller.task());

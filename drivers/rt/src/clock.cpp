@@ -1,5 +1,6 @@
 #include "mppi/rt/clock.hpp"
 
+#include <cstdint>
 #include <ctime>
 
 namespace mppi::rt {

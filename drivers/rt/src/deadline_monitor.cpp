@@ -1,6 +1,7 @@
 #include "mppi/rt/deadline_monitor.hpp"
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdlib>
 
 namespace mppi::rt {
@@ -29,6 +30,7 @@ void DeadlineMonitor::record(std::int64_t start_ns, std::int64_t end_ns, bool mi
   ++cycles_;
   if (missed) {
     ++misses_;
+    if (last_compute_ <= period_) ++late_start_misses_;
     ++consecutive_;
     max_consecutive_ = std::max(max_consecutive_, consecutive_);
   } else {
@@ -65,6 +67,7 @@ TimingSummary DeadlineMonitor::summarise(const Set& s) const {
   out.lead = s.lead.summary();
   out.cycles = cycles_;
   out.misses = misses_;
+  out.late_start_misses = late_start_misses_;
   out.consecutive_misses = consecutive_;
   out.max_consecutive_misses = max_consecutive_;
   out.last_compute_ms = static_cast<double>(last_compute_) * 1e-6;

@@ -41,6 +41,9 @@ class Plant {
   virtual void position(int v, double* p) const = 0;
   virtual double speed(int v) const = 0;
   virtual std::vector<float> hover() const = 0;  // the control that holds the vehicles
+  // What an autopilot's failsafe would command now (timing.command_timeout): the
+  // rate-controlled quadrotors level themselves and hold their altitude; the others hover.
+  virtual std::vector<float> failsafe() const { return hover(); }
   virtual StateGroup group(int i) const = 0;     // for state noise
   // After noise is added to a published copy: renormalise quaternions etc.
   virtual void fix_published(float*) const {}

@@ -83,6 +83,11 @@ struct Scenario {
   double lockstep_timeout = 5.0;    // s wall clock for one command
   double startup_timeout = 30.0;    // s wall clock for the first command
   double obstacles_hz = 10.0;       // obstacle and reference messages
+  // > 0: with no command for this long (s, simulated time), the plant gets its failsafe
+  // command (Plant::failsafe: level and hold altitude, or hover) until the next one, as an
+  // autopilot's offboard-loss failsafe (COM_OF_LOSS_T) would; 0: the last command stays
+  // applied (the default).
+  double command_timeout = 0.0;
   int max_published_obstacles = 64; // nearest ones when there are more
 
   // World.
@@ -114,6 +119,8 @@ struct Scenario {
 
 // Loads and validates; throws std::runtime_error naming the file and the bad field.
 Scenario load_scenario(const std::string& path, std::uint64_t seed);
+// The same from YAML text (`label` names it in errors): what the fuzz target feeds.
+Scenario load_scenario_text(const std::string& text, const std::string& label, std::uint64_t seed);
 
 // The forest and moving obstacles for this seed (deterministic).
 void generate_obstacles(Scenario& s);

@@ -2,11 +2,14 @@
 
     python -m mavlink_vehicle --url udpout:127.0.0.1:14540 [--autopilot px4|ardupilot]
         [--world sim/mavlink_vehicle/worlds/circle.yaml] [--lcm-url URL] [--out DIR]
-        [--param NAME=VALUE ...] [--duration S]
+        [--param NAME=VALUE ...] [--duration S] [--signing-key-file FILE]
 
 Writes DIR/truth.jsonl (state, applied command, mode at state_hz, and events), DIR/wire.jsonl
 (what came in on the link, and when each ODOMETRY went out) and, on exit (SIGTERM/SIGINT or
---duration), DIR/vehicle_summary.json.
+--duration), DIR/vehicle_summary.json. With --signing-key-file (32 bytes, as 64 hex digits
+or raw) the link is MAVLink 2 signed: everything sent is signed, only correctly signed
+messages are taken, and the rest are counted (vehicle_summary.json: rejected_unsigned,
+rejected_bad_signature).
 """
 from __future__ import annotations
 
@@ -35,7 +38,15 @@ def main(argv=None) -> int:
     ap.add_argument("--mass", type=float, default=1.0)
     ap.add_argument("--start", default=None, help="x,y,z ENU (default: the world's start on the ground)")
     ap.add_argument("--duration", type=float, default=0.0)
+    ap.add_argument("--signing-key-file", help="MAVLink 2 signing key: 64 hex digits or 32 raw bytes")
     a = ap.parse_args(argv)
+    key = None
+    if a.signing_key_file:
+        raw = Path(a.signing_key_file).read_bytes()
+        key = raw if len(raw) == 32 else bytes.fromhex(raw.decode().strip())
+        if len(key) != 32:
+            print("mavlink-vehicle: --signing-key-file must hold 32 bytes", file=sys.stderr)
+            return 2
     if a.physics_hz < 500:
         print("mavlink-vehicle: --physics-hz must be >= 500", file=sys.stderr)
         return 2
@@ -61,7 +72,7 @@ def main(argv=None) -> int:
     if a.start:
         start = tuple(float(c) for c in a.start.split(","))
     v = Vehicle(a.url, autopilot=a.autopilot, params=params, world=world, mission=mission, out=out,
-                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass)
+                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass, signing_key=key)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())

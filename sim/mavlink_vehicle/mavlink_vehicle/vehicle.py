@@ -40,9 +40,14 @@ class Vehicle:
     SETPOINT_HOLD_S = 0.1
 
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
-                 state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0):
+                 state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0, signing_key=None):
         self.ap = autopilot
         self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
+        if signing_key is not None:
+            # As an autopilot with signing on: everything it sends is signed, and it takes
+            # only messages signed with the key (pymavlink's own implementation, not the
+            # bridge's: the test checks one against the other).
+            self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
         self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
                        "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0}
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
@@ -424,7 +429,13 @@ class Vehicle:
                                          "armed": self.armed, "ground": self.plant.on_ground}) + "\n")
 
     def summary(self):
-        s = {"autopilot": self.ap, "counters": self.counters, "events": self.events,
+        sg = self.conn.mav.signing
+        if sg.secret_key is not None:
+            # pymavlink counts a bad signature in reject_count too.
+            self.counters["rejected_unsigned"] = sg.reject_count - sg.badsig_count
+            self.counters["rejected_bad_signature"] = sg.badsig_count
+            self.counters["accepted_signed"] = sg.goodsig_count
+        s = {"autopilot": self.ap, "counters": self.counters, "signing": sg.secret_key is not None, "events": self.events,
              "companion": self.companion, "gcs_seen": sorted(self.gcs_seen), "final_mode": self.mode,
              "armed": self.armed, "final_state": self.plant.x, "t": self.t}
         if self.mission is not None:

@@ -13,6 +13,13 @@
 //   w_floor * max(0, floor_z - (pz + floor_lookahead * min(vz, 0)))^2
 // when its altitude, predicted floor_lookahead seconds ahead at its sink rate, is below
 // floor_z (a sink-rate limit that tightens near the ground).
+//
+// Goal pull beyond a radius (xy_linear_beyond = r > 0, off by default): the xy goal term
+// w_xy e^2 (e the horizontal distance to the goal) becomes w_xy r (2 e - r) beyond e = r,
+// the quadratic continued along its slope there (a Huber loss). The pull towards a far goal
+// is then bounded (2 w_xy r per metre), so w_xy can be large enough to hold each vehicle of a
+// team on its own goal near the end without flinging it off the start line 40 m away at
+// top speed. The terminal term uses the same shape.
 #pragma once
 
 #include "mppi/costs/obstacles.hpp"
@@ -37,6 +44,8 @@ struct ForestCost {
     float w_separation = 350.0f;    // team only: exp barrier on vehicle-vehicle distance
     float separation_scale = 1.0f;  // m^2
     float w_terminal = 0.0f;        // multiplies the goal terms at the horizon's end
+    float xy_linear_beyond = 0.0f;  // m; > 0: the xy goal term grows linearly beyond it
+    float crash_sticky = 0.0f;      // > 0: w_crash at every step after a crash (moving obstacles)
     float ground_margin = 0.0f;     // m above ground_z that a rollout treats as the ground
     float tilt_cos_min = -1.0f;     // a rollout tilted further is a crash (-1: no limit)
     float floor_z = 0.0f;           // m, the floor of the predicted altitude
@@ -66,7 +75,7 @@ struct ForestCost {
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
-    V q = p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
+    V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
           p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
     if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     if (p.w_floor > 0.0f) {
@@ -76,8 +85,13 @@ struct ForestCost {
     }
     mask_t<V> hit = mask_or(d < p.vehicle_radius, pos[2] < p.ground_z + p.ground_margin);
     if (p.tilt_cos_min > -1.0f) hit = mask_or(hit, Vehicle::tilt_cos(x) < p.tilt_cos_min);
+    // crash_sticky: a vehicle that crashed at an earlier step (*crash on entry) pays w_crash
+    // at every later step too, as the paper's frozen vehicle does when its obstacle stands
+    // still; a moving obstacle would otherwise sweep past the frozen vehicle, and a rollout
+    // that grazes one pay a few steps of w_crash instead of the rest of the horizon.
+    const mask_t<V> charged = p.crash_sticky > 0.0f ? mask_or(hit, *crash) : hit;
     *crash = mask_or(*crash, hit);
-    return select(hit, q + p.w_crash, q);
+    return select(charged, q + p.w_crash, q);
   }
 
   template <class V>
@@ -98,7 +112,16 @@ struct ForestCost {
     V pos[3];
     Vehicle::position(x, pos);
     const float* g = p.goal[j];
-    return p.w_terminal * (p.w_xy * (fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]));
+    return p.w_terminal * (p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]));
+  }
+
+  // The xy goal term's shape of the squared horizontal distance e2: e2 itself, or with
+  // xy_linear_beyond = r > 0, r (2 e - r) beyond e = r (see the top of the file).
+  template <class V>
+  MPPI_HD static V goal_xy(const Params& p, const V& e2) {
+    const float r = p.xy_linear_beyond;
+    if (r <= 0.0f) return e2;
+    return select(e2 > r * r, r * (2.0f * fsqrt(e2) - r), e2);
   }
 
   // Once per cycle, before the rollouts (host): index the obstacles near the plan's

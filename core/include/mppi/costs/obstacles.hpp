@@ -51,6 +51,10 @@ MPPI_HD void store_cell_indices(float fx, float fy, int nx, int* out) {
   out[0] = static_cast<int>(fx) + nx * static_cast<int>(fy);
 }
 
+MPPI_HD void store_cell_indices(double fx, double fy, int nx, int* out) {
+  out[0] = static_cast<int>(fx) + nx * static_cast<int>(fy);
+}
+
 // Obstacle culling. Each cycle, a uniform grid is laid over the region the rollouts can
 // reach (the plan's noise-free path, widened by a reach distance), and each cell lists the
 // cylinders that can be the nearest one for some point of the cell at some time of the

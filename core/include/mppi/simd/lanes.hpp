@@ -118,7 +118,7 @@ struct LaneF {
   // The scalar definitions (hd.hpp), lane-wise, including their NaN behaviour.
   friend LaneF fmin_(LaneF a, LaneF b) { return LaneF(hn::IfThenElse(hn::Lt(a.v, b.v), a.v, b.v)); }
   friend LaneF fmax_(LaneF a, LaneF b) { return LaneF(hn::IfThenElse(hn::Gt(a.v, b.v), a.v, b.v)); }
-  friend LaneF fclamp(LaneF v, LaneF lo, LaneF hi) { return select(v < lo, lo, select(v > hi, hi, v)); }
+  friend LaneF fclamp(LaneF x, LaneF lo, LaneF hi) { return select(x < lo, lo, select(x > hi, hi, x)); }
   friend LaneF fsq(LaneF a) { return a * a; }
   friend LaneF fabs_(LaneF a) { return LaneF(hn::Abs(a.v)); }
   friend LaneF fsqrt(LaneF a) { return LaneF(hn::Sqrt(a.v)); }
@@ -151,6 +151,15 @@ inline VecF u32_to_float(const LaneU& r) {
   const auto hi = hn::ConvertTo(df, hn::BitCast(di, hn::ShiftRight<16>(r.v)));
   const auto lo = hn::ConvertTo(df, hn::BitCast(di, hn::And(r.v, hn::Set(DU(), 0xFFFFu))));
   return hn::Add(hn::Mul(hi, hn::Set(df, 65536.0f)), lo);
+}
+
+// rng.hpp's sample_group lane-wise: sample mod groups, as floats.
+inline VecF sample_group(const LaneU& sample, std::uint32_t groups) {
+  alignas(64) std::uint32_t a[16];
+  alignas(64) float f[16];
+  hn::Store(sample.v, DU(), a);
+  for (int l = 0; l < kLanes; ++l) f[l] = static_cast<float>(a[l] % groups);
+  return hn::Load(DF(), f);
 }
 
 // lo = m * b mod 2^32, hi = the high word of the 64-bit product, lane-wise.

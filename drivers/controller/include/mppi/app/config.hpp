@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/ddp/settings.hpp"
 #include "mppi/settings.hpp"
 
 namespace mppi::app {
@@ -25,6 +26,11 @@ struct AppConfig {
   std::string task;                                  // a name of mppi::task_names()
   std::string backend = "auto";                      // cpu | cuda | auto
   MppiSettings mppi;
+  // The optimizer: "mppi" (the default) or "ddp", the MPC-DDP baseline, which plans with the
+  // `ddp:` section's settings over mppi.horizon, mppi.dt and the limits of mppi.
+  std::string controller = "mppi";
+  DdpSettings ddp;
+  bool has_ddp = false;                              // the file has a `ddp:` section
   std::vector<std::pair<std::string, double>> params;  // "model.NAME" / "cost.NAME" overrides
   YAML::Node root;                                   // the whole document (programs read their own section)
   // The settings file's `cuda:` section (mppi, model, cost overrides: what the CUDA backend
@@ -33,6 +39,19 @@ struct AppConfig {
   // The settings for a backend ("cpu" or "cuda"): *cuda for "cuda" when there is one.
   const AppConfig& for_backend(const std::string& resolved) const {
     return resolved == "cuda" && cuda ? *cuda : *this;
+  }
+  // This config flying the optimizer settings S whatever the backend (S comes from a running
+  // controller, already the backend's own): a live update rebuilds from it. Setting only
+  // `mppi` would leave the `cuda:` section's stale settings to the CUDA backend.
+  AppConfig with_mppi(const MppiSettings& s) const {
+    AppConfig c = *this;
+    c.mppi = s;
+    if (cuda) {
+      auto cc = std::make_shared<AppConfig>(*cuda);
+      cc->mppi = s;
+      c.cuda = std::move(cc);
+    }
+    return c;
   }
 };
 
@@ -45,7 +64,8 @@ AppConfig parse_config(YAML::Node root, const std::vector<std::string>& override
 std::string default_config_path(const std::string& task);
 
 // Builds the controller of the config's task on its backend. "auto" picks CUDA when built
-// with it and a device is present. Throws ConfigError for an unusable backend.
+// with it and a device is present. Throws ConfigError for an unusable backend. With
+// controller: ddp, the DDP baseline instead (CPU; the backend setting does not apply).
 std::unique_ptr<Controller> make_controller(const AppConfig& config);
 
 // Name of the backend "auto" resolves to here, and why CUDA is not available (if so).

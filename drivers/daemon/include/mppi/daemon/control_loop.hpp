@@ -18,6 +18,7 @@
 
 #include "mppi/controller.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
+#include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/command_gate.hpp"
@@ -45,8 +46,22 @@ struct LatencySettings {
   std::int64_t future_tolerance_ns = 2'000'000;  // a sample time further ahead is refused
 };
 
+// Real time: what starts a cycle.
+//   kClock  the fixed-rate grid at rate_hz; a state waits up to a period for its cycle.
+//   kState  each state received at least min_gap periods after the last cycle's start
+//           starts one at once (so at most rate_hz / min_gap cycles a second, and state-in
+//           -> command-out is the cycle's own time); with no such state, a cycle starts
+//           `grace` periods after its grid time, and the next state then starts one at once
+//           (a state stream slower than rate_hz is followed state by state); with no states
+//           at all, cycles on the grid take the stale path (hold, then failsafe).
+//           The inbox must post state_wake (Inbox::Expect::wake_on_state).
+enum class Trigger { kClock, kState };
+
 struct LoopSettings {
   double rate_hz = 50.0;
+  Trigger trigger = Trigger::kClock;
+  double state_trigger_min_gap = 0.75;  // periods
+  double state_trigger_grace = 0.5;     // periods
   std::int64_t state_timeout_ns = 100 * rt::kNsPerMs;
   std::int64_t failsafe_timeout_ns = 500 * rt::kNsPerMs;
   double status_hz = 1.0;
@@ -97,6 +112,8 @@ struct LoopCounters {
   std::atomic<std::int64_t> repeated_ticks{0};    // lock-step ticks already answered, dropped
   std::atomic<std::int64_t> partial_updates{0};   // anytime: updates from fewer than K rollouts
   std::atomic<std::int64_t> anytime_holds{0};     // anytime: below min_rollouts, held plan published
+  std::atomic<std::int64_t> state_triggered{0};   // trigger state: cycles a state started
+  std::atomic<std::int64_t> clock_triggered{0};   // trigger state: cycles started without one (grace ran out)
 };
 
 class ControlLoop {
@@ -116,7 +133,8 @@ class ControlLoop {
   void prepare();
   // Fixes the first release (real time) at clock now; run() calls it if not done.
   void start();
-  // One real-time cycle: sleeps until its release, then runs. False if stopped first.
+  // One real-time cycle: sleeps until its release (trigger clock) or a state that starts it
+  // (trigger state), then runs. False if stopped first.
   bool step_realtime(const std::atomic<bool>& stop);
   // One lock-step cycle per tick. False if no tick arrived before stop.
   bool step_lockstep(const std::atomic<bool>& stop);
@@ -148,8 +166,21 @@ class ControlLoop {
   // Parameter keys handled by the loop itself (the rest go to the controller).
   static bool is_loop_param(const std::string& key);
 
+  // Live optimizer updates (control_loop_live.cpp): with `live` set (before the first
+  // cycle; its current() must be the loop's controller), mppi.* updates go to its builder
+  // and the controller it builds is swapped in between two cycles. Null: mppi.* refused.
+  void set_live_optimizer(LiveOptimizer* live) { live_ = live; }
+  // The controller in service (it changes with a live update; loop thread).
+  Controller& controller() const { return *c_; }
+  // The index of the next cycle (0 = the first): param_result_t's cycle.
+  std::int64_t cycle_index() const { return cycle_index_; }
+  // Replay: the next cycles' expected latency (ns) instead of the estimator's; < 0: the
+  // estimator's.
+  void set_expected_latency(std::int64_t ns) { expected_override_ns_ = ns; }
+
  private:
   enum class Outcome { kFresh, kHeld, kFailsafe };
+  bool step_state_triggered(const std::atomic<bool>& stop);
   void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
   // The state's sample time on the loop's timeline (now_state_ns's), and whether it lies
   // further in the future than the tolerance.
@@ -162,6 +193,13 @@ class ControlLoop {
   void remember(std::int64_t sent_ns, const float* u);
   void apply_between_cycles(std::int64_t now_state_ns);
   std::string apply_param(const transport::ParamUpdate& p);
+  // Live updates (control_loop_live.cpp): the answer to one update on the reply channel;
+  // forward an mppi.* update to the builder (true when taken); answer the builder's
+  // refusals and swap in a controller it built.
+  void answer_param(const transport::ParamUpdate& p, bool applied, const std::string& why);
+  bool forward_live_param(const transport::ParamUpdate& p);
+  void service_live();
+  void swap_in(OptimizerBundle* b);
   void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
   void select_obstacles(const transport::StateSample& x);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
@@ -215,6 +253,8 @@ class ControlLoop {
   int consecutive_bad_updates_ = 0;
   std::int64_t prev_tick_sim_ns_ = -1;
   std::int64_t last_tick_seq_ = -1;
+  std::int64_t trigger_recv_ns_ = INT64_MIN;  // recv_ns of the state that started the last cycle
+  bool grace_started_ = false;                // trigger state: the last cycle started without a state
 
   // Latency compensation (loop thread only).
   rt::LatencyEstimator latency_;
@@ -257,6 +297,9 @@ class ControlLoop {
   std::atomic<std::int64_t> snap_cycles_{0}, snap_misses_{0}, snap_consecutive_{0};
   std::atomic<double> snap_rate_{0.0};
   LoopCounters counters_;
+
+  LiveOptimizer* live_ = nullptr;
+  std::int64_t expected_override_ns_ = -1;
 };
 
 }  // namespace mppi::daemon

@@ -2,6 +2,7 @@
 // name the field ("daemon.rate_hz: must be in (0, 2000]").
 #pragma once
 
+#include <cstdint>
 #include <yaml-cpp/yaml.h>
 
 #include <string>
@@ -21,6 +22,7 @@ struct DaemonSettings {
   rt::RealtimeRequest realtime;
   int warmup_iterations = 3;
   std::int8_t expect_model = 0;  // vehicle_state_t::MODEL_*, from the task
+  LiveSettings live;             // live optimizer updates (mppi.* at run time)
 };
 
 // Reads `section` (may be null: all defaults) for a controller with nu controls of task

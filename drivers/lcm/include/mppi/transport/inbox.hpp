@@ -13,7 +13,13 @@
 
 namespace mppi::transport {
 
-enum class Reject { kNone, kNan, kDuplicate, kOutOfOrder, kShape, kUndecodable };
+enum class Reject { kNone, kNan, kDuplicate, kOutOfOrder, kShape, kUndecodable, kTime };
+
+// The timestamps (us) a state, tick or reference epoch may carry: [0, kMaxUtime], i.e. up
+// to the year 2116 on the wall clock, any simulated time from 0. In nanoseconds each of
+// them, and the difference of any two, fits in int64; past it the loop's clock arithmetic
+// would overflow (fuzz_clock found sim_utime * 1000 overflowing in the lock-step cycle).
+constexpr std::int64_t kMaxUtime = INT64_MAX / 1000 / 2;
 const char* to_string(Reject r);
 
 struct InboxCounters {
@@ -23,10 +29,12 @@ struct InboxCounters {
   std::atomic<std::int64_t> rejected_out_of_order{0};
   std::atomic<std::int64_t> rejected_shape{0};        // wrong n / nx / vehicle count / model
   std::atomic<std::int64_t> rejected_undecodable{0};  // garbage bytes, wrong type
-  std::atomic<std::int64_t> rejected_inputs{0};       // bad reference / obstacles
+  std::atomic<std::int64_t> rejected_time{0};         // sample time outside [0, kMaxUtime]
+  std::atomic<std::int64_t> rejected_inputs{0};       // bad reference / obstacles (epoch out of range too)
   std::atomic<std::int64_t> params_dropped{0};        // queue full
   std::atomic<std::int64_t> ticks{0};
-  std::atomic<std::int64_t> ticks_dropped{0};
+  std::atomic<std::int64_t> ticks_dropped{0};   // queue full
+  std::atomic<std::int64_t> ticks_rejected{0};  // sim time outside [0, kMaxUtime]
 };
 
 class Inbox {
@@ -39,6 +47,7 @@ class Inbox {
     // stream was quiet this long; before that it is out of order.
     std::int64_t restart_after_ns = 100'000'000;
     bool tick_on_state = false;  // lock-step: each accepted state is also a tick
+    bool wake_on_state = false;  // real time, state-triggered: post state_wake per accepted state
   };
 
   explicit Inbox(const Expect& e) : expect_(e) {}
@@ -62,8 +71,12 @@ class Inbox {
   rt::LatestValue<ObstacleInput> obstacles;
   rt::SpscRing<ParamUpdate, 64> params;
   rt::SpscRing<ClockTick, 256> ticks;
-  rt::Wakeup wake;  // posted once per tick (lock-step)
+  rt::Wakeup wake;        // posted once per tick (lock-step)
+  rt::Wakeup state_wake;  // posted once per accepted state (with wake_on_state)
   InboxCounters counters;
+  // recv_ns of the newest accepted state (INT64_MIN before the first): the state-triggered
+  // loop starts a cycle on a state received late enough in the period.
+  std::int64_t last_state_recv_ns() const { return last_state_recv_ns_.load(std::memory_order_acquire); }
 
   const Expect& expect() const { return expect_; }
 
@@ -72,6 +85,7 @@ class Inbox {
   std::int64_t last_seq_ = -1;  // receive thread only
   std::int64_t last_recv_ns_ = 0;
   bool have_last_ = false;
+  std::atomic<std::int64_t> last_state_recv_ns_{INT64_MIN};
 };
 
 }  // namespace mppi::transport

@@ -1,6 +1,6 @@
 // Transport over LCM: one receive thread running handleTimeout (so stop() returns on a
-// quiet bus), raw subscriptions decoded by hand (so garbage and wrong types are counted,
-// not printed and dropped), encoding into buffers sized once.
+// quiet bus), raw subscriptions decoded by LcmDecoder (so garbage and wrong types are
+// counted, not printed and dropped), encoding into buffers sized once.
 #pragma once
 
 #include <lcm/lcm-cpp.hpp>
@@ -12,10 +12,12 @@
 #include <vector>
 
 #include "mppi/rt/clock.hpp"
+#include "mppi/transport/lcm_decode.hpp"
 #include "mppi/transport/transport.hpp"
 #include "mppi_lcm/command_t.hpp"
 #include "mppi_lcm/controller_status_t.hpp"
 #include "mppi_lcm/obstacles_t.hpp"
+#include "mppi_lcm/param_result_t.hpp"
 #include "mppi_lcm/param_update_t.hpp"
 #include "mppi_lcm/plan_t.hpp"
 #include "mppi_lcm/reference_t.hpp"
@@ -32,6 +34,7 @@ struct LcmChannels {
   std::string reference = "MPPI_REFERENCE";
   std::string obstacles = "MPPI_OBSTACLES";
   std::string params = "MPPI_PARAMS";
+  std::string param_result = "MPPI_PARAM_RESULT";
   std::string clock = "MPPI_SIM_CLOCK";
 };
 
@@ -54,6 +57,7 @@ class LcmTransport final : public Transport {
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
   bool publish_plan(const PlanView& p) override;
+  bool publish_param_result(const ParamResult& r) override;
 
   lcm::LCM& lcm() { return lcm_; }
 
@@ -64,14 +68,11 @@ class LcmTransport final : public Transport {
   void on_param(const lcm::ReceiveBuffer* rb, const std::string& channel);
   void on_clock(const lcm::ReceiveBuffer* rb, const std::string& channel);
   template <class Msg>
-  bool decode(Msg* msg, const lcm::ReceiveBuffer* rb);
-  template <class Msg>
   bool send(const std::string& channel, const Msg& msg);
 
   lcm::LCM lcm_;
   std::string url_;
   LcmChannels ch_;
-  rt::Clock* recv_clock_;
   int timeout_ms_;
   Inbox* inbox_ = nullptr;
   std::thread thread_;
@@ -79,17 +80,13 @@ class LcmTransport final : public Transport {
   std::atomic<bool> receive_fifo_ok_{false};
   std::atomic<bool> running_{false};
 
-  // Receive-thread scratch, reused (their vectors keep their capacity).
-  mppi_lcm::vehicle_state_t state_in_;
-  mppi_lcm::reference_t reference_in_;
-  mppi_lcm::obstacles_t obstacles_in_;
-  mppi_lcm::param_update_t param_in_;
-  mppi_lcm::sim_clock_t clock_in_;
+  LcmDecoder decoder_;  // receive thread
 
   // Loop-thread scratch.
   mppi_lcm::command_t command_out_;
   mppi_lcm::controller_status_t status_out_;
   mppi_lcm::plan_t plan_out_;
+  mppi_lcm::param_result_t param_result_out_{};
   std::vector<std::uint8_t> buf_;
 };
 

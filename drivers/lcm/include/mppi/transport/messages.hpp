@@ -68,6 +68,16 @@ struct ParamUpdate {
   double value = 0.0;
 };
 
+// The answer to one ParamUpdate (mppi_lcm::param_result_t).
+struct ParamResult {
+  std::int64_t update_seq = 0;
+  char key[64] = {};
+  double value = 0.0;
+  bool applied = false;
+  std::int64_t cycle = 0;  // the loop cycle from which it is in effect, or at which it was refused
+  char reason[192] = {};   // "" when applied; "field: reason"
+};
+
 struct ClockTick {
   std::int64_t seq = 0;
   std::int64_t sim_utime = 0;
@@ -85,7 +95,7 @@ struct StatusReport {
   float compute_ms_last = 0, compute_ms_min = 0, compute_ms_mean = 0, compute_ms_max = 0, compute_ms_p99 = 0;
   float period_ms_min = 0, period_ms_mean = 0, period_ms_max = 0, period_ms_p99 = 0;
   float jitter_ms_p99 = 0;
-  std::int64_t cycles = 0, misses = 0, consecutive_misses = 0;
+  std::int64_t cycles = 0, misses = 0, late_start_misses = 0, consecutive_misses = 0;
   float state_to_command_ms_p99 = 0, state_age_ms_p99 = 0, latency_expected_ms = 0, lead_ms_mean = 0,
         lead_ms_p99 = 0;
   float disturbance_accel[3] = {0, 0, 0};

@@ -25,6 +25,11 @@ class Transport {
   virtual bool publish_command(const Command& c) = 0;
   virtual bool publish_status(const StatusReport& s) = 0;
   virtual bool publish_plan(const PlanView& p) = 0;
+  // The answer to a parameter update (loop thread, between cycles).
+  virtual bool publish_param_result(const ParamResult& r) {
+    (void)r;
+    return false;
+  }
 };
 
 }  // namespace mppi::transport

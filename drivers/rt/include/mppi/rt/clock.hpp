@@ -5,6 +5,8 @@
 
 #include <cstdint>
 
+#include "mppi/rt/wakeup.hpp"
+
 namespace mppi::rt {
 
 constexpr std::int64_t kNsPerMs = 1'000'000;
@@ -17,6 +19,13 @@ class Clock {
   virtual std::int64_t now_ns() = 0;
   // Returns at or after t_ns (absolute), or early when interrupted; callers re-check.
   virtual void sleep_until(std::int64_t t_ns) = 0;
+  // sleep_until that a post on `wake` ends early (true then: the post was taken). A clock
+  // that cannot wait on it sleeps the whole way.
+  virtual bool sleep_until_or(Wakeup& wake, std::int64_t t_ns) {
+    (void)wake;
+    sleep_until(t_ns);
+    return false;
+  }
 };
 
 // CLOCK_MONOTONIC with absolute-time clock_nanosleep (TIMER_ABSTIME): no drift from
@@ -25,6 +34,7 @@ class MonotonicClock final : public Clock {
  public:
   std::int64_t now_ns() override;
   void sleep_until(std::int64_t t_ns) override;
+  bool sleep_until_or(Wakeup& wake, std::int64_t t_ns) override { return wake.wait_until(t_ns); }
 };
 
 // CLOCK_MONOTONIC now, for code that has no Clock at hand (receive-time stamps).

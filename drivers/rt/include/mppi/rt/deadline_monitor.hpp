@@ -15,6 +15,10 @@ struct TimingSummary {
   DurationSummary compute, period, jitter, latency, age, lead;
   std::int64_t cycles = 0;
   std::int64_t misses = 0;
+  // Misses of cycles whose own work (start -> end) fit in one period: the thread woke late
+  // (the OS or the hypervisor did not run it on time; cyclictest measures the machine).
+  // misses - late_start_misses are the controller's own overruns.
+  std::int64_t late_start_misses = 0;
   std::int64_t consecutive_misses = 0;
   std::int64_t max_consecutive_misses = 0;
   double last_compute_ms = 0.0;
@@ -26,7 +30,8 @@ class DeadlineMonitor {
   explicit DeadlineMonitor(std::int64_t period_ns);
 
   // One cycle: it started at start_ns, its work ended at end_ns; missed says whether it
-  // ended after its deadline. The first cycle has no period.
+  // ended after its deadline. The first cycle has no period. A miss whose work took no more
+  // than a period started late (late_start_misses).
   void record(std::int64_t start_ns, std::int64_t end_ns, bool missed);
   // Time from the state's sample to the command leaving, when a fresh command went out.
   void record_latency(std::int64_t ns);
@@ -42,6 +47,7 @@ class DeadlineMonitor {
   std::int64_t period_ns() const { return period_; }
   std::int64_t consecutive_misses() const { return consecutive_; }
   std::int64_t misses() const { return misses_; }
+  std::int64_t late_start_misses() const { return late_start_misses_; }
   std::int64_t cycles() const { return cycles_; }
 
  private:
@@ -56,7 +62,7 @@ class DeadlineMonitor {
   Set w_, t_;
   std::int64_t last_start_ = -1;
   std::int64_t last_compute_ = 0;
-  std::int64_t cycles_ = 0, misses_ = 0, consecutive_ = 0, max_consecutive_ = 0;
+  std::int64_t cycles_ = 0, misses_ = 0, late_start_misses_ = 0, consecutive_ = 0, max_consecutive_ = 0;
 };
 
 }  // namespace mppi::rt

@@ -26,6 +26,12 @@ class PeriodicSchedule {
 
   // Call when a cycle begins (after waking); fixes the release the cycle belongs to.
   void begin(std::int64_t /*now_ns*/) { release_ = next_; }
+  // A cycle started by an event (a state) rather than the grid: the grid moves to it, the
+  // cycle's deadline is a period after it.
+  void begin_at(std::int64_t now_ns) {
+    release_ = now_ns;
+    next_ = now_ns;
+  }
 
   // Call when the cycle's work is done at end_ns. Returns true when the cycle missed its
   // deadline; then the next release is end_ns itself (the grid is re-anchored there and

@@ -19,6 +19,10 @@ class Wakeup {
   void post();
   // True when a post was consumed, false on timeout.
   bool wait_for(std::int64_t timeout_ns);
+  // The same with an absolute CLOCK_MONOTONIC deadline.
+  bool wait_until(std::int64_t monotonic_ns);
+  // Takes a pending post without waiting; false when there is none.
+  bool try_wait();
 
  private:
   sem_t sem_;

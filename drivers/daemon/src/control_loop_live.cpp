@@ -1,0 +1,93 @@
+// ControlLoop: answers to parameter updates, and live optimizer updates (the swap of a
+// controller built by LiveOptimizer's builder thread, between two cycles).
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include "mppi/daemon/control_loop.hpp"
+
+namespace mppi::daemon {
+
+void ControlLoop::answer_param(const transport::ParamUpdate& p, bool applied, const std::string& why) {
+  transport::ParamResult r;
+  r.update_seq = p.seq;
+  std::memcpy(r.key, p.key, sizeof(r.key));
+  r.key[sizeof(r.key) - 1] = '\0';
+  r.value = p.value;
+  r.applied = applied;
+  r.cycle = cycle_index_;
+  const std::size_t n = std::min(why.size(), sizeof(r.reason) - 1);
+  std::memcpy(r.reason, why.data(), n);
+  r.reason[n] = '\0';
+  tx_->publish_param_result(r);
+}
+
+bool ControlLoop::forward_live_param(const transport::ParamUpdate& p) {
+  if (live_ == nullptr || !is_live_key(p.key)) return false;
+  if (live_->request(p)) return true;
+  counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
+  spdlog::warn("parameter update seq {} rejected: the optimizer builder is busy", p.seq);
+  answer_param(p, false, std::string(p.key) + ": the optimizer builder is busy (64 updates queued); send it again");
+  return true;
+}
+
+void ControlLoop::service_live() {
+  if (OptimizerBundle* b = live_->take_ready()) swap_in(b);
+  transport::ParamResult r;
+  while (live_->pop_refusal(&r)) {
+    r.cycle = cycle_index_;
+    counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
+    spdlog::warn("parameter update seq {} rejected: {}", r.update_seq, r.reason);
+    tx_->publish_param_result(r);
+  }
+}
+
+// Between two cycles: the new controller takes the running one's task state (inputs,
+// run-time model and cost parameters, the disturbance estimate, the noise counter) and its
+// plan, resampled onto the new horizon; the loop's own state (latency estimate, command
+// history, disturbance observer, the plan's timeline) stays as it is. Pointer and vector
+// swaps only: the buffers came with the bundle, and the old ones leave with it.
+void ControlLoop::swap_in(OptimizerBundle* b) {
+  Controller* next = b->controller.get();
+  if (!next->adopt(*c_)) {
+    // Cannot happen with the daemon's factory (same task); refuse rather than lose the task state.
+    for (int i = 0; i < b->count; ++i) {
+      counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
+      answer_param(b->updates[i], false, std::string(b->updates[i].key) + ": the new optimizer cannot take over");
+    }
+    b->count = 0;
+    live_->retire(b);
+    return;
+  }
+  const int t_old = horizon_, t_new = next->horizon();
+  const double dt_old = c_->dt(), dt_new = next->dt();
+  // The optimizer's plan, through the bundle's held buffer as scratch, then the held plan.
+  resample_plan(c_->plan().data(), t_old, dt_old, b->held.data(), t_new, dt_new, nu_, u_init_.data());
+  next->set_plan(b->held.data());
+  resample_plan(held_.data(), t_old, dt_old, b->held.data(), t_new, dt_new, nu_, u_init_.data());
+  held_.swap(b->held);
+  guard_plan_.swap(b->guard);
+  const int threads_before = live_->current_threads();
+  live_->swap_current(b);  // b now holds the old controller
+  c_ = next;
+  // A new team size: libgomp starts or ends workers here, between cycles (the one step of
+  // a live update that is not a pointer swap; only when mppi.threads changed).
+  if (live_->current_threads() != threads_before && std::strncmp(c_->backend(), "cpu", 3) == 0)
+    resize_worker_team(live_->current_threads());
+  horizon_ = t_new;
+  dt_ns_ = std::llround(dt_new * 1e9);
+  status_.rollouts = c_->settings().rollouts;
+  status_.horizon = t_new;
+  status_.backend = c_->backend();
+  status_.task = c_->task().c_str();
+  for (int i = 0; i < b->count; ++i) {
+    counters_.params_applied.fetch_add(1, std::memory_order_relaxed);
+    spdlog::info("parameter {} = {} applied (update seq {}, cycle {})", b->updates[i].key, b->updates[i].value,
+                 b->updates[i].seq, cycle_index_);
+    answer_param(b->updates[i], true, {});
+  }
+  live_->retire(b);
+}
+
+}  // namespace mppi::daemon

@@ -1,0 +1,89 @@
+// Settings files as input: whatever the YAML holds, a bad file ends in a ConfigError that
+// names where (mppid exits 2 with it), never in a yaml-cpp error that names nothing.
+// fuzz_settings found a list or map used as a key (YAML's "? ...") escaping as
+// YAML::TypedBadConversion: test/fuzz/regressions/fuzz_settings.
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <string>
+
+#include "mppi/app/config.hpp"
+#include "mppi/daemon/daemon_settings.hpp"
+
+using namespace mppi;
+
+namespace {
+
+// The ConfigError's message, or a failure saying what escaped instead.
+std::string config_error(const std::string& yaml) {
+  try {
+    const app::AppConfig c = app::parse_config(YAML::Load(yaml));
+    daemon::parse_daemon_settings(c.root["daemon"], c.task, static_cast<int>(c.mppi.u_init.size()));
+  } catch (const app::ConfigError& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "not a ConfigError: " << e.what();
+    return {};
+  }
+  ADD_FAILURE() << "accepted:\n" << yaml;
+  return {};
+}
+
+const char* kGood = R"(task: cartpole_swingup
+mppi: {rollouts: 8, horizon: 5, dt: 0.02, lambda: 1, nu: 1, sigma: [1], u_min: [-1], u_max: [1], u_init: [0]}
+)";
+
+}  // namespace
+
+TEST(SettingsInput, TheBaseFileIsValid) {
+  const app::AppConfig c = app::parse_config(YAML::Load(kGood));
+  EXPECT_EQ(c.task, "cartpole_swingup");
+}
+
+TEST(SettingsInput, AListOrMapAsAKeyNamesItsSection) {
+  const std::string found = std::string(MPPID_SOURCE_DIR) + "/test/fuzz/regressions/fuzz_settings/top_level_key_is_a_map.yaml";
+  try {
+    app::parse_config(YAML::LoadFile(found));
+    ADD_FAILURE() << "accepted " << found;
+  } catch (const app::ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()), "(file): keys must be plain names (line 14 is a map)");
+  }
+  EXPECT_EQ(config_error(std::string(kGood) + "? [a, b]\n: 1\n"), "(file): keys must be plain names (line 3 is a list)");
+  EXPECT_EQ(config_error("task: cartpole_swingup\nmppi: {? [a]: 1}\n"), "mppi: keys must be plain names (line 2 is a list)");
+  EXPECT_EQ(config_error(std::string(kGood) + "model: {? [a]: 1}\n"), "model: keys must be plain names (line 3 is a list)");
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: {? [a]: 1}\n"), "daemon: keys must be plain names (line 3)");
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: {realtime: {? {x: 1}: 1}}\n"),
+            "daemon.realtime: keys must be plain names (line 3)");
+}
+
+TEST(SettingsInput, TheTriggerIsClockOrStateAndItsFractionsAreBounded) {
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: {trigger: states}\n"), "daemon.trigger: must be clock or state");
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {trigger: state, state_trigger: {min_gap: 0}}\n")
+                .find("daemon.state_trigger.min_gap: must be in"),
+            std::string::npos);
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {state_trigger: {grace: 0.5, slack: 1}}\n").find("slack"),
+            std::string::npos);
+  const app::AppConfig c = app::parse_config(YAML::Load(std::string(kGood) +
+                                                         "daemon: {trigger: state, state_trigger: {min_gap: 0.5, grace: 1}}\n"));
+  const auto d = daemon::parse_daemon_settings(c.root["daemon"], c.task, 1);
+  EXPECT_EQ(d.loop.trigger, daemon::Trigger::kState);
+  EXPECT_DOUBLE_EQ(d.loop.state_trigger_min_gap, 0.5);
+  EXPECT_DOUBLE_EQ(d.loop.state_trigger_grace, 1.0);
+}
+
+// A `cuda:` section may carry daemon settings (the GPU's state trigger): merged key by key
+// into the file's daemon section, the rest of which stays.
+TEST(SettingsInput, TheCudaSectionMayCarryDaemonSettings) {
+  const app::AppConfig c = app::parse_config(
+      YAML::Load(std::string(kGood) + "daemon: {rate_hz: 40, trigger: clock}\ncuda: {daemon: {trigger: state}}\n"));
+  ASSERT_TRUE(c.cuda);
+  const auto cpu = daemon::parse_daemon_settings(c.for_backend("cpu").root["daemon"], c.task, 1);
+  const auto gpu = daemon::parse_daemon_settings(c.for_backend("cuda").root["daemon"], c.task, 1);
+  EXPECT_EQ(cpu.loop.trigger, daemon::Trigger::kClock);
+  EXPECT_EQ(gpu.loop.trigger, daemon::Trigger::kState);
+  EXPECT_DOUBLE_EQ(gpu.loop.rate_hz, 40.0);
+  // A file section that is not a map cannot take the cuda section's keys (fuzz_settings found
+  // `daemon: 1` escaping as YAML::BadSubscript: test/fuzz/regressions/fuzz_settings).
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: 1\ncuda: {daemon: {trigger: state}}\n"),
+            "cuda: daemon: expected a map");
+}

@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# The sanitizer and fuzzing stage of CI (.ci/run, after tools/test.sh, whose setup installed
+# clang 14). Three steps, each CPU-only and warning-checked:
+#   1. asan  (build-asan, clang, ASan + UBSan, preset `asan`): every test and the libFuzzer
+#            targets in one build; ctest there, the excluded tests below said why;
+#   2. fuzz  each libFuzzer target for MPPID_FUZZ_SECONDS (60), two at a time (tools/fuzz);
+#   3. tsan  (build-tsan, clang, ThreadSanitizer, preset `tsan`): the threaded tests (rt_tests:
+#            loop, deadline guard, latest-value slot, rings; driver_tests: the LCM receive
+#            thread with the loop), OpenMP made visible to TSan by LLVM's Archer tool.
+#
+#   tools/sanitize.sh [--skip-asan] [--skip-fuzz] [--skip-tsan] [--fuzz-seconds N]
+#
+# Environment: MPPID_JOBS (2) build jobs; CI=true makes clang warnings errors.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+do_asan=1 do_fuzz=1 do_tsan=1
+fuzz_seconds="${MPPID_FUZZ_SECONDS:-60}"
+while (($#)); do
+  case "$1" in
+    --skip-asan) do_asan=0 ;;
+    --skip-fuzz) do_fuzz=0 ;;
+    --skip-tsan) do_tsan=0 ;;
+    --fuzz-seconds) fuzz_seconds="$2"; shift ;;
+    -h|--help) sed -n '2,15s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    *) echo "sanitize.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+jobs="${MPPID_JOBS:-2}"
+log() { printf '[sanitize] %s\n' "$*"; }
+stamp() { date +%s; }
+
+configure() {  # preset, build dir
+  local args=(--preset "$1")
+  command -v ccache >/dev/null && args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  # clang's warnings are errors in CI too (cmake/Warnings.cmake: the same policy as gcc's).
+  if [[ -n "${CI:-}" ]]; then args+=(-DMPPID_WERROR=ON); fi
+  cmake "${args[@]}" >/dev/null
+}
+
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1:abort_on_error=0:strict_string_checks=1}"
+export UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}"
+export TSAN_OPTIONS="${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1:suppressions=$ROOT/test/tsan.supp}"
+for s in /usr/bin/llvm-symbolizer-14 /usr/lib/llvm-14/bin/llvm-symbolizer; do
+  [[ -x "$s" ]] && { export ASAN_SYMBOLIZER_PATH="$s" TSAN_SYMBOLIZER_PATH="$s"; break; }
+done
+
+status=0
+if ((do_asan)); then
+  t0=$(stamp)
+  log "asan: configure and build build-asan (tests and fuzz targets)"
+  configure asan
+  cmake --build build-asan -j"$jobs"
+  t1=$(stamp)
+  # Not under ASan, each for the reason given:
+  #  - ClosedLoop.RacecarLapsTheEllipse, ClosedLoop.RateQuadrotorTracksCircle, Forest seeds 1
+  #    and 2: 75-125 s each under ASan (7 min of CPU), the same code (offline plant, optimizer,
+  #    models) as the kept ClosedLoop.CartpoleSwingsUpAndHolds and Forest seed 3 and the core
+  #    tests; they run unsanitized in tools/test.sh.
+  #  - CUDA tests: not built (sanitizer builds are CPU-only).
+  exclude='^(ClosedLoop\.RacecarLapsTheEllipse|ClosedLoop\.RateQuadrotorTracksCircle|Seeds/Forest\.QuadrotorCrossesWithoutCollision/[12])$'
+  log "asan: ctest (excluded: $exclude)"
+  ctest --test-dir build-asan --output-on-failure --no-tests=error -j"$jobs" -E "$exclude" || status=1
+  log "asan: build $((t1 - t0)) s, tests $(($(stamp) - t1)) s"
+fi
+
+if ((do_fuzz)); then
+  t0=$(stamp)
+  log "fuzz: every target ${fuzz_seconds} s, two at a time"
+  tools/fuzz --no-build --seconds "$fuzz_seconds" --jobs 2 || status=1
+  log "fuzz: $(($(stamp) - t0)) s"
+fi
+
+if ((do_tsan)); then
+  t0=$(stamp)
+  log "tsan: configure and build build-tsan (rt_tests, driver_tests)"
+  configure tsan
+  cmake --build build-tsan -j"$jobs" --target rt_tests driver_tests
+  t1=$(stamp)
+  archer=/usr/lib/llvm-14/lib/libarcher.so
+  [[ -f "$archer" ]] || { echo "sanitize.sh: $archer missing (libomp-14-dev)" >&2; exit 1; }
+  log "tsan: ctest -L 'rt|drivers' (the binaries' own tests; the daemon binary is not built here)"
+  OMP_TOOL_LIBRARIES="$archer" ctest --test-dir build-tsan --output-on-failure --no-tests=error -j"$jobs" \
+    -L 'rt|drivers' -LE 'binary|e2e|systemd' || status=1
+  log "tsan: build $((t1 - t0)) s, tests $(($(stamp) - t1)) s"
+fi
+
+if ((status == 0)); then log "all passed"; else log "FAILED" >&2; fi
+exit "$status"
