@@ -9,6 +9,8 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
+#include "mppi/settings.hpp"
+#include "mppi/simd.hpp"
 
 using namespace mppi;
 
@@ -86,4 +88,62 @@ TEST(SettingsInput, TheCudaSectionMayCarryDaemonSettings) {
   // `daemon: 1` escaping as YAML::BadSubscript: test/fuzz/regressions/fuzz_settings).
   EXPECT_EQ(config_error(std::string(kGood) + "daemon: 1\ncuda: {daemon: {trigger: state}}\n"),
             "cuda: daemon: expected a map");
+}
+
+// `cpu_targets:` (issue 10, item 4): what the CPU backend flies with on each SIMD target. The
+// entry of the target mppi.simd resolves to here applies; every entry is validated at load,
+// whatever the machine, and a bad one names itself.
+TEST(SettingsInput, TheCpuTargetOfThisMachineTakesItsEntry) {
+  const std::string file = std::string(kGood) +
+                           "daemon: {rate_hz: 40}\n"
+                           "cpu_targets: {scalar: {mppi: {rollouts: 4}, daemon: {rate_hz: 25}}, sse4: {mppi: {rollouts: 6}}}\n";
+  const app::AppConfig c = app::parse_config(YAML::Load(file), {"mppi.simd=off"});
+  ASSERT_EQ(c.cpu_targets.size(), 2u);
+  EXPECT_EQ(c.variant_for("cpu"), "cpu_targets.scalar");
+  EXPECT_EQ(c.for_backend("cpu").mppi.rollouts, 4);
+  EXPECT_EQ(c.mppi.rollouts, 8);  // the file's own settings stay
+  EXPECT_DOUBLE_EQ(daemon::parse_daemon_settings(c.for_backend("cpu").root["daemon"], c.task, 1).loop.rate_hz, 25.0);
+  // A command-line --set wins over the entry; --set cpu_targets.scalar... changes the entry.
+  const app::AppConfig d = app::parse_config(YAML::Load(file), {"mppi.simd=off", "mppi.rollouts=16"});
+  EXPECT_EQ(d.for_backend("cpu").mppi.rollouts, 16);
+  const app::AppConfig e = app::parse_config(YAML::Load(file), {"mppi.simd=off", "cpu_targets.scalar.mppi.rollouts=12"});
+  EXPECT_EQ(e.for_backend("cpu").mppi.rollouts, 12);
+  // A target with no entry flies the file's settings; so does the CUDA backend.
+  EXPECT_EQ(c.variant_for("cuda"), "");
+  EXPECT_EQ(c.for_backend("cuda").mppi.rollouts, 8);
+  if (simd::supported(simd::Target::kAvx2)) {
+    const app::AppConfig f = app::parse_config(YAML::Load(file), {"mppi.simd=avx2"});
+    EXPECT_EQ(f.variant_for("cpu"), "");
+    EXPECT_EQ(f.for_backend("cpu").mppi.rollouts, 8);
+  }
+  // A live update (with_mppi) reaches the entry.
+  MppiSettings s = c.for_backend("cpu").mppi;
+  s.rollouts = 2;
+  EXPECT_EQ(c.with_mppi(s).for_backend("cpu").mppi.rollouts, 2);
+}
+
+TEST(SettingsInput, ABadCpuTargetEntryNamesItself) {
+  EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {avx9: {mppi: {rollouts: 4}}}\n"),
+            "cpu_targets.avx9: not a SIMD target (scalar, " + simd::target_names() + ")");
+  EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {sse4: {mppi: {rollouts: 0}}}\n"),
+            "cpu_targets.sse4: mppi.rollouts: must be >= 1");
+  EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {sse4: {planner: {x: 1}}}\n"),
+            "cpu_targets.sse4: planner: unknown section (mppi, model, cost, daemon)");
+  EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: [1, 2]\n"),
+            "cpu_targets: expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
+  EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {scalar: {mppi: {rollouts: 4}}, off: {}}\n"),
+            "cpu_targets.off: not a SIMD target (scalar, " + simd::target_names() + ")");
+}
+
+// The shipped task files: each entry is valid and has fewer rollouts than the AVX-512 default.
+TEST(SettingsInput, ShippedCpuTargetsFlyFewerRolloutsOnNarrowerLanes) {
+  for (const char* task : {"quadrotor_forest", "quadrotor_rate_forest", "quadrotor_track", "quadrotor_rate_track",
+                           "racecar_ellipse", "team3_forest"}) {
+    const app::AppConfig c = app::load_config(app::default_config_path(task));
+    ASSERT_FALSE(c.cpu_targets.empty()) << task;
+    for (const auto& [target, v] : c.cpu_targets) {
+      EXPECT_LT(v->mppi.rollouts, c.mppi.rollouts) << task << " " << target;
+      EXPECT_NO_THROW(daemon::parse_daemon_settings(v->root["daemon"], c.task, static_cast<int>(c.mppi.u_init.size())));
+    }
+  }
 }

@@ -5,6 +5,7 @@
 #include <set>
 
 #include "mppi/params.hpp"
+#include "mppi/simd.hpp"
 #include "mppi/tasks.hpp"
 
 namespace mppi::app {
@@ -163,16 +164,19 @@ std::string default_config_path(const std::string& task) {
 
 namespace {
 
-// A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost, daemon).
-YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section, const std::string& name) {
-  if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
+// A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost, daemon),
+// and without the variant sections (`cuda:`, `cpu_targets:`): a variant has none of its own.
+// Errors name the part; the caller puts the variant's name in front.
+YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section) {
+  if (!section.IsMap()) fail("(section)", "expected a map of mppi/model/cost/daemon overrides");
   YAML::Node out = YAML::Clone(root);
-  out.remove(name);
+  out.remove("cuda");
+  out.remove("cpu_targets");
   for (const auto& kv : section) {
     const auto part = kv.first.as<std::string>();
     if (part != "mppi" && part != "model" && part != "cost" && part != "daemon")
-      fail(name + "." + part, "unknown section (mppi, model, cost, daemon)");
-    if (!kv.second.IsMap()) fail(name + "." + part, "expected a map");
+      fail(part, "unknown section (mppi, model, cost, daemon)");
+    if (!kv.second.IsMap()) fail(part, "expected a map");
     if (!out[part] || out[part].IsNull()) out[part] = YAML::Node(YAML::NodeType::Map);
     // The file's own section must be a map to merge into (the daemon section is checked only
     // here before mppid parses it; fuzz_settings found `daemon: 1` escaping as YAML::BadSubscript).
@@ -182,12 +186,12 @@ YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section, const 
   return out;
 }
 
-AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool cuda_variant) {
+AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant) {
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
   const YAML::Node file = YAML::Clone(root);
   for (const auto& o : overrides) apply_override(root, o);
   static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
-                                                 "description", "cuda", "controller", "ddp"};
+                                                 "description", "cuda", "cpu_targets", "controller", "ddp"};
   for (const auto& kv : root) {
     const auto name = key_name(kv.first, "(file)");
     if (!sections.count(name)) fail(name, "unknown section");
@@ -231,24 +235,54 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   const std::string err = validate(c.mppi, nu);
   if (!err.empty()) throw ConfigError("mppi." + err);
   if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
-  // The `cuda:` variant: the file with that section (after the overrides: --set cuda.x=...
-  // works) merged in, then the other overrides again (so a command-line --set wins over the
-  // section). Parsed, and so validated, now, whatever the machine; after the file itself, so
-  // an error of the file (or of an override both share) is reported as the file's.
-  if (const YAML::Node section = root["cuda"]; section && !cuda_variant) {
-    std::vector<std::string> rest;
-    for (const auto& o : overrides)
-      if (o.rfind("cuda.", 0) != 0) rest.push_back(o);
+  // The variants (`cuda:`, each entry of `cpu_targets:`): the file with that section (after the
+  // overrides: --set cuda.x=... works) merged in, then the other overrides again (so a
+  // command-line --set wins over the section). Parsed, and so validated, now, whatever the
+  // machine; after the file itself, so an error of the file (or of an override both share) is
+  // reported as the file's.
+  if (variant) return c;
+  std::vector<std::string> rest;
+  for (const auto& o : overrides)
+    if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
+  const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
     try {
-      c.cuda = std::make_shared<const AppConfig>(parse_impl(merged_with(file, section, "cuda"), rest, true));
+      return std::make_shared<const AppConfig>(parse_impl(merged_with(file, section), rest, true));
     } catch (const ConfigError& e) {
-      throw ConfigError(std::string("cuda: ") + e.what());
+      throw ConfigError(name + ": " + e.what());
+    }
+  };
+  if (const YAML::Node section = root["cuda"]; section) c.cuda = parse_variant(section, "cuda");
+  if (const YAML::Node targets = root["cpu_targets"]; targets && !targets.IsNull()) {
+    if (!targets.IsMap()) fail("cpu_targets", "expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
+    for (const auto& kv : targets) {
+      const std::string target = key_name(kv.first, "cpu_targets");
+      simd::Target t{};
+      if (target == "off" || target == "auto" || !simd::parse_setting(target, &t))
+        fail("cpu_targets." + target, "not a SIMD target (scalar, " + simd::target_names() + ")");
+      if (c.cpu_targets.count(simd::name(t))) fail("cpu_targets." + target, "given twice");
+      c.cpu_targets[simd::name(t)] = parse_variant(kv.second, "cpu_targets." + target);
     }
   }
   return c;
 }
 
 }  // namespace
+
+std::string AppConfig::variant_for(const std::string& resolved) const {
+  if (resolved == "cuda") return cuda ? "cuda" : "";
+  if (resolved != "cpu" || cpu_targets.empty()) return "";
+  simd::Target t{};
+  // A setting this machine cannot run is CpuBackend's error to report, with the file's settings.
+  if (!simd::parse_setting(mppi.simd, &t) || !simd::supported(t)) return "";
+  return cpu_targets.count(simd::name(t)) ? std::string("cpu_targets.") + simd::name(t) : "";
+}
+
+const AppConfig& AppConfig::for_backend(const std::string& resolved) const {
+  const std::string v = variant_for(resolved);
+  if (v.empty()) return *this;
+  if (v == "cuda") return *cuda;
+  return *cpu_targets.at(v.substr(std::string("cpu_targets.").size()));
+}
 
 AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {
   return parse_impl(root, overrides, false);

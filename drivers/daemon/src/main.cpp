@@ -105,14 +105,20 @@ int main(int argc, char** argv) {
     cfg = mppi::app::load_config(config_path, overrides);
     // The daemon section of the backend that will fly (a `cuda:` section may set its own).
     const int nu = static_cast<int>(cfg.mppi.u_init.size());
-    if (cfg.cuda) {  // checked whatever the machine, like the rest of the `cuda:` section
+    // Every variant's daemon section is checked whatever the machine, like the rest of it.
+    const auto check_daemon = [&](const mppi::app::AppConfig& v, const std::string& name) {
       try {
-        mppi::daemon::parse_daemon_settings(cfg.cuda->root["daemon"], cfg.task, nu);
+        mppi::daemon::parse_daemon_settings(v.root["daemon"], cfg.task, nu);
       } catch (const mppi::app::ConfigError& e) {
-        throw mppi::app::ConfigError(std::string("cuda: ") + e.what());
+        throw mppi::app::ConfigError(name + ": " + e.what());
       }
-    }
-    const auto& flying = cfg.for_backend(mppi::app::resolve_backend(cfg.backend));
+    };
+    if (cfg.cuda) check_daemon(*cfg.cuda, "cuda");
+    for (const auto& [target, v] : cfg.cpu_targets) check_daemon(*v, "cpu_targets." + target);
+    const std::string resolved = mppi::app::resolve_backend(cfg.backend);
+    const auto& flying = cfg.for_backend(resolved);
+    if (const std::string v = cfg.variant_for(resolved); !v.empty())
+      spdlog::info("settings: the file's {} section applies on this machine", v);
     ds = mppi::daemon::parse_daemon_settings(flying.root["daemon"], cfg.task, nu);
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: {}", e.what());

@@ -5,6 +5,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <map>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -36,13 +37,19 @@ struct AppConfig {
   // The settings file's `cuda:` section (mppi, model, cost overrides: what the CUDA backend
   // flies with instead, e.g. more rollouts), merged and validated at load; null if none.
   std::shared_ptr<const AppConfig> cuda;
-  // The settings for a backend ("cpu" or "cuda"): *cuda for "cuda" when there is one.
-  const AppConfig& for_backend(const std::string& resolved) const {
-    return resolved == "cuda" && cuda ? *cuda : *this;
-  }
+  // The settings file's `cpu_targets:` section: per SIMD target of the CPU backend (scalar,
+  // sse4, avx2, avx3, neon), what it flies with instead (e.g. fewer rollouts on a target with
+  // narrower lanes, so the cycle keeps its headroom). Merged and validated at load, every
+  // entry, whatever the machine; the target used is the one mppi.simd resolves to here.
+  std::map<std::string, std::shared_ptr<const AppConfig>> cpu_targets;
+  // The settings for a backend ("cpu" or "cuda"): *cuda for "cuda" when there is one; for
+  // "cpu", the entry of cpu_targets of the SIMD target this machine runs, when there is one.
+  const AppConfig& for_backend(const std::string& resolved) const;
+  // Which section for_backend(resolved) takes: "cuda", "cpu_targets.<target>" or "" (the file's).
+  std::string variant_for(const std::string& resolved) const;
   // This config flying the optimizer settings S whatever the backend (S comes from a running
   // controller, already the backend's own): a live update rebuilds from it. Setting only
-  // `mppi` would leave the `cuda:` section's stale settings to the CUDA backend.
+  // `mppi` would leave the `cuda:` (or `cpu_targets:`) section's stale settings to the backend.
   AppConfig with_mppi(const MppiSettings& s) const {
     AppConfig c = *this;
     c.mppi = s;
@@ -50,6 +57,11 @@ struct AppConfig {
       auto cc = std::make_shared<AppConfig>(*cuda);
       cc->mppi = s;
       c.cuda = std::move(cc);
+    }
+    for (auto& [name, v] : c.cpu_targets) {
+      auto cv = std::make_shared<AppConfig>(*v);
+      cv->mppi = s;
+      v = std::move(cv);
     }
     return c;
   }
