@@ -34,7 +34,10 @@ stamp() { date +%s; }
 
 configure() {  # preset, build dir
   local args=(--preset "$1")
-  command -v ccache >/dev/null && args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+  if command -v ccache >/dev/null; then
+    args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+    export CCACHE_BASEDIR="$ROOT" CCACHE_NOHASHDIR=true  # another clone of the same tree hits
+  fi
   # clang's warnings are errors in CI too (cmake/Warnings.cmake: the same policy as gcc's).
   if [[ -n "${CI:-}" ]]; then args+=(-DMPPID_WERROR=ON); fi
   cmake "${args[@]}" >/dev/null

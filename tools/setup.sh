@@ -39,6 +39,7 @@ log() { printf '[setup] %s\n' "$*"; }
 APT_PACKAGES=(
   # toolchain and build
   build-essential cmake ninja-build pkg-config git ca-certificates
+  ccache  # a second build of the same sources (CI after a session, the sanitizer builds) is a cache hit
   # C++ libraries (OpenMP comes with gcc as libgomp)
   libeigen3-dev librandom123-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
   libhwy-dev  # Google Highway: the CPU backend's SIMD targets and vector math
@@ -122,6 +123,11 @@ if ((do_build)); then
   # it (override with: -- -DMPPID_LCM=OFF).
   if [[ -x "$VENV/bin/python" ]]; then args+=(-DMPPID_LCM=ON); fi
   [[ -n "${MPPID_CUDA:-}" ]] && args+=("-DMPPID_CUDA=$MPPID_CUDA")
+  if command -v ccache >/dev/null; then
+    args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_CUDA_COMPILER_LAUNCHER=ccache)
+    # Paths under the checkout hash as relative ones: another clone of the same tree hits.
+    export CCACHE_BASEDIR="$ROOT" CCACHE_NOHASHDIR=true
+  fi
   log "cmake ${args[*]} ${cmake_extra[*]}"
   cmake "${args[@]}" "${cmake_extra[@]}"
   log "cmake --build $BUILD_DIR -j${MPPID_JOBS:-2}"
