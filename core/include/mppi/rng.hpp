@@ -39,8 +39,10 @@ MPPI_HD void box_muller4(const U r[4], V out[4]) {
     const V u1 = (V(u32_to_float(r[2 * p])) + 0.5f) * kInv32;
     const V u2 = (V(u32_to_float(r[2 * p + 1])) + 0.5f) * kInv32;
     const V rad = fsqrt(-2.0f * flog(u1));
-    out[2 * p] = rad * fcos(kTwoPi * u2);
-    out[2 * p + 1] = rad * fsin(kTwoPi * u2);
+    V s, c;
+    fsincos(kTwoPi * u2, &s, &c);
+    out[2 * p] = rad * c;
+    out[2 * p + 1] = rad * s;
   }
 }
 

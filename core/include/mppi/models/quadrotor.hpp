@@ -37,9 +37,10 @@ struct Quadrotor {
 
   template <class V>
   MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
-    const V sphi = fsin(x[ROLL]), cphi_raw = fcos(x[ROLL]);
-    const V sth = fsin(x[PITCH]), cth = fcos(x[PITCH]);
-    const V spsi = fsin(x[YAW]), cpsi = fcos(x[YAW]);
+    V sphi, cphi_raw, sth, cth, spsi, cpsi;
+    fsincos(x[ROLL], &sphi, &cphi_raw);
+    fsincos(x[PITCH], &sth, &cth);
+    fsincos(x[YAW], &spsi, &cpsi);
     // The ZXY Euler map is singular at roll = +-90 deg; keep it finite there.
     const V cphi = select(fabs_(cphi_raw) < 1e-3f, select(cphi_raw < 0.0f, V(-1e-3f), V(1e-3f)), cphi_raw);
 
