@@ -1,34 +1,40 @@
 // rollout_chunked: the single-vehicle update with the serial chain cut down to the dynamics,
-// and the weighting done in the same kernel (finalize_blocks combines the blocks).
+// the dynamics of one chunk of steps overlapped with the costs of the previous one, and the
+// weighting done in the same kernel (finalize_blocks combines the blocks).
 //
-// A block holds R = 32 rollouts and NW warps. The horizon is walked in chunks of C steps;
-// each chunk has two phases, separated by block barriers:
-//   A  one warp (a different one each chunk, so the dynamics spread over the schedulers)
-//      advances the 32 rollouts C steps with T::advance and stores every state in shared
-//      memory; only this is serial in the step. Meanwhile the other warps move the cylinders
-//      to each step's time (forest tasks).
-//   B  every warp, one (rollout, step) item per thread: the running cost T::running of the
-//      stored state (Task::running_with; the forest's obstacle search over the moved
-//      cylinders, laid out for 16-byte loads), plus the control cost; and the noise of the
-//      next chunk (perturb, control_cost), drawn ahead into a second buffer.
-// Several blocks per multiprocessor overlap one block's phase A with the others' phase B.
+// A block holds R = 32 rollouts and NW warps (4 by default, at most 8; ~100 registers a
+// thread, so four blocks of 4 warps share a multiprocessor). The horizon is walked in chunks
+// of C steps. In iteration c, between two block barriers:
+//   producer  one warp (a different one each iteration, so the dynamics spread over the
+//             schedulers) advances the 32 rollouts through chunk c + 1 with T::advance and
+//             stores every state in shared memory (double-buffered by chunk): only this is
+//             serial in the step;
+//   consumers the other warps, one (rollout, step) item per thread: the running cost of
+//             chunk c (T::running_with; the forest's obstacle search through core's
+//             ObstacleGrid over the cylinders in global memory, L1-cached) plus the control
+//             cost, into a T x R table in shared memory; and the noise of chunk c + 2 (perturb,
+//             control_cost; triple-buffered), the controls also kept in global memory for the
+//             update. Then, behind a barrier of the consumers alone, the crash fix-up below.
+// With one warp the same work runs in turn.
 //
 // Crashes. Task::advance freezes a crashed vehicle, and a crash is only known from the cost.
-// Phase A never waits for it: it advances as if nothing crashed. Phase B then finds, per
-// rollout, the first step s* whose cost set a crash bit; the rollout's state is frozen at
-// x(s*) from there on (kept in shared memory), the items after s* in this chunk are costed
-// again with it, and every later chunk costs the frozen state instead of phase A's. That is
-// exactly CpuBackend's sequence: x(s*+1) = x(s*) = ... and running(x(s*), t_i) after s*.
+// The producer never waits for it: it advances as if nothing crashed. The consumers find, per
+// rollout, the first step s* whose cost set a crash bit; the rollout's state is frozen at x(s*)
+// from there on (kept in shared memory), the items after s* in this chunk are costed again
+// with it (crashed on entry, as CpuBackend's running() sees them), and every later chunk costs
+// the frozen state instead of the producer's. That is exactly CpuBackend's sequence:
+// x(s*+1) = x(s*) = ... and running(x(s*), t_i) with the crash bit set, after s*.
 //
-// Weights. Each q goes to S~ in global memory; after the last chunk one warp turns the
-// block's rows into the cost-to-go (summed from the end, as CpuBackend does). Then, per step
-// i, the block weighs its own rollouts against its own minimum m_b: w = exp(-(S - m_b)/lambda)
-// and sums w, w du (du from the controls kept in global memory, or drawn again) and the
-// step-0 statistics. finalize_blocks rescales each block's sums by exp(-(m_b - m)/lambda),
-// m the minimum over all blocks, and adds them in block order: the CPU's weights
-// exp(-(S - m)/lambda) up to rounding (plans agree to ~1e-7 relative), and a block whose
-// minimum is past the flush point (a > 60) contributes nothing, as its rollouts do on the
-// CPU. Every sum has a fixed order: the update is bit-for-bit repeatable.
+// Weights. After the last chunk one thread per rollout adds the terminal cost and turns its
+// column of the table into the cost-to-go (summed from the end, as CpuBackend does; row 0,
+// S~(tau_0,k), also goes to global memory for rollout_costs()). Then one thread per step i
+// weighs the block's rollouts against the block's own minimum m_b, w = exp(-(S - m_b)/lambda),
+// and sums w, w du (du from the kept controls, or drawn again) and the step-0 statistics, in
+// rollout order. finalize_blocks rescales each block's sums by exp(-(m_b - m)/lambda), m the
+// minimum over all blocks, and adds them in block order: the CPU's weights exp(-(S - m)/lambda)
+// up to rounding (plans agree to ~1e-7 relative), and a block whose minimum is past the flush
+// point (a > 60) contributes nothing, as its rollouts do on the CPU. Every sum has a fixed
+// order: the update is bit-for-bit repeatable.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -41,137 +47,141 @@
 
 namespace mppi::cuda_detail {
 
-// The cylinders' radii in shared memory, and per step of the chunk their centres moved to
-// the step's time (c.x + c.vx t, c.y + c.vy t: ObstacleSet::surface_distance's own operations),
-// padded to a multiple of 8 with cylinders so far away they are never the nearest.
-struct ObstacleTable {
-  static constexpr int kCap = ObstacleSet::kCapacity;
-  // Padding: a NaN centre gives a NaN distance, which fminf never picks (whatever the position).
-  static constexpr float kAway = __builtin_nanf("");
-  alignas(16) float r[kCap];  // first: read 16 bytes at a time
-  int count;                  // real cylinders
-  int padded;                 // count rounded up to 8
-};
+// Launch bounds of rollout_chunked: at most 256 threads; two blocks of 256 (four of 128) a
+// multiprocessor, so at most 128 registers a thread (a cap of 64 made the kept-controls
+// variant spill).
+constexpr int kChunkMaxThreads = 256;
+constexpr int kChunkMinBlocks = 2;
+
+// The bytes of T::Params staged into shared memory: for the forest tasks everything up to the
+// obstacle count (the cylinders and the obstacle grid are read from global memory, through
+// core's ObstacleGrid::nearest_surface); for the others the whole struct.
+template <class T>
+__host__ __device__ constexpr std::size_t chunk_param_bytes() {
+  using P = typename T::Params;
+  if constexpr (kForestTask<T>) {
+    using C = typename T::Cost::Params;
+    static_assert(offsetof(ObstacleSet, count) == 0, "the obstacle count comes first");
+    return (offsetof(P, cost) + offsetof(C, obstacles) + sizeof(int) + 3) / 4 * 4;
+  } else {
+    return (sizeof(P) + 3) / 4 * 4;
+  }
+}
+
+// Floats per rollout of a vector in shared memory, laid out [rollout][n] so that a thread
+// moves it 16 (or 8) bytes at a time: n rounded up to 4, plus 4 more when that is an even
+// number of 16-byte units (an odd number keeps a quarter-warp's 16-byte accesses on distinct
+// banks); 1 and 2 stay as they are.
+__host__ __device__ constexpr int lane_stride(int n) {
+  return n <= 2 ? n : ((n + 3) / 4 % 2 == 0 ? (n + 3) / 4 * 4 + 4 : (n + 3) / 4 * 4);
+}
+
+// N floats from / to shared memory at p, laid out by lane_stride (p aligned to match).
+template <int N>
+__device__ __forceinline__ void lds_vec(const float* p, float* v) {
+  if constexpr (N <= 2) {
+#pragma unroll
+    for (int n = 0; n < N; ++n) v[n] = p[n];
+  } else {
+    constexpr int N4 = (N + 3) / 4 * 4;
+    float t[N4];
+#pragma unroll
+    for (int n = 0; n < N4; n += 4) {
+      const float4 q = *reinterpret_cast<const float4*>(p + n);
+      t[n] = q.x;
+      t[n + 1] = q.y;
+      t[n + 2] = q.z;
+      t[n + 3] = q.w;
+    }
+#pragma unroll
+    for (int n = 0; n < N; ++n) v[n] = t[n];
+  }
+}
+template <int N>
+__device__ __forceinline__ void sts_vec(float* p, const float* v) {
+  if constexpr (N <= 2) {
+#pragma unroll
+    for (int n = 0; n < N; ++n) p[n] = v[n];
+  } else {
+    constexpr int N4 = (N + 3) / 4 * 4;
+#pragma unroll
+    for (int n = 0; n < N4; n += 4)
+      *reinterpret_cast<float4*>(p + n) = make_float4(v[n], n + 1 < N ? v[n + 1] : 0.0f, n + 2 < N ? v[n + 2] : 0.0f,
+                                                      n + 3 < N ? v[n + 3] : 0.0f);
+  }
+}
 
 template <class T>
 struct ChunkLayout {
-  static constexpr int R = 32;  // rollouts per block
+  static constexpr int R = 32;       // rollouts per block
+  static constexpr int QS = R + 1;   // row stride of the cost table (no bank conflicts by step)
   static constexpr int NX = T::kNx, NU = T::kNu;
-  std::size_t params, obst, moved, xs, us, cc, hit, xf, flags, bytes;
-  __host__ __device__ ChunkLayout(int chunk) {
+  static constexpr int XS = lane_stride(NX), US = lane_stride(NU);  // floats per rollout
+  std::size_t params, xs, us, cc, hit, xf, flags, qb, bytes;
+  __host__ __device__ ChunkLayout(int chunk, int horizon) {
     std::size_t at = 0;
     auto take = [&](std::size_t n) {
       const std::size_t here = at;
       at += align16(n);
       return here;
     };
-    params = take(sizeof(typename T::Params));
-    obst = take(kForestTask<T> ? sizeof(ObstacleTable) : 0);
-    moved = take(kForestTask<T> ? sizeof(float) * chunk * 2 * ObstacleTable::kCap : 0);  // [s][x|y][n]
-    xs = take(sizeof(float) * chunk * NX * R);        // [s][n][lane]: states after step s
-    us = take(sizeof(float) * 2 * chunk * NU * R);    // [buf][s][n][lane]: perturbed controls
-    cc = take(sizeof(float) * 2 * chunk * R);         // [buf][s][lane]: control costs
-    hit = take(sizeof(std::uint32_t) * chunk * R);    // [s][lane]: crash bits of step s
-    xf = take(sizeof(float) * NX * R);                // [n][lane]: the frozen (crashed) state
-    flags = take(sizeof(int) * 2 * R);                // frozen[lane], refix_from[lane]
+    params = take(chunk_param_bytes<T>());
+    xs = take(sizeof(float) * 2 * chunk * R * XS);  // [chunk & 1][s][lane][n]: states after step s
+    us = take(sizeof(float) * 3 * chunk * R * US);  // [chunk % 3][s][lane][n]: perturbed controls
+    cc = take(sizeof(float) * 3 * chunk * R);       // [chunk % 3][s][lane]: control costs
+    hit = take(sizeof(std::uint32_t) * chunk * R);  // [s][lane]: crash bits of step s
+    xf = take(sizeof(float) * R * XS);              // [lane][n]: the frozen (crashed) state
+    flags = take(sizeof(int) * (2 * R + 8));        // frozen[lane], refix_from[lane], slot[warp]
+    qb = take(sizeof(float) * static_cast<std::size_t>(horizon) * QS);  // [i][lane]: q, then S~
     bytes = at;
   }
 };
 
-// ObstacleSet::nearest_surface at one step, over the moved cylinders of that step (mx, my):
-// each through ObstacleSet::surface_distance (with the motion already applied: zero velocity,
-// t = 0, which the compiler folds away), the minimum taken with fminf (equal to the CPU's
-// comparison except possibly in the sign of a zero distance, which no term of the cost sees).
-__device__ __forceinline__ float nearest_surface_moved(const ObstacleTable& o, const float* mx, const float* my, float px,
-                                                       float py) {
-  float best = ObstacleSet::kFar;
-  for (int b = 0; b < o.padded; b += 8) {
-    float d[8];
-#pragma unroll
-    for (int h = 0; h < 2; ++h) {
-      const float4 cx = *reinterpret_cast<const float4*>(mx + b + 4 * h);
-      const float4 cy = *reinterpret_cast<const float4*>(my + b + 4 * h);
-      const float4 cr = *reinterpret_cast<const float4*>(o.r + b + 4 * h);
-      d[4 * h + 0] = ObstacleSet::surface_distance(Cylinder{cx.x, cy.x, cr.x, -0.0f, -0.0f}, px, py, 0.0f);
-      d[4 * h + 1] = ObstacleSet::surface_distance(Cylinder{cx.y, cy.y, cr.y, -0.0f, -0.0f}, px, py, 0.0f);
-      d[4 * h + 2] = ObstacleSet::surface_distance(Cylinder{cx.z, cy.z, cr.z, -0.0f, -0.0f}, px, py, 0.0f);
-      d[4 * h + 3] = ObstacleSet::surface_distance(Cylinder{cx.w, cy.w, cr.w, -0.0f, -0.0f}, px, py, 0.0f);
-    }
-#pragma unroll
-    for (int u = 0; u < 8; ++u) best = fminf(d[u], best);
-  }
-  return best;
-}
-
-// The same through the obstacle grid (ObstacleGrid::nearest_surface's lookup, the cell's
-// list searched over the moved cylinders); outside the grid, or with none, every cylinder.
-// The list of a cell holds the nearest cylinder of every point in it, so the distance is
-// the full search's (and CpuBackend's, which searches the same grid).
-__device__ __forceinline__ float nearest_surface_listed(const ObstacleGrid& g, const ObstacleTable& o, const float* mx,
-                                                        const float* my, float px, float py) {
-  if (g.nx > 0) {
-    const float fx = (px - g.x0) * g.inv_cell;
-    const float fy = (py - g.y0) * g.inv_cell;
-    if (fx >= 0.0f && fx < static_cast<float>(g.nx) && fy >= 0.0f && fy < static_cast<float>(g.ny)) {
-      int cell;
-      store_cell_indices(fx, fy, g.nx, &cell);
-      float best = ObstacleSet::kFar;
-      const int end = g.first[cell + 1];
-      for (int r = g.first[cell]; r < end; ++r) {
-        const int n = g.refs[r];
-        best = fminf(ObstacleSet::surface_distance(Cylinder{mx[n], my[n], o.r[n], -0.0f, -0.0f}, px, py, 0.0f), best);
-      }
-      return best;
-    }
-  }
-  return nearest_surface_moved(o, mx, my, px, py);
-}
-
-// Task::running for a single vehicle at step s of the chunk; forest tasks search the moved
-// cylinders of that step (through the grid).
+// Task::running for a single vehicle; forest tasks search the obstacles through the grid in
+// global memory (gp: the cycle's parameters on the device), exactly as ForestCost::vehicle.
 template <class T>
-__device__ __forceinline__ float running_chunked(const typename T::Params& p, const ObstacleTable* o,
-                                                 const float* moved, int chunk, int s, const float* x, float t,
-                                                 std::uint32_t* crashed) {
+__device__ __forceinline__ float running_chunked(const typename T::Params& p, const typename T::Params& gp,
+                                                 const float* x, float t, std::uint32_t* crashed) {
   if constexpr (kForestTask<T>) {
     using Vehicle = typename T::Vehicle;
-    const float* mx = moved + static_cast<std::size_t>(s) * 2 * ObstacleTable::kCap;
-    (void)chunk;
-    (void)t;
     return T::running_with(p, x, crashed, [&](int j, const float* xj, bool* hit) {
       float pos[3];
       Vehicle::position(xj, pos);
-      const float d = nearest_surface_listed(p.cost.obstacle_grid, *o, mx, mx + ObstacleTable::kCap, pos[0], pos[1]);
+      const float d = gp.cost.obstacle_grid.nearest_surface(gp.cost.obstacles, pos[0], pos[1], t);
       return ForestCost<Vehicle>::vehicle_at_distance(p.cost, j, xj, d, hit);
     });
   } else {
-    (void)o;
-    (void)moved;
-    (void)chunk;
-    (void)s;
+    (void)gp;
     return T::running(p, x, t, crashed);
   }
 }
 
-template <int N>
-__device__ __forceinline__ void warp_sum(float (&v)[N]) {
-#pragma unroll
-  for (int n = 0; n < N; ++n)
-#pragma unroll
-    for (int off = 16; off > 0; off >>= 1) v[n] += __shfl_xor_sync(kFullMask, v[n], off);
+// The hardware warp slot of the calling warp on its multiprocessor (PTX %warpid). A warp
+// issues from scheduler slot mod 4 (the four sub-partitions of an SM), which is all this is
+// used for: a hint, never for correctness.
+__device__ __forceinline__ int warp_slot() {
+  unsigned w;
+  asm volatile("mov.u32 %0, %%warpid;" : "=r"(w));
+  return static_cast<int>(w);
 }
+
+// A barrier of the n consumer threads (named barrier 1; n a multiple of 32).
+__device__ __forceinline__ void consumer_sync(int n) { asm volatile("bar.sync 1, %0;" ::"r"(n) : "memory"); }
 
 // part layout: [(i * blocks + b) * (NU + 1) + n], n = 0: sum w, 1..NU: sum w du.
 // stats_part[b]: step-0 statistics of block b. pmin[i * blocks + b]: block minima.
-template <class T>
-__global__ void rollout_chunked(const Input<T>* in, const float* plan, float* S, unsigned char* crashed_out,
-                                float* pmin, float* part, StatsPart* stats_part, float* u_keep, int K, int horizon,
-                                int chunk, float dt, int substeps, float inv_lambda, int trajectory,
-                                SamplerConstants<T::kNu> c) {
-  constexpr int R = ChunkLayout<T>::R, NX = T::kNx, NU = T::kNu;
+// S0: S~(tau_0,k), the first row of the cost-to-go (for rollout_costs()).
+// kKeep: the controls are kept in u_keep for the update (else drawn again there).
+template <class T, bool kKeep>
+__global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
+    rollout_chunked(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
+                    float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
+                    int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
+  constexpr int R = ChunkLayout<T>::R, QS = ChunkLayout<T>::QS, NX = T::kNx, NU = T::kNu;
+  constexpr int XS = ChunkLayout<T>::XS, US = ChunkLayout<T>::US;
   static_assert(T::kVehicles == 1, "rollout_chunked is for single vehicles");
   extern __shared__ __align__(16) unsigned char smem[];
-  const ChunkLayout<T> L(chunk);
+  const ChunkLayout<T> L(chunk, horizon);
   using Params = typename T::Params;
 
   const int tid = static_cast<int>(threadIdx.x), threads = static_cast<int>(blockDim.x);
@@ -179,29 +189,14 @@ __global__ void rollout_chunked(const Input<T>* in, const float* plan, float* S,
   const int k0 = static_cast<int>(blockIdx.x) * R;
   const int blocks = static_cast<int>(gridDim.x);
   const int valid = K - k0 < R ? K - k0 : R;  // rollouts of this block
+  const int nchunks = (horizon + chunk - 1) / chunk;
 
-  // Stage the parameters (and the cylinders' radii), clear the flags.
+  // Stage the parameters, clear the flags.
   {
-    static_assert(sizeof(Params) % 4 == 0, "parameters are copied as 32-bit words");
+    constexpr int kWords = static_cast<int>(chunk_param_bytes<T>() / 4);
     const auto* from = reinterpret_cast<const std::uint32_t*>(&in->params);
     auto* to = reinterpret_cast<std::uint32_t*>(smem + L.params);
-    for (int w = tid; w < static_cast<int>(sizeof(Params) / 4); w += threads) to[w] = from[w];
-  }
-  ObstacleTable* obst = nullptr;
-  float* moved = nullptr;
-  const Cylinder* cyl = nullptr;
-  int n_obst = 0;
-  if constexpr (kForestTask<T>) {
-    obst = reinterpret_cast<ObstacleTable*>(smem + L.obst);
-    moved = reinterpret_cast<float*>(smem + L.moved);
-    const ObstacleSet& set = in->params.cost.obstacles;
-    cyl = set.items;
-    n_obst = set.count < ObstacleSet::kCapacity ? (set.count > 0 ? set.count : 0) : ObstacleSet::kCapacity;
-    for (int n = tid; n < ObstacleTable::kCap; n += threads) obst->r[n] = n < n_obst ? set.items[n].radius : 0.0f;
-    if (tid == 0) {
-      obst->count = n_obst;
-      obst->padded = (n_obst + 7) / 8 * 8;
-    }
+    for (int w = tid; w < kWords; w += threads) to[w] = from[w];
   }
   float* xs = reinterpret_cast<float*>(smem + L.xs);
   float* us = reinterpret_cast<float*>(smem + L.us);
@@ -210,187 +205,221 @@ __global__ void rollout_chunked(const Input<T>* in, const float* plan, float* S,
   float* xf = reinterpret_cast<float*>(smem + L.xf);
   int* frozen = reinterpret_cast<int*>(smem + L.flags);
   int* refix = frozen + R;
+  int* slot = refix + R;
+  float* qb = reinterpret_cast<float*>(smem + L.qb);
   if (tid < R) frozen[tid] = 0;
+  if (lane == 0) slot[warp] = warp_slot();
   const NoiseKey key = in->key;
   const Params& p = *reinterpret_cast<const Params*>(smem + L.params);
+  const Params& gp = in->params;
 
-  // The noise of the chunk starting at step i0 into buffer b: item (s, lane).
-  auto draw = [&](int i0, int b) {
-    const int steps = horizon - i0 < chunk ? horizon - i0 : chunk;
-    for (int item = tid; item < steps * R; item += threads) {
-      const int s = item / R, l = item % R, i = i0 + s;
-      const float* pu = plan + i * NU;
-      float u[NU], du[NU];
-      perturb<NU>(c, key, static_cast<std::uint32_t>(k0 + l), static_cast<std::uint32_t>(i), pu, u, du);
-      float* uo = us + (static_cast<std::size_t>(b * chunk + s) * NU) * R + l;
-#pragma unroll
-      for (int n = 0; n < NU; ++n) uo[n * R] = u[n];
-      ccs[(b * chunk + s) * R + l] = control_cost<NU>(c, pu, du);
-      if (u_keep != nullptr && l < valid) store_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
-    }
-  };
-  draw(0, 0);
-  __syncthreads();
+  auto steps_of = [&](int ci) { return horizon - ci * chunk < chunk ? horizon - ci * chunk : chunk; };
+  // Rollout l's state after step s of chunk ci, its control at that step.
+  auto xs_at = [&](int ci, int s, int l) { return xs + (static_cast<std::size_t>((ci & 1) * chunk + s) * R + l) * XS; };
+  auto us_at = [&](int ci, int s, int l) { return us + (static_cast<std::size_t>((ci % 3) * chunk + s) * R + l) * US; };
+  auto cc_at = [&](int ci, int s) { return ccs + static_cast<std::size_t>((ci % 3) * chunk + s) * R; };
 
-  int b = 0;
-  const int producer_base = static_cast<int>(blockIdx.x);
-  for (int i0 = 0, ci = 0; i0 < horizon; i0 += chunk, ++ci, b ^= 1) {
-    const int steps = horizon - i0 < chunk ? horizon - i0 : chunk;
-    const int producer = (ci + producer_base) % warps;
-    // The cylinders at each step's time (forest tasks), by the warps that are not advancing
-    // the rollouts (by the one warp before it does, in a block of one warp).
-    auto move_cylinders = [&](int first, int stride) {
-      if constexpr (kForestTask<T>) {
-        const int padded = (n_obst + 7) / 8 * 8;
-        for (int e = first; e < steps * padded; e += stride) {
-          const int s = e / padded, n = e % padded;
-          const float t = static_cast<float>(i0 + s + 1) * dt;
-          float* row = moved + static_cast<std::size_t>(s) * 2 * ObstacleTable::kCap;
-          if (n < n_obst) {
-            const Cylinder& cy = cyl[n];
-            row[n] = cy.x + cy.vx * t;
-            row[ObstacleTable::kCap + n] = cy.y + cy.vy * t;
-          } else {
-            row[n] = ObstacleTable::kAway;
-            row[ObstacleTable::kCap + n] = ObstacleTable::kAway;
-          }
-        }
-      } else {
-        (void)first;
-        (void)stride;
-      }
-    };
-    if (warps == 1) move_cylinders(tid, threads);
-    if (warp == producer) {
-      // ---- phase A: the dynamics, one warp ----
-      float x[NX];
-      if (i0 == 0) {
-#pragma unroll
-        for (int n = 0; n < NX; ++n) x[n] = in->x0[n];
-      } else {
-        // The last state of the previous chunk (its phase A wrote slot chunk - 1).
-#pragma unroll
-        for (int n = 0; n < NX; ++n) x[n] = xs[((chunk - 1) * NX + n) * R + lane];
-      }
-      for (int s = 0; s < steps; ++s) {
-        float u[NU];
-        const float* ui = us + (static_cast<std::size_t>(b * chunk + s) * NU) * R + lane;
-#pragma unroll
-        for (int n = 0; n < NU; ++n) u[n] = ui[n * R];
-        T::advance(p, x, u, dt, substeps, 0u);
-#pragma unroll
-        for (int n = 0; n < NX; ++n) xs[(s * NX + n) * R + lane] = x[n];
-      }
-    } else {
-      move_cylinders(tid - (tid >= producer * 32 ? 32 : 0), threads - 32);
-    }
-    __syncthreads();
-    // ---- phase B1: costs of this chunk; noise of the next ----
-    for (int item = tid; item < steps * R; item += threads) {
-      const int s = item / R, l = item % R, i = i0 + s;
-      float x[NX];
-      const float* src = frozen[l] ? xf + l : xs + s * NX * R + l;
-#pragma unroll
-      for (int n = 0; n < NX; ++n) x[n] = src[n * R];
-      std::uint32_t bits = 0;
-      const float t = static_cast<float>(i + 1) * dt;
-      const float q = sanitize_cost(running_chunked<T>(p, obst, moved, chunk, s, x, t, &bits) +
-                                    ccs[(b * chunk + s) * R + l]);
-      if (l < valid) S[static_cast<std::size_t>(i) * K + k0 + l] = q;
-      hits[s * R + l] = bits;
-    }
-    if (i0 + chunk < horizon) draw(i0 + chunk, b ^ 1);
-    __syncthreads();
-    // ---- phase B2: first crash of each rollout in this chunk ----
-    if (tid < R) {
-      int from = steps;
-      if (!frozen[tid]) {
-        for (int s = 0; s < steps; ++s) {
-          if (hits[s * R + tid] != 0u) {
-            for (int n = 0; n < NX; ++n) xf[n * R + tid] = xs[(s * NX + n) * R + tid];
-            frozen[tid] = 1;
-            from = s + 1;
-            break;
-          }
-        }
-      }
-      refix[tid] = from;
-    }
-    __syncthreads();
-    // ---- phase B3: the steps after a crash in this chunk, costed on the frozen state ----
-    for (int item = tid; item < steps * R; item += threads) {
-      const int s = item / R, l = item % R, i = i0 + s;
-      if (s < refix[l] || l >= valid) continue;
-      float x[NX];
-#pragma unroll
-      for (int n = 0; n < NX; ++n) x[n] = xf[n * R + l];
-      std::uint32_t bits = 0;
-      const float t = static_cast<float>(i + 1) * dt;
-      S[static_cast<std::size_t>(i) * K + k0 + l] =
-          sanitize_cost(running_chunked<T>(p, obst, moved, chunk, s, x, t, &bits) + ccs[(b * chunk + s) * R + l]);
-    }
-    // The next phase A writes xs and the moved cylinders and reads the other noise buffer; the
-    // barrier after it orders this phase's reads before the next draw into this buffer.
-  }
-  __syncthreads();
-
-  // ---- terminal cost and the cost-to-go, one warp ----
-  const int last_steps = horizon - (horizon - 1) / chunk * chunk;  // steps of the last chunk
-  if (warp == 0 && lane < valid) {
-    const int k = k0 + lane;
-    float x[NX];
-    const float* src = frozen[lane] ? xf + lane : xs + (last_steps - 1) * NX * R + lane;
-#pragma unroll
-    for (int n = 0; n < NX; ++n) x[n] = src[n * R];
-    float* sk = S + (static_cast<std::size_t>(horizon - 1) * K + k);
-    const float last = sanitize_cost(*sk + T::terminal(p, x));
-    *sk = last;
-    suffix_sums(S, K, horizon, k, last);
-    crashed_out[k] = frozen[lane] != 0;
-  }
-  __syncthreads();
-
-  // ---- per step: the block's minimum and weighted sums, one warp a step ----
-  for (int i = warp; i < horizon; i += warps) {
-    const int wi = trajectory ? 0 : i;
-    const bool on = lane < valid;
-    const int k = k0 + lane;
-    const float s_w = on ? S[static_cast<std::size_t>(wi) * K + k] : kCostCeiling;
-    float m = s_w;
-#pragma unroll
-    for (int off = 16; off > 0; off >>= 1) m = fmin_(m, __shfl_xor_sync(kFullMask, m, off));
-    const float w = on ? unnormalised_weight(s_w - m, inv_lambda) : 0.0f;
+  // The noise of item (step s of chunk ci, rollout l).
+  auto draw = [&](int ci, int s, int l) {
+    const int i = ci * chunk + s;
     const float* pu = plan + i * NU;
     float u[NU], du[NU];
-    if (u_keep != nullptr) {
-      if (on) load_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k) * NU, u);
-      else
-        for (int n = 0; n < NU; ++n) u[n] = pu[n];
-      for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
+    perturb<NU>(c, key, static_cast<std::uint32_t>(k0 + l), static_cast<std::uint32_t>(i), pu, u, du);
+    sts_vec<NU>(us_at(ci, s, l), u);
+    cc_at(ci, s)[l] = control_cost<NU>(c, pu, du);
+    if (kKeep && l < valid) store_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
+  };
+  // q of item (s, l) of chunk ci at state x; bits: the crash bits, in and out.
+  auto cost = [&](int ci, int s, int l, const float* x, std::uint32_t* bits) {
+    const int i = ci * chunk + s;
+    const float t = static_cast<float>(i + 1) * dt;
+    qb[i * QS + l] = sanitize_cost(running_chunked<T>(p, gp, x, t, bits) + cc_at(ci, s)[l]);
+  };
+  // The dynamics of chunk ci, lane = rollout, from the last state of chunk ci - 1.
+  auto produce = [&](int ci) {
+    float x[NX];
+    if (ci == 0) {
+#pragma unroll
+      for (int n = 0; n < NX; ++n) x[n] = in->x0[n];
     } else {
-      perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+      lds_vec<NX>(xs_at(ci - 1, steps_of(ci - 1) - 1, lane), x);
     }
-    float acc[NU + 1];
-    acc[0] = w;
+    const int steps = steps_of(ci);
+    float un[NU];  // the next step's control, loaded a step ahead
+    lds_vec<NU>(us_at(ci, 0, lane), un);
+    for (int s = 0; s < steps; ++s) {
+      float u[NU];
 #pragma unroll
-    for (int n = 0; n < NU; ++n) acc[1 + n] = w * du[n];
-    warp_sum(acc);
-    if (lane == 0) {
-      pmin[static_cast<std::size_t>(i) * blocks + blockIdx.x] = m;
-      float* out = part + (static_cast<std::size_t>(i) * blocks + blockIdx.x) * (NU + 1);
+      for (int n = 0; n < NU; ++n) u[n] = un[n];
+      if (s + 1 < steps) lds_vec<NU>(us_at(ci, s + 1, lane), un);
+      T::advance(p, x, u, dt, substeps, 0u);
+      sts_vec<NX>(xs_at(ci, s, lane), x);
+    }
+  };
+
+  // The warp that advances chunk ci. The producer's dependent chain is the one serial part,
+  // so each producer should have a scheduler of its own: the blocks that share a
+  // multiprocessor (their warps hold consecutive slots, `warps` a block) start on different
+  // sub-partitions (slot mod 4) and each moves on by one every chunk. Without a warp on the
+  // wanted sub-partition (fewer than 4 warps), the warps take turns.
+  auto producer_of = [&](int ci) {
+    const int turn = ci + slot[0] / warps;
+    if (warps >= 4) {
+      for (int w = 0; w < warps; ++w)
+        if ((slot[w] & 3) == (turn & 3) && (warps < 8 || ((w >> 2) & 1) == ((turn >> 2) & 1))) return w;
+      for (int w = 0; w < warps; ++w)
+        if ((slot[w] & 3) == (turn & 3)) return w;
+    }
+    return turn % warps;
+  };
+
+  // Prologue: the noise of chunk 0; then the dynamics of chunk 0 beside the noise of chunk 1.
+  for (int e = tid; e < steps_of(0) * R; e += threads) draw(0, e / R, e % R);
+  __syncthreads();
+  {
+    const int producer = producer_of(0);
+    if (warp == producer) produce(0);
+    if (nchunks > 1 && (warps == 1 || warp != producer)) {
+      const int ct = warps == 1 || warp < producer ? tid : tid - 32, nct = warps == 1 ? threads : threads - 32;
+      for (int e = ct; e < steps_of(1) * R; e += nct) draw(1, e / R, e % R);
+    }
+  }
+  __syncthreads();
+
+  for (int ci = 0; ci < nchunks; ++ci) {
+    // The producer of chunk ci + 1 (none after the last chunk: every warp consumes).
+    const int producer = ci + 1 < nchunks ? producer_of(ci + 1) : -1;
+    if (warp == producer) produce(ci + 1);
+    if (warps == 1 || warp != producer) {
+      const bool all = warps == 1 || producer < 0;
+      const int ct = all || warp < producer ? tid : tid - 32, nct = all ? threads : threads - 32;
+      const int steps = steps_of(ci);
+      const int n_cost = steps * R;
+      const int n_items = n_cost + (ci + 2 < nchunks ? steps_of(ci + 2) * R : 0);
+      // ---- the costs of chunk ci; the noise of chunk ci + 2 ----
+      for (int e = ct; e < n_items; e += nct) {
+        if (e < n_cost) {
+          const int s = e / R, l = e % R;
+          std::uint32_t bits = 0;
+          if (l < valid) {
+            const bool fz = frozen[l] != 0;
+            float x[NX];
+            lds_vec<NX>(fz ? xf + l * XS : xs_at(ci, s, l), x);
+            bits = fz ? 1u : 0u;  // crashed before: CpuBackend's running() sees the bit
+            cost(ci, s, l, x, &bits);
+          }
+          hits[s * R + l] = bits;
+        } else {
+          const int f = e - n_cost;
+          draw(ci + 2, f / R, f % R);
+        }
+      }
+      consumer_sync(nct);
+      // ---- the first crash of each rollout in this chunk ----
+      if (ct < R) {
+        const int l = ct;
+        int from = steps;
+        if (!frozen[l]) {
+          for (int s = 0; s < steps; ++s) {
+            if (hits[s * R + l] != 0u) {
+              const float* src = xs_at(ci, s, l);
+              for (int n = 0; n < XS; ++n) xf[l * XS + n] = src[n];
+              frozen[l] = 1;
+              from = s + 1;
+              break;
+            }
+          }
+        }
+        refix[l] = from;
+      }
+      consumer_sync(nct);
+      // ---- the steps after a crash in this chunk, costed on the frozen state ----
+      for (int e = ct; e < n_cost; e += nct) {
+        const int s = e / R, l = e % R;
+        if (l >= valid || s < refix[l]) continue;
+        float x[NX];
+        lds_vec<NX>(xf + l * XS, x);
+        std::uint32_t bits = 1u;
+        cost(ci, s, l, x, &bits);
+      }
+    }
+    // The next iteration's producer reads the noise drawn here and overwrites the states of
+    // chunk ci - 1 (read by the producer here); its consumers read these states and flags.
+    __syncthreads();
+  }
+
+  griddep_launch_dependents();  // finalize_blocks may be scheduled behind the last blocks
+
+  // ---- terminal cost and the cost-to-go, one thread per rollout ----
+  if (tid < valid) {
+    const int l = tid, last = nchunks - 1;
+    float x[NX];
+    lds_vec<NX>(frozen[l] ? xf + l * XS : xs_at(last, steps_of(last) - 1, l), x);
+    float* col = qb + l;
+    float acc = sanitize_cost(col[(horizon - 1) * QS] + T::terminal(p, x));
+    col[(horizon - 1) * QS] = acc;
+    int i = horizon - 2;
+    constexpr int kBatch = 8;
+    for (; i >= kBatch - 1; i -= kBatch) {
+      float v[kBatch];
 #pragma unroll
-      for (int n = 0; n <= NU; ++n) out[n] = acc[n];
+      for (int b = 0; b < kBatch; ++b) v[b] = col[(i - b) * QS];
+#pragma unroll
+      for (int b = 0; b < kBatch; ++b) {
+        acc = sanitize_cost(v[b] + acc);
+        col[(i - b) * QS] = acc;
+      }
     }
-    if (i == 0) {
-      // Step-0 statistics: sum w^2 (of these block-relative weights), S~ over the finite
-      // rollouts, how many, how many crashed.
-      const float s0 = on ? S[k] : kCostCeiling;
-      float st[2] = {w * w, on && s0 < kCostCeiling ? s0 : 0.0f};
-      warp_sum(st);
-      const unsigned fin = __ballot_sync(kFullMask, on && s0 < kCostCeiling);
-      const unsigned cr = __ballot_sync(kFullMask, on && frozen[lane] != 0);
-      if (lane == 0) stats_part[blockIdx.x] = StatsPart{st[0], st[1], __popc(fin), __popc(cr)};
+    for (; i >= 0; --i) {
+      acc = sanitize_cost(col[i * QS] + acc);
+      col[i * QS] = acc;
     }
+    S0[k0 + l] = acc;
+    crashed_out[k0 + l] = frozen[l] != 0;
+  }
+  __syncthreads();
+
+  // ---- per step: the block's minimum and weighted sums, one thread a step ----
+  for (int i = tid; i < horizon; i += threads) {
+    const int wi = trajectory ? 0 : i;
+    const float* row = qb + wi * QS;
+    float m = kCostCeiling;
+    for (int l = 0; l < valid; ++l) m = fmin_(m, row[l]);
+    const float* pu = plan + i * NU;
+    float acc[NU + 1] = {};
+    float w2 = 0.0f, sum_cost = 0.0f;
+    int finite = 0, crashed = 0;
+#pragma unroll 4
+    for (int l = 0; l < valid; ++l) {
+      const float s = row[l];
+      const float w = unnormalised_weight(s - m, inv_lambda);
+      float u[NU], du[NU];
+      if constexpr (kKeep) {
+        load_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
+#pragma unroll
+        for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
+      } else {
+        perturb<NU>(c, key, static_cast<std::uint32_t>(k0 + l), static_cast<std::uint32_t>(i), pu, u, du);
+      }
+      acc[0] += w;
+#pragma unroll
+      for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
+      if (i == 0) {
+        // Step-0 statistics: sum w^2 (of these block-relative weights), S~ over the finite
+        // rollouts, how many, how many crashed.
+        w2 += w * w;
+        if (s < kCostCeiling) {
+          sum_cost += s;
+          ++finite;
+        }
+        crashed += frozen[l] != 0;
+      }
+    }
+    pmin[static_cast<std::size_t>(i) * blocks + blockIdx.x] = m;
+    float* out = part + (static_cast<std::size_t>(i) * blocks + blockIdx.x) * (NU + 1);
+#pragma unroll
+    for (int n = 0; n <= NU; ++n) out[n] = acc[n];
+    if (i == 0) stats_part[blockIdx.x] = StatsPart{w2, sum_cost, finite, crashed};
   }
 }
 
@@ -402,6 +431,7 @@ template <int NU>
 __global__ void finalize_blocks(const float* plan, const float* part, const StatsPart* stats_part, const float* pmin,
                                 int blocks, float inv_lambda, int trajectory, float* plan_out, DeviceStats* stats,
                                 SamplerConstants<NU> c) {
+  griddep_wait();  // launched as a programmatic dependent: the blocks' sums are complete
   const int i = static_cast<int>(blockIdx.x), wi = trajectory ? 0 : i;
   const float* mrow = pmin + static_cast<std::size_t>(wi) * blocks;
   float m = kCostCeiling;

@@ -9,11 +9,13 @@
 // else rollout_single with G lanes per rollout (1 to 8: about 8 warps per multiprocessor
 // while the rollouts alone leave it idle); for teams where the noise is drawn (kernels.cuh,
 // NoiseMode: the pre-pass when its buffer fits in the noise budget).
-// The chunked kernel keeps the perturbed controls for the update while they fit in about the
-// L2 cache (else the update draws them again).
+// Single vehicles keep the perturbed controls for the update: the chunked kernel while they
+// fit in about the L2 cache, the lane kernel while they fit in the noise budget (else the
+// update draws them again). The weighting (weigh_local, or the chunked kernel itself) weighs
+// each chunk of rollouts against its own minimum and finalize_blocks combines the chunks.
 // For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
-// MPPID_CUDA_WARPS=<warps per chunked block>, MPPID_CUDA_NOISE=prepass|inline (teams),
-// keep|redraw (chunked) and
+// MPPID_CUDA_WARPS=<warps per chunked block, 1-8>, MPPID_CUDA_NOISE=prepass|inline (teams),
+// keep|redraw (single vehicles) and
 // MPPID_CUDA_LANES=1|2|4|8 override the choices; the plan is the same either way (rollout
 // costs bit for bit).
 #pragma once
@@ -31,6 +33,7 @@
 #include <vector>
 
 #include "chunked.cuh"
+#include "chunked_team.cuh"
 #include "cuda_check.cuh"
 #include "kernels.cuh"
 #include "mppi/gpu/cuda_backend.hpp"
@@ -101,6 +104,31 @@ class CudaBackend final : public RolloutBackend<T> {
     // Launch shapes.
     const int sms = prop.multiProcessorCount;
     if constexpr (kTeam) {
+      // The chunked team kernel (chunked_team.cuh) for teams of up to four vehicles (eight or
+      // more rollouts a block) when its shared memory fits; else the lane kernel (rollout_team).
+      // Measured on an H100 (gpu/NOTES.md, v6): team3 K = 1200 chunked 127 us against lanes
+      // 222 us; team9 K = 6000 (three rollouts a block) chunked 1.46-2.3 ms against lanes 1.12 ms.
+      chunked_ = TeamChunkLayout<T>::R >= 8;
+      if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) == "chunked";
+      chunk_steps_ = 8;
+      if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
+      chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
+      chunk_smem_ = TeamChunkLayout<T>(chunk_steps_, t_).bytes;
+      if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
+      chunk_blocks_ = (static_cast<long long>(k_) + TeamChunkLayout<T>::R - 1) / TeamChunkLayout<T>::R;
+      // 8 warps while the blocks leave multiprocessors free, else 4.
+      chunk_warps_ = chunk_blocks_ <= 2LL * sms ? 8 : 4;
+      if (const char* v = std::getenv("MPPID_CUDA_WARPS"))
+        chunk_warps_ = std::clamp(std::atoi(v), 1, kChunkMaxThreads / 32);
+      if (chunked_) {
+        // The chunked kernel draws the noise itself and keeps the controls for the update
+        // while they fit in the noise budget.
+        mode_ = NoiseMode::kInline;
+        keep_u_ = u_bytes <= budget;
+        if (const char* m = std::getenv("MPPID_CUDA_NOISE")) {
+          if (std::string(m) == "redraw") keep_u_ = false;
+        }
+      }
       constexpr int per_warp = team_rollouts_per_warp<T>();
       // One warp per block while that spreads the warps over more multiprocessors.
       warps_per_block_ = (static_cast<long long>(k_) + per_warp - 1) / per_warp <= 2LL * sms ? 1 : 2;
@@ -116,12 +144,20 @@ class CudaBackend final : public RolloutBackend<T> {
       chunked_ = static_cast<long long>(k_) <= 128LL * sms;
       if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) != "lanes";
       if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
-      if (const char* v = std::getenv("MPPID_CUDA_WARPS")) chunk_warps_ = std::clamp(std::atoi(v), 1, 32);
+      if (const char* v = std::getenv("MPPID_CUDA_WARPS"))
+        chunk_warps_ = std::clamp(std::atoi(v), 1, kChunkMaxThreads / 32);
       chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
-      chunk_smem_ = ChunkLayout<T>(chunk_steps_).bytes;
+      chunk_smem_ = ChunkLayout<T>(chunk_steps_, t_).bytes;
       if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
       chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
-      if (!chunked_) keep_u_ = false;
+      if (!chunked_) {
+        // The lane kernel keeps the controls while they fit in the noise budget: reading them
+        // back costs less than drawing them again.
+        keep_u_ = u_bytes <= budget;
+        if (const char* m = std::getenv("MPPID_CUDA_NOISE")) {
+          if (std::string(m) == "redraw") keep_u_ = false;
+        }
+      }
       // Lanes per rollout: up to about 8 warps per multiprocessor (forest tasks only). On an
       // H100, quadrotor_forest K=16384 took 403/339/363/576 us with G = 1/2/4/8 and K=4096
       // 380/290/240/240 us: past ~8 warps the G-fold repeated dynamics cost more issue slots
@@ -154,12 +190,12 @@ class CudaBackend final : public RolloutBackend<T> {
     d_cost_ = DeviceBuffer(kt * sizeof(float), "the cost-to-go S~ (K x T = " + std::to_string(k_) + " x " +
                                                    std::to_string(t_) + " floats)");
     d_crashed_ = DeviceBuffer(static_cast<std::size_t>(k_), "the crash flags (K bytes)");
-    if (keep_u_) d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
+    if (keep_u_ && mode_ != NoiseMode::kPrepass) d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
     if (mode_ == NoiseMode::kPrepass) {
       d_u_ = DeviceBuffer(u_bytes, "the sampled controls (K x T x NU floats)");
       d_cc_ = DeviceBuffer(cc_bytes, "the control costs (K x T floats)");
     }
-    // Per-chunk (lane kernel) or per-block (chunked kernel) minima, sums and statistics.
+    // Per-chunk (weigh_local) or per-block (chunked kernel) minima, sums and statistics.
     const std::size_t parts = chunked_ ? static_cast<std::size_t>(chunk_blocks_) : static_cast<std::size_t>(chunks_);
     d_pmin_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * sizeof(float), "the per-chunk minima");
     d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * (kNu + 1) * sizeof(float), "the per-chunk sums");
@@ -175,12 +211,10 @@ class CudaBackend final : public RolloutBackend<T> {
     cudaStream_t stream = nullptr;
     check(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), "cudaStreamCreateWithFlags");
     stream_.reset(stream);
-    if constexpr (!kTeam) {
-      if (chunked_ && chunk_smem_ > 48 * 1024) {
-        check(cudaFuncSetAttribute(rollout_chunked<T>, cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                   static_cast<int>(chunk_smem_)),
-              "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(chunk_smem_) + " bytes)");
-      }
+    if (chunked_ && chunk_smem_ > 48 * 1024) {
+      check(cudaFuncSetAttribute(chunked_kernel(), cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                 static_cast<int>(chunk_smem_)),
+            "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(chunk_smem_) + " bytes)");
     }
     if (!chunked_ && rollout_smem_ > 48 * 1024) {
       const std::string what = "cudaFuncSetAttribute (dynamic shared memory " + std::to_string(rollout_smem_) + " bytes)";
@@ -190,6 +224,10 @@ class CudaBackend final : public RolloutBackend<T> {
       });
     }
 
+    // finalize_blocks as a programmatic dependent launch (sm_90 on): launched while the last
+    // blocks of the kernel before it run, it waits for them on the device.
+    pdl_ = prop.major >= 9;
+    if (const char* v = std::getenv("MPPID_CUDA_PDL")) pdl_ = std::string(v) != "0";
     const char* env = std::getenv("MPPID_CUDA_GRAPH");
     use_graph_ = env == nullptr || std::string(env) != "0";
     if (use_graph_) {
@@ -254,6 +292,14 @@ class CudaBackend final : public RolloutBackend<T> {
   static constexpr int kSampleBlock = 256;
   static constexpr std::size_t kKeepControlsMax = std::size_t{48} << 20;
 
+  // The chunked rollout kernel of this task (single vehicle or team), controls kept or not.
+  using ChunkedKernel = void (*)(const Input<T>*, const float*, float*, unsigned char*, float*, float*, StatsPart*,
+                                 float*, int, int, int, float, int, float, int, SamplerConstants<kNu>);
+  ChunkedKernel chunked_kernel() const {
+    if constexpr (kTeam) return keep_u_ ? rollout_chunked_team<T, true> : rollout_chunked_team<T, false>;
+    else return keep_u_ ? rollout_chunked<T, true> : rollout_chunked<T, false>;
+  }
+
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
   template <class F>
   void with_rollout_kernel(F&& f) const {
@@ -271,7 +317,6 @@ class CudaBackend final : public RolloutBackend<T> {
       f(rollout_single<T, 1>);
     }
   }
-  static constexpr int kFinalBlock = 128;
 
   template <class F>
   static void lazy_check(cudaError_t e, F&& message) {
@@ -300,6 +345,28 @@ class CudaBackend final : public RolloutBackend<T> {
           std::to_string(prop.sharedMemPerBlockOptin));
   }
 
+  // finalize_blocks for `parts` chunks or blocks per step, after the kernel that wrote them.
+  void launch_finalize(cudaStream_t st, int parts, float* plan_out, DeviceStats* stats) {
+    const float* d_plan = reinterpret_cast<const float*>(d_in_.as<unsigned char>() + align16(sizeof(Input<T>)));
+    cudaLaunchConfig_t cfg{};
+    cfg.gridDim = dim3(static_cast<unsigned>(t_));
+    cfg.blockDim = dim3(kReduceBlock);
+    cfg.dynamicSmemBytes = 0;
+    cfg.stream = st;
+    cudaLaunchAttribute attr[1];
+    attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+    attr[0].val.programmaticStreamSerializationAllowed = 1;
+    cfg.attrs = attr;
+    cfg.numAttrs = pdl_ ? 1 : 0;
+    const float* part = d_part_.as<float>();
+    const StatsPart* stats_part = d_stats_part_.as<StatsPart>();
+    const float* pmin = d_pmin_.as<float>();
+    const int traj = trajectory_ ? 1 : 0;
+    lazy_check(cudaLaunchKernelEx(&cfg, finalize_blocks<kNu>, d_plan, part, stats_part, pmin, parts, inv_lambda_, traj,
+                                  plan_out, stats, c_),
+               [&] { return what("launching the update kernel"); });
+  }
+
   // The work of one cycle on the stream (captured once into the graph).
   void enqueue() {
     cudaStream_t st = stream_.get();
@@ -319,43 +386,34 @@ class CudaBackend final : public RolloutBackend<T> {
     }
     if (chunked_) {
       // Rollouts, costs and each block's weighted sums in one kernel; then the blocks combined.
-      if constexpr (!kTeam) {
-        const int threads = 32 * chunk_warps_;
-        rollout_chunked<T><<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
-            d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
-            d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
-            inv_lambda_, trajectory_ ? 1 : 0, c_);
-        lazy_check(cudaGetLastError(), [&] {
-          return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
-                      std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
-        });
-        finalize_blocks<kNu><<<static_cast<unsigned>(t_), kReduceBlock, 0, st>>>(
-            d_plan, d_part_.as<float>(), d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
-            static_cast<int>(chunk_blocks_), inv_lambda_, trajectory_ ? 1 : 0, d_plan_out, d_stats, c_);
-        lazy_check(cudaGetLastError(), [&] { return what("launching the block-combining update kernel"); });
-      }
+      const int threads = 32 * chunk_warps_;
+      chunked_kernel()<<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
+          d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
+          d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
+          inv_lambda_, trajectory_ ? 1 : 0, c_);
+      lazy_check(cudaGetLastError(), [&] {
+        return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
+                    std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
+      });
+      launch_finalize(st, static_cast<int>(chunk_blocks_), d_plan_out, d_stats);
     } else {
       const dim3 rgrid(static_cast<unsigned>(rollout_grid_));
+      float* u_keep = keep_u_ && !kTeam ? d_u_.as<float>() : nullptr;
       with_rollout_kernel([&](auto kernel) {
         kernel<<<rgrid, rollout_block_, rollout_smem_, st>>>(d_in, d_plan, io, d_cost_.as<float>(),
-                                                             d_crashed_.as<unsigned char>(), k_, t_, dt_, substeps_, c_);
+                                                             d_crashed_.as<unsigned char>(), u_keep, k_, t_, dt_,
+                                                             substeps_, c_);
       });
       lazy_check(cudaGetLastError(), [&] {
         return what("launching the rollout kernel (" + std::to_string(rollout_grid_) + " blocks of " +
                     std::to_string(rollout_block_) + " threads, " + std::to_string(rollout_smem_) + " bytes shared)");
       });
-      partial_min<T><<<dim3(trajectory_ ? 1u : static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock,
-                       0, st>>>(d_cost_.as<float>(), k_, chunk_, d_pmin_.as<float>());
-      lazy_check(cudaGetLastError(), [&] { return what("launching the minimum kernel"); });
-      weigh<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
-          d_in, d_plan, mode_ == NoiseMode::kPrepass ? d_u_.as<float>() : nullptr, d_cost_.as<float>(),
-          d_pmin_.as<float>(), chunks_, d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_, trajectory_ ? 1 : 0,
-          d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
+      const float* u_stored = mode_ == NoiseMode::kPrepass || (keep_u_ && !kTeam) ? d_u_.as<float>() : nullptr;
+      weigh_local<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(chunks_)), kReduceBlock, 0, st>>>(
+          d_in, d_plan, u_stored, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), k_, chunk_, inv_lambda_,
+          trajectory_ ? 1 : 0, d_pmin_.as<float>(), d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
       lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
-      finalize<kNu><<<static_cast<unsigned>(t_), kFinalBlock, 0, st>>>(d_plan, d_part_.as<float>(),
-                                                                       d_stats_part_.as<StatsPart>(), d_pmin_.as<float>(),
-                                                                       chunks_, chunks_, d_plan_out, d_stats, c_);
-      lazy_check(cudaGetLastError(), [&] { return what("launching the update kernel"); });
+      launch_finalize(st, chunks_, d_plan_out, d_stats);
     }
     lazy_check(cudaMemcpyAsync(h_out_.as<void>(), d_out_.as<void>(), out_bytes_, cudaMemcpyDeviceToHost, st),
                [&] { return what("cudaMemcpyAsync of the output"); });
@@ -408,6 +466,7 @@ class CudaBackend final : public RolloutBackend<T> {
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;
   std::unique_ptr<CUgraphExec_st, GraphExecDeleter> exec_;
   bool use_graph_ = true;
+  bool pdl_ = false;
 };
 
 }  // namespace mppi::cuda_detail

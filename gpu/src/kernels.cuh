@@ -7,18 +7,17 @@
 //                   (K x T x NU, kept for the update) and its control cost (K x T)
 //   rollout_single  G lanes per rollout, state in registers (single vehicles; forest.cuh)
 //   rollout_team    M consecutive lanes of a warp per rollout, vehicle j on lane j
-//   partial_min     min over a chunk of rollouts of S~(tau_i,k), per step i
-//   weigh           per (step i, chunk): w = exp(-(S - min)/lambda), sum w and w du, with
-//                   du = u - plan from the pre-pass's controls, or regenerated from the same
-//                   counter-based noise
-//   finalize        per step i: sum the chunks, u_i = clamp(u_i + sum w du / sum w); stats
+//   weigh_local     per (step i, chunk of rollouts): the chunk's own minimum m_c of S~, then
+//                   w = exp(-(S - m_c)/lambda), sum w and w du, with du = u - plan from the
+//                   kept controls (the pre-pass's, or the rollout's), or regenerated from the
+//                   same counter-based noise
+//   finalize_blocks (chunked.cuh) per step i: the chunks' sums rescaled to the global minimum
+//                   and added in chunk order, u_i = clamp(u_i + sum w du / sum w); stats
 //
 // Where the noise is drawn (NoiseMode). Teams: in the pre-pass when its K x T x NU buffer
 // fits, which takes a chunk of noise draws off every team rollout's serial chain (-10 % at
-// team3 K=1200 on an H100). Single vehicles: inside the rollout, and again in the update;
-// measured on an H100, a pre-pass or keeping the controls from the rollout for the update
-// was 2-20 % slower at every K from 16k to 1M (the extra K x T x NU traffic costs more than
-// the second draw, and at small K the noise is not what bounds a step).
+// team3 K=1200 on an H100). Single vehicles (lane kernel): inside the rollout, which keeps
+// the controls for the update when they fit (cuda_backend_impl.cuh), else draws them again.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -104,6 +103,20 @@ __device__ const typename T::Params* stage_params(const typename T::Params& src,
   for (unsigned w = threadIdx.x; w < kBytes / 4; w += blockDim.x) to[w] = from[w];
   __syncthreads();
   return reinterpret_cast<const typename T::Params*>(smem);
+}
+
+// Programmatic dependent launch (sm_90 on): the kernel after this one in the stream may be
+// launched now (it waits in griddep_wait() until this grid has finished and its writes are
+// visible); elsewhere, and when not launched that way, both are no-ops.
+__device__ __forceinline__ void griddep_launch_dependents() {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  asm volatile("griddepcontrol.launch_dependents;" ::: "memory");
+#endif
+}
+__device__ __forceinline__ void griddep_wait() {
+#if defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 900
+  asm volatile("griddepcontrol.wait;" ::: "memory");
+#endif
 }
 
 // Sum of N values over the block (blockDim.x a multiple of 32); the result is in thread 0.
@@ -193,8 +206,8 @@ struct RolloutIo {
 // bit) and split the obstacle loop (forest.cuh). With few rollouts the GPU is mostly idle and
 // a rollout's serial chain of steps sets the time; G > 1 shortens each step's link of it.
 template <class T, int G>
-__global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
-                               unsigned char* crashed_out, int K, int horizon, float dt, int substeps,
+__global__ void __launch_bounds__(128, 8) rollout_single(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
+                               unsigned char* crashed_out, float* u_keep, int K, int horizon, float dt, int substeps,
                                SamplerConstants<T::kNu> c) {
   constexpr int NX = T::kNx, NU = T::kNu;
   static_assert(G == 1 || G == 2 || G == 4 || G == 8, "lanes per rollout: 1, 2, 4 or 8");
@@ -221,6 +234,7 @@ __global__ void rollout_single(const Input<T>* in, const float* plan, RolloutIo<
   for (int i = 0; i < horizon; ++i) {
     const float* pu = plan + i * NU;
     perturb<NU>(c, key, static_cast<std::uint32_t>(k), static_cast<std::uint32_t>(i), pu, u, du);
+    if (u_keep != nullptr && writer) store_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k) * NU, u);
     T::advance(p, x, u, dt, substeps, crashed);
     const float t = static_cast<float>(i + 1) * dt;
     q = sanitize_cost(running_cost<T, G>(p, grid, x, t, lane, &crashed) + control_cost<NU>(c, pu, du));
@@ -252,10 +266,11 @@ __host__ __device__ constexpr int team_rollouts_per_warp() { return 32 / T::kVeh
 
 template <class T, NoiseMode kMode>
 __global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
-                             unsigned char* crashed_out, int K, int horizon, float dt, int substeps,
+                             unsigned char* crashed_out, float* u_keep, int K, int horizon, float dt, int substeps,
                              SamplerConstants<T::kNu> c) {
   constexpr int M = T::kVehicles, VNX = T::kVehicleNx, VNU = T::kVehicleNu, NU = T::kNu;
   constexpr int G = team_rollouts_per_warp<T>();
+  (void)u_keep;  // the pre-pass keeps them
   using Vehicle = typename T::Vehicle;
   using Cost = typename T::Cost;
   extern __shared__ __align__(16) unsigned char smem[];
@@ -355,39 +370,27 @@ __global__ void rollout_team(const Input<T>* in, const float* plan, RolloutIo<T:
 }
 
 // ---- weights and the update ------------------------------------------------------------
-// Block (i, c): minimum of S~(tau_i,k) over chunk c of the rollouts. (A template only so
-// that every instantiation unit may hold it.)
+// Block (i, c): over chunk c of the rollouts at step i, the chunk's own minimum m_c of the
+// weighting row (S~(tau_i,k), cost-to-go, or S~(tau_0,k), trajectory), then with
+// w = exp(-(S - m_c)/lambda) the sums w and w du, in a fixed order; m_c into pmin[i * chunks + c]
+// and the sums into part, for finalize_blocks (chunked.cuh), which rescales each chunk to the
+// global minimum. Block (0, c) also sums the step-0 statistics. u_stored: the controls of
+// every (k, i), or null to draw them again.
 template <class T>
-__global__ void partial_min(const float* S, int K, int chunk, float* pmin) {
-  const int i = static_cast<int>(blockIdx.x), c = static_cast<int>(blockIdx.y);
-  const int begin = c * chunk, end = begin + chunk < K ? begin + chunk : K;
-  const float* row = S + static_cast<std::size_t>(i) * K;
-  float m = kCostCeiling;
-  for (int k = begin + static_cast<int>(threadIdx.x); k < end; k += static_cast<int>(blockDim.x)) m = fmin_(m, row[k]);
-  m = block_min(m);
-  if (threadIdx.x == 0) pmin[static_cast<std::size_t>(i) * gridDim.y + c] = m;
-}
-
-// Block (i, c): sum w and w du over chunk c at step i, w from S~(tau_i,k) (cost-to-go) or
-// S~(tau_0,k) (trajectory). Block (0, c) also sums the step-0 statistics. u_stored: the
-// controls of every (k, i), or null to draw them again. pmin: min_count partial minima per
-// step (row-major by step), reduced here to the step's minimum.
-template <class T>
-__global__ void weigh(const Input<T>* in, const float* plan, const float* u_stored, const float* S, const float* pmin,
-                      int min_count, const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory,
-                      float* part, StatsPart* stats_part, SamplerConstants<T::kNu> c) {
+__global__ void weigh_local(const Input<T>* in, const float* plan, const float* u_stored, const float* S,
+                            const unsigned char* crashed, int K, int chunk, float inv_lambda, int trajectory,
+                            float* pmin, float* part, StatsPart* stats_part, SamplerConstants<T::kNu> c) {
   constexpr int NU = T::kNu;
   const int i = static_cast<int>(blockIdx.x), ci = static_cast<int>(blockIdx.y), chunks = static_cast<int>(gridDim.y);
   const int wi = trajectory ? 0 : i;
+  const float* row = S + static_cast<std::size_t>(wi) * K;
+  const int begin = ci * chunk, end = begin + chunk < K ? begin + chunk : K;
   float m = kCostCeiling;
-  for (int n = static_cast<int>(threadIdx.x); n < min_count; n += static_cast<int>(blockDim.x))
-    m = fmin_(m, pmin[static_cast<std::size_t>(wi) * min_count + n]);
+  for (int k = begin + static_cast<int>(threadIdx.x); k < end; k += static_cast<int>(blockDim.x)) m = fmin_(m, row[k]);
   m = block_min(m);
 
   const NoiseKey key = in->key;
   const float* pu = plan + i * NU;
-  const float* row = S + static_cast<std::size_t>(wi) * K;
-  const int begin = ci * chunk, end = begin + chunk < K ? begin + chunk : K;
   float acc[NU + 1] = {};
   float st[2] = {};
   int cnt[2] = {};
@@ -414,42 +417,16 @@ __global__ void weigh(const Input<T>* in, const float* plan, const float* u_stor
     }
   }
   block_sum(acc);
-  if (threadIdx.x == 0)
+  griddep_launch_dependents();
+  if (threadIdx.x == 0) {
+    pmin[static_cast<std::size_t>(i) * chunks + ci] = m;
     for (int n = 0; n <= NU; ++n) part[(static_cast<std::size_t>(i) * chunks + ci) * (NU + 1) + n] = acc[n];
+  }
   if (i == 0) {
     block_sum(st);
     block_sum(cnt);
     if (threadIdx.x == 0) stats_part[ci] = StatsPart{st[0], st[1], cnt[0], cnt[1]};
   }
-}
-
-// Block i: u_i = clamp(u_i + sum w du / sum w); block 0 also writes the statistics.
-template <int NU>
-__global__ void finalize(const float* plan, const float* part, const StatsPart* stats_part, const float* pmin,
-                         int min_count, int chunks, float* plan_out, DeviceStats* stats, SamplerConstants<NU> c) {
-  const int i = static_cast<int>(blockIdx.x);
-  float acc[NU + 1] = {};
-  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x))
-    for (int j = 0; j <= NU; ++j) acc[j] += part[(static_cast<std::size_t>(i) * chunks + n) * (NU + 1) + j];
-  block_sum(acc);
-  if (threadIdx.x == 0)
-    for (int j = 0; j < NU; ++j)
-      plan_out[i * NU + j] = fclamp(plan[i * NU + j] + acc[1 + j] / acc[0], c.u_min[j], c.u_max[j]);
-  if (i != 0) return;
-  float st[2] = {};
-  int cnt[2] = {};
-  float m = kCostCeiling;
-  for (int n = static_cast<int>(threadIdx.x); n < chunks; n += static_cast<int>(blockDim.x)) {
-    st[0] += stats_part[n].sum_w2;
-    st[1] += stats_part[n].sum_cost;
-    cnt[0] += stats_part[n].finite;
-    cnt[1] += stats_part[n].crashed;
-  }
-  for (int n = static_cast<int>(threadIdx.x); n < min_count; n += static_cast<int>(blockDim.x)) m = fmin_(m, pmin[n]);
-  m = block_min(m);
-  block_sum(st);
-  block_sum(cnt);
-  if (threadIdx.x == 0) *stats = DeviceStats{m, acc[0], st[0], st[1], cnt[0], cnt[1]};
 }
 
 }  // namespace mppi::cuda_detail

@@ -65,6 +65,7 @@ struct Errors {
   int over_tolerance = 0;  // rollouts outside kCostTolerance
   double cost_in_tolerance = 0.0;  // largest relative error among the others
   double abs_in_tolerance = 0.0;   // largest absolute error among the others
+  int crashed_cpu = 0, crashed_gpu = 0;  // rollouts that crashed somewhere
 };
 
 template <class T>
@@ -106,6 +107,8 @@ Errors compare_one_update(const gpu_test::Scenario<T>& sc, RolloutBackend<T>& cp
               static_cast<float>(kDivergentFraction) * std::max(1.0f, std::fabs(sc_stats.mean_cost)));
   EXPECT_NEAR(sg_stats.ess, sc_stats.ess, 1e-3f * std::max(1.0f, sc_stats.ess));
   EXPECT_NEAR(sg_stats.crashed, sc_stats.crashed, kDivergentFraction * sc.settings.rollouts);
+  e.crashed_cpu = sc_stats.crashed;
+  e.crashed_gpu = sg_stats.crashed;
   *plan = pc;
   return e;
 }
@@ -127,8 +130,9 @@ void check_parity(const char* name, Weighting weighting, Tweak&& tweak) {
     EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts)
         << name << " cycle " << cycle << ": worst rollout " << e.worst_rollout << " cpu " << e.worst_cpu << " gpu "
         << e.worst_gpu << " (rel " << e.cost << "); " << e.identical << " bit-identical";
-    std::printf("[parity] %s cycle %u: %d of %zu rollouts bit-identical, %d over tolerance\n", name, cycle, e.identical,
-                static_cast<std::size_t>(sc.settings.rollouts), e.over_tolerance);
+    std::printf("[parity] %s cycle %u: %d of %zu rollouts bit-identical, %d over tolerance, crashed %d (cpu %d)\n",
+                name, cycle, e.identical, static_cast<std::size_t>(sc.settings.rollouts), e.over_tolerance,
+                e.crashed_gpu, e.crashed_cpu);
     EXPECT_LE(e.plan, plan_tolerance(sc.settings, e.abs_in_tolerance))
         << name << " cycle " << cycle << " (largest in-tolerance cost error " << e.abs_in_tolerance << ")";
     worst.cost = std::max(worst.cost, e.cost);
@@ -247,6 +251,60 @@ TEST(CudaParity, ChunkedKernelEveryChunkAndWarpCount) {
   }
   unsetenv("MPPID_CUDA_WARPS");
   unsetenv("MPPID_CUDA_NOISE");
+}
+
+// The chunked team kernel (the default for teams) at chunk lengths that do and do not divide
+// the horizon and 1, 2 and 8 warps a block; and the lane kernel (rollout_team) it replaced.
+TEST(CudaParity, ChunkedTeamKernelEveryChunkAndWarpCount) {
+  SKIP_WITHOUT_CUDA();
+  for (const char* chunk : {"1", "7", "100"}) {
+    setenv("MPPID_CUDA_CHUNK", chunk, 1);
+    std::printf("[parity] chunked team kernel, %s steps a chunk\n", chunk);
+    check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo);
+  }
+  unsetenv("MPPID_CUDA_CHUNK");
+  // team9 flies the lane kernel by default; the chunked one, forced, must agree as well.
+  setenv("MPPID_CUDA_KERNEL", "chunked", 1);
+  setenv("MPPID_CUDA_NOISE", "redraw", 1);
+  for (const char* warps : {"1", "2", "4"}) {
+    setenv("MPPID_CUDA_WARPS", warps, 1);
+    std::printf("[parity] chunked team kernel, %s warps a block, noise drawn again for the update\n", warps);
+    check_parity<Team9Forest>("team9_forest", Weighting::kTrajectory);
+  }
+  unsetenv("MPPID_CUDA_WARPS");
+  unsetenv("MPPID_CUDA_NOISE");
+  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
+  std::printf("[parity] team lane kernel\n");
+  check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo);
+  check_parity<Team9Forest>("team9_forest", Weighting::kCostToGo);
+  unsetenv("MPPID_CUDA_KERNEL");
+}
+
+// A crowded team3 (vehicles 0.35 m apart, crashes charged at every later step): many crashes,
+// vehicle-vehicle ones among them, so the chunked team kernel's freeze rounds (a crash changes
+// the later terms of the other vehicles) run often; the lane kernel for comparison.
+TEST(CudaParity, ChunkedTeamKernelCrowdedCrashes) {
+  SKIP_WITHOUT_CUDA();
+  auto crowd = [](gpu_test::Scenario<Team3Forest>& sc) {
+    for (int j = 0; j < 3; ++j) {
+      float* x = sc.x0.data() + j * Quadrotor::kNx;
+      x[Quadrotor::PY] = 0.35f * static_cast<float>(j - 1);
+      x[Quadrotor::PZ] = 1.0f;
+      sc.params.cost.goal[j][1] = x[Quadrotor::PY];
+      sc.params.cost.goal[j][2] = 1.0f;
+    }
+    sc.params.cost.crash_sticky = 1.0f;
+    sc.settings.sigma.assign(12, 60.0f);
+  };
+  for (const char* chunk : {"3", "4"}) {
+    setenv("MPPID_CUDA_CHUNK", chunk, 1);
+    std::printf("[parity] chunked team kernel, crowded, %s steps a chunk\n", chunk);
+    check_parity<Team3Forest>("team3_forest crowded", Weighting::kCostToGo, crowd);
+  }
+  unsetenv("MPPID_CUDA_CHUNK");
+  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
+  check_parity<Team3Forest>("team3_forest crowded, lane kernel", Weighting::kCostToGo, crowd);
+  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // Rollout counts that leave the last block of 32 partly empty, and many blocks to combine

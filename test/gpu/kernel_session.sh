@@ -1,0 +1,146 @@
+#!/bin/bash
+# Kernel work on the GPU machine in one device call: build only the CUDA targets (no LCM, no
+# SIMD CPU kernels: the parity reference is the scalar CPU backend), then the steps named.
+#   test/gpu/kernel_session.sh STEP...
+# Steps:
+#   build        build-k/ (or $B): cuda_backend_tests, mppid-gpu-timing (ptxas resource report
+#                of the rollout kernels into $OUT/ptxas.txt)
+#   build-ftz    the same with MPPID_CUDA_FTZ=ON into $B-ftz
+#   parity       CudaParity.* and CudaDeterminism.* and the allocation tests ($OUT/parity.txt)
+#   parity-ftz   the same on the FTZ build
+#   timing       the issue's targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
+#   timing-ftz   the same on the FTZ build
+#   variants     block shapes and kernels at K = 16,384 (env overrides)
+#   ncu          Nsight Compute, full set with per-instruction samples, on the chunked kernel
+#   ncu-others   Nsight Compute on one update's kernels of each other target ($OUT/ncu-*.txt)
+#   sass         cuobjdump -sass of the quadrotor_forest instantiation ($OUT/sass.txt.gz)
+# Logs and results land in $OUT (the device tool's output folder) or results/kernel.
+set -uo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+cd "$ROOT"
+D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
+B="${B:-/root/build-k}"
+# Everything goes to a work folder; at the end one archive of it (and the summaries) lands in
+# $OUT (the device tool brings back at most 8 files).
+DEST="${OUT:-$ROOT/results/kernel}"
+OUT="$ROOT/results/kernel-work"
+rm -rf "$OUT" && mkdir -p "$OUT" "$DEST"
+export LD_LIBRARY_PATH="$D/lib:${LD_LIBRARY_PATH:-}"
+T0=$(date +%s)
+stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
+TARGETS=(quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000)
+
+build() {  # dir, extra cmake args...
+  local dir=$1; shift
+  cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 \
+    -DMPPID_WERROR=OFF -DMPPID_LCM=OFF -DMPPID_SIMD=OFF -DMPPID_BENCH=OFF -DMPPID_TESTS=ON \
+    -DRANDOM123_INCLUDE_DIR="$D/usr/include" -DCMAKE_CUDA_FLAGS="-Xptxas=-v" "$@" >"$OUT/configure-$(basename "$dir").log" 2>&1 &&
+    ninja -C "$dir" -j"$(nproc)" cuda_backend_tests mppid-gpu-timing >"$OUT/build-$(basename "$dir").log" 2>&1
+}
+parity() {  # build dir, label
+  timeout 300 "$1/bin/cuda_backend_tests" --gtest_filter='CudaParity.*:CudaDeterminism.*:CudaErrors.*:CudaBackend.*' \
+    >"$OUT/parity-$2.log" 2>&1
+  local rc=$?
+  grep -E '^\[parity\] [a-z_0-9+ ,]+ +cost|^\[parity\] chunked K=|FAILED|PASSED|tests ran|Failure|error' "$OUT/parity-$2.log" |
+    grep -v '^\[parity\] .*cycle' | head -60 >"$OUT/parity-$2.txt"
+  echo "parity $2: rc $rc; $(grep -E 'PASSED|FAILED' "$OUT/parity-$2.log" | tr '\n' ' ')"
+}
+timing() {  # build dir, label
+  {
+    "$1/bin/mppid-gpu-timing" --iters 1000 "${TARGETS[@]}" quadrotor_forest:4096
+    "$1/bin/mppid-gpu-timing" --iters 60 --warmup 5 quadrotor_forest:1048576
+  } >"$OUT/timing-$2.json" 2>&1
+  sed -nE 's/^ *\{"task": "([^"]*)", "rollouts": ([0-9]*), .*"median_us": ([0-9.]*), "p99_us": ([0-9.]*).*/'"$2"' \1 K=\2 median \3 p99 \4/p' "$OUT/timing-$2.json"
+}
+row() {  # label, env..., -- timing args
+  local label=$1; shift
+  local envs=()
+  while [ "$1" != "--" ]; do envs+=("$1"); shift; done
+  shift
+  env "${envs[@]}" "$B/bin/mppid-gpu-timing" "$@" 2>&1 |
+    sed -nE "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 p99 \4/p"
+}
+
+for step in "$@"; do
+  case $step in
+    build)
+      stamp "build $B"
+      build "$B" || { echo "BUILD FAILED"; grep -E 'error|warning' "$OUT/build-$(basename "$B").log" | head -30; exit 1; }
+      grep -cE "warning" "$OUT/build-$(basename "$B").log" | sed "s/^/warnings in the build log: /"
+      grep -A4 -E "Compiling entry function '.*(rollout|finalize|weigh)" "$OUT/build-$(basename "$B").log" |
+        grep -E "Compiling|registers|spill" >"$OUT/ptxas.txt" || true
+      stamp "built" ;;
+    build-ftz)
+      stamp "build $B-ftz"
+      build "$B-ftz" -DMPPID_CUDA_FTZ=ON || { echo "FTZ BUILD FAILED"; grep -E 'error' "$OUT/build-$(basename "$B")-ftz.log" | head; }
+      stamp "built ftz" ;;
+    cpucheck)
+      # The CPU side of a change to core/ (fsincos): core's tests with the SIMD targets, -Werror.
+      stamp "cpu build"
+      cmake -S . -B /root/build-cpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=OFF -DMPPID_WERROR=ON -DMPPID_LCM=OFF \
+        -DMPPID_SIMD=ON -DMPPID_BENCH=OFF -DMPPID_TESTS=ON -DRANDOM123_INCLUDE_DIR="$D/usr/include" \
+        -DCMAKE_PREFIX_PATH="$D/usr" >"$OUT/configure-cpu.log" 2>&1 &&
+        ninja -C /root/build-cpu -j"$(nproc)" core_tests core_simd_tests core_alloc_tests closed_loop_tests >"$OUT/build-cpu.log" 2>&1 ||
+        { echo "CPU BUILD FAILED"; grep -E "error|warning" "$OUT/build-cpu.log" | head -20; }
+      export LD_LIBRARY_PATH="$D/usr/lib/x86_64-linux-gnu:$LD_LIBRARY_PATH"
+      for t in core_tests core_simd_tests core_alloc_tests closed_loop_tests; do
+        timeout 300 /root/build-cpu/bin/$t >"$OUT/cpu-$t.log" 2>&1
+        echo "cpu $t: rc $? $(grep -E '^\[  (PASSED|FAILED)' "$OUT/cpu-$t.log" | tr '\n' ' ')"
+      done
+      stamp "cpu tests done" ;;
+    parity) parity "$B" base ;;
+    parity-ftz) parity "$B-ftz" ftz ;;
+    timing) timing "$B" base ;;
+    timing-ftz) timing "$B-ftz" ftz ;;
+    variants)
+      {
+        for c in 6 8 10 12; do
+          row "team chunk=$c warps=8" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=8 -- --iters 300 team3_forest:1200
+        done
+        row "team chunked" MPPID_CUDA_KERNEL=chunked -- --iters 100 team9_forest:6000
+        row "team9 lanes, K=1024" -- --iters 300 team9_forest:1024
+        row "team9 chunked, K=1024" MPPID_CUDA_KERNEL=chunked -- --iters 300 team9_forest:1024
+      } | tee "$OUT/variants.txt" ;;
+    ncu)
+      command -v ncu >/dev/null || { echo "no ncu"; continue; }
+      export MPPID_CUDA_GRAPH=0
+      TM="$B/bin/mppid-gpu-timing"
+      NCU_CASE=${NCU_CASE:-quadrotor_forest:16384}
+      stamp "ncu full, chunked $NCU_CASE"
+      timeout 200 ncu --clock-control none --kernel-name regex:rollout_chunked --launch-skip 6 --launch-count 1 --set full \
+        --import-source no -f -o "$OUT/ncu-chunked" "$TM" --iters 3 --warmup 5 "$NCU_CASE" >"$OUT/ncu-chunked.log" 2>&1
+      ncu --import "$OUT/ncu-chunked.ncu-rep" --page details >"$OUT/ncu-chunked.txt" 2>&1
+      ncu --import "$OUT/ncu-chunked.ncu-rep" --page source --csv --print-source sass 2>/dev/null | gzip >"$OUT/ncu-chunked-sass.csv.gz"
+      rm -f "$OUT/ncu-chunked.ncu-rep"
+      grep -E "Duration|Executed Ipc A|Issue Slots Busy|No Eligible|Warp Cycles Per Issued|Executed Instructions  |Achieved Active Warps" "$OUT/ncu-chunked.txt"
+      [ -n "${NCU_SKIP_4096:-}" ] || timeout 150 ncu --clock-control none --kernel-name regex:rollout_chunked --launch-skip 6 --launch-count 1 \
+        --section SpeedOfLight --section WarpStateStats --section SourceCounters --section InstructionStats \
+        --import-source no -f -o "$OUT/ncu-4096" "$TM" --iters 3 --warmup 5 quadrotor_forest:4096 >"$OUT/ncu-4096.log" 2>&1
+      ncu --import "$OUT/ncu-4096.ncu-rep" --page details >"$OUT/ncu-4096.txt" 2>&1
+      ncu --import "$OUT/ncu-4096.ncu-rep" --page source --csv --print-source sass 2>/dev/null | gzip >"$OUT/ncu-4096-sass.csv.gz"
+      rm -f "$OUT/ncu-4096.ncu-rep"
+      grep -E "Duration|Executed Instructions  " "$OUT/ncu-4096.txt" | sed 's/^/4096: /'
+      stamp "ncu done" ;;
+    ncu-others)
+      export MPPID_CUDA_GRAPH=0
+      TM="$B/bin/mppid-gpu-timing"
+      stamp "ncu others"
+      secs=(--section SpeedOfLight --section LaunchStats --section Occupancy --section WarpStateStats --section InstructionStats --section SchedulerStats)
+      for c in quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000 quadrotor_forest:4096; do
+        echo "==== $c"
+        timeout 120 ncu --clock-control none --launch-skip 12 --launch-count 5 "${secs[@]}" "$TM" --iters 3 --warmup 8 "$c"
+      done >"$OUT/ncu-others.txt" 2>&1
+      echo "==== quadrotor_forest:1048576" >>"$OUT/ncu-others.txt"
+      timeout 150 ncu --clock-control none --launch-skip 4 --launch-count 4 "${secs[@]}" "$TM" --iters 1 --warmup 2 quadrotor_forest:1048576 \
+        >>"$OUT/ncu-others.txt" 2>&1
+      grep -E '^  [a-zA-Z_].*\(|^==== |Duration|Executed Ipc A|Issue Slots Busy|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Executed Instructions  |Registers Per|Block Limit (Sh|Reg)|Theoretical Occ' \
+        "$OUT/ncu-chunked.txt" "$OUT/ncu-others.txt" | sed 's/^[^:]*://' >"$OUT/ncu-summary.txt"
+      stamp "ncu done" ;;
+    sass)
+      obj=$(find "$B" -name 'instantiate_QuadrotorForest.cu.o' | head -1)
+      [ -n "$obj" ] && cuobjdump -sass "$obj" | gzip >"$OUT/sass.txt.gz" ;;
+    *) echo "unknown step $step" ;;
+  esac
+done
+stamp "session done"
+tar czf "$DEST/session.tgz" -C "$OUT" . && ls -la "$DEST"
