@@ -5,8 +5,10 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstring>
 #include <memory>
+#include <thread>
 #include <vector>
 
 #include "../core/fixtures.hpp"
@@ -166,6 +168,45 @@ TEST_P(Anytime, BelowTheMinimumThePlanIsLeftAndTheHeldPlanGoesOut) {
   EXPECT_TRUE(st.updated);
   EXPECT_EQ(st.rollouts, 64);
   EXPECT_NE(plan, held);
+}
+
+// The daemon's path: no hook, so no barrier per chunk; the flag is raised by another thread
+// (the deadline guard) whenever it comes. Whatever prefix K' the threads agreed on, the
+// update is bit for bit the update of a K'-sample backend (K' a whole number of chunks).
+TEST_P(Anytime, AStopFromAnotherThreadAnyTimeIsTheUpdateOfThePrefixFinished) {
+  const auto p = forest_params();
+  const auto x = forest_state();
+  int partial = 0;
+  for (int delay_us : {0, 200, 500, 1000, 2000, 4000, 100000}) {
+    const MppiSettings full = settings(GetParam(), 2048);
+    CpuBackend<QuadrotorForest> stopped(full);
+    std::atomic<bool> stop{false};
+    stopped.set_stop_flag(&stop);
+    std::vector<float> a = start_plan(full);
+    UpdateStats sa;
+    std::thread raiser([&] {
+      std::this_thread::sleep_for(std::chrono::microseconds(delay_us));  // when the stop comes, not a check
+      stop.store(true);
+    });
+    stopped.update(x.data(), p, 3, a.data(), &sa);
+    raiser.join();
+    ASSERT_EQ(sa.rollouts % 64, 0) << "a whole number of chunks";
+    if (sa.rollouts < 64) {
+      EXPECT_FALSE(sa.updated);
+      EXPECT_TRUE(same_bits(a, start_plan(full))) << "no update: the plan is untouched";
+      continue;
+    }
+    partial += sa.partial ? 1 : 0;
+    const MppiSettings small = settings(GetParam(), sa.rollouts);
+    CpuBackend<QuadrotorForest> reference(small);
+    std::vector<float> b = start_plan(full);
+    UpdateStats sb;
+    reference.update(x.data(), p, 3, b.data(), &sb);
+    EXPECT_EQ(sa.partial, sa.rollouts < 2048);
+    EXPECT_TRUE(same_bits(a, b)) << GetParam() << ": stopped at " << sa.rollouts << " after " << delay_us << " us";
+    EXPECT_EQ(sa.ess, sb.ess);
+  }
+  RecordProperty("partial_updates", partial);
 }
 
 INSTANTIATE_TEST_SUITE_P(ScalarAndSimd, Anytime, ::testing::Values("off", "auto"));
