@@ -80,7 +80,7 @@ struct TeamChunkLayout {
     tq = take(sizeof(float) * chunk * R * TERMS);       // [s][r][term]: vehicle terms, then pair terms
     hit = take(sizeof(std::uint32_t) * chunk * R);      // [s][r]: crash bits set at step s
     xf = take(sizeof(float) * R * M * XS);              // [r][j][n]: frozen states
-    flags = take(sizeof(int) * (3 * R + 8 + 2));        // mask[r], from[r], scan[r], slot[warp], pending[2]
+    flags = take(sizeof(int) * (3 * R + 32 + 2));       // mask[r], from[r], scan[r], slot[warp], pending[2]
     qb = take(sizeof(float) * static_cast<std::size_t>(horizon) * QS);  // [i][r]: q, then S~
     bytes = at;
   }
@@ -123,8 +123,12 @@ __device__ __forceinline__ float team_term(const typename T::Params& p, const ty
   return q;
 }
 
+// Launch bounds: up to 16 warps (one block a multiprocessor when the blocks are few), at most
+// 128 registers a thread.
+constexpr int kTeamMaxThreads = 512;
+
 template <class T, bool kKeep>
-__global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
+__global__ void __launch_bounds__(kTeamMaxThreads, 1)
     rollout_chunked_team(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
                          float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
                          int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
@@ -161,7 +165,7 @@ __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
   int* from = reinterpret_cast<int*>(mask + R);                   // first step to cost again
   int* scan = from + R;                                           // first step to look for crashes at
   int* slot = scan + R;
-  int* pending = slot + 8;
+  int* pending = slot + 32;
   float* qb = reinterpret_cast<float*>(smem + L.qb);
   for (int e = tid; e < R; e += threads) mask[e] = 0u;
   for (int e = tid; e < chunk * R; e += threads) hits[e] = 0u;
@@ -247,16 +251,19 @@ __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
     for (int e = ct; e < steps * R; e += nct) perturbed(ci, e / R, e % R);
   };
 
-  // Prologue: the noise of chunks 0 and 1, the dynamics of chunk 0.
+  // Prologue: the noise of chunk 0; then the dynamics of chunk 0 beside the noise of chunk 1.
   __syncthreads();
   draw_chunk(0, tid, threads, [] { __syncthreads(); });
   __syncthreads();
-  if (warp == producer_of(0)) produce(0);
-  __syncthreads();
-  if (nchunks > 1) {
-    draw_chunk(1, tid, threads, [] { __syncthreads(); });
-    __syncthreads();
+  {
+    const int producer = producer_of(0);
+    if (warp == producer) produce(0);
+    if (nchunks > 1 && (warps == 1 || warp != producer)) {
+      const int ct = warps == 1 || warp < producer ? tid : tid - 32, nct = warps == 1 ? threads : threads - 32;
+      draw_chunk(1, ct, nct, [nct] { consumer_sync(nct); });
+    }
   }
+  __syncthreads();
 
   for (int ci = 0; ci < nchunks; ++ci) {
     const int producer = ci + 1 < nchunks ? producer_of(ci + 1) : -1;

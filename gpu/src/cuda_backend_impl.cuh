@@ -105,21 +105,26 @@ class CudaBackend final : public RolloutBackend<T> {
     const int sms = prop.multiProcessorCount;
     if constexpr (kTeam) {
       // The chunked team kernel (chunked_team.cuh) for teams of up to four vehicles (eight or
-      // more rollouts a block) when its shared memory fits; else the lane kernel (rollout_team).
-      // Measured on an H100 (gpu/NOTES.md, v6): team3 K = 1200 chunked 127 us against lanes
-      // 222 us; team9 K = 6000 (three rollouts a block) chunked 1.46-2.3 ms against lanes 1.12 ms.
-      chunked_ = TeamChunkLayout<T>::R >= 8;
+      // more rollouts a block), or while its blocks are few (at most 4 a multiprocessor), when
+      // its shared memory fits; else the lane kernel (rollout_team). Measured on an H100
+      // (gpu/NOTES.md, v6): team3 K = 1200 chunked ~100 us against lanes 222 us; team9
+      // (three rollouts a block) K = 1024 chunked 342 us against lanes 735 us, but K = 6000
+      // (2000 blocks) chunked 1.46-2.3 ms against lanes 1.12 ms.
+      chunk_blocks_ = (static_cast<long long>(k_) + TeamChunkLayout<T>::R - 1) / TeamChunkLayout<T>::R;
+      chunked_ = TeamChunkLayout<T>::R >= 8 || chunk_blocks_ <= 4LL * sms;
       if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) == "chunked";
-      chunk_steps_ = 8;
+      // Chunks of 20 steps with a multiprocessor for every block (team3 K = 1200 on an H100:
+      // 97-99 us at 16-25 steps, 104-107 at 8 and 12, 112 at 6), else 8 (shared memory).
+      chunk_steps_ = chunk_blocks_ <= sms ? 20 : 8;
       if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
       chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
       chunk_smem_ = TeamChunkLayout<T>(chunk_steps_, t_).bytes;
       if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
-      chunk_blocks_ = (static_cast<long long>(k_) + TeamChunkLayout<T>::R - 1) / TeamChunkLayout<T>::R;
-      // 8 warps while the blocks leave multiprocessors free, else 4.
-      chunk_warps_ = chunk_blocks_ <= 2LL * sms ? 8 : 4;
+      // 16 warps while there is a multiprocessor for every block, 8 while two blocks share
+      // one, else 4.
+      chunk_warps_ = chunk_blocks_ <= sms ? 16 : chunk_blocks_ <= 2LL * sms ? 8 : 4;
       if (const char* v = std::getenv("MPPID_CUDA_WARPS"))
-        chunk_warps_ = std::clamp(std::atoi(v), 1, kChunkMaxThreads / 32);
+        chunk_warps_ = std::clamp(std::atoi(v), 1, kTeamMaxThreads / 32);
       if (chunked_) {
         // The chunked kernel draws the noise itself and keeps the controls for the update
         // while they fit in the noise budget.
@@ -143,13 +148,16 @@ class CudaBackend final : public RolloutBackend<T> {
       // ~500 us vs chunked ~720 us; K = 1,048,576 lanes 6.9 ms vs chunked 10.1 ms.
       chunked_ = static_cast<long long>(k_) <= 128LL * sms;
       if (const char* v = std::getenv("MPPID_CUDA_KERNEL")) chunked_ = std::string(v) != "lanes";
+      chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
+      // 8 warps while there is a multiprocessor for every block (the consumers are then the
+      // only warps beside the producer), else 4 (four blocks a multiprocessor).
+      chunk_warps_ = chunk_blocks_ <= sms ? 8 : 4;
       if (const char* v = std::getenv("MPPID_CUDA_CHUNK")) chunk_steps_ = std::max(1, std::atoi(v));
       if (const char* v = std::getenv("MPPID_CUDA_WARPS"))
         chunk_warps_ = std::clamp(std::atoi(v), 1, kChunkMaxThreads / 32);
       chunk_steps_ = std::min(chunk_steps_, std::max(1, t_));
       chunk_smem_ = ChunkLayout<T>(chunk_steps_, t_).bytes;
       if (chunk_smem_ > prop.sharedMemPerBlockOptin) chunked_ = false;
-      chunk_blocks_ = (static_cast<long long>(k_) + ChunkLayout<T>::R - 1) / ChunkLayout<T>::R;
       if (!chunked_) {
         // The lane kernel keeps the controls while they fit in the noise budget: reading them
         // back costs less than drawing them again.

@@ -9,6 +9,7 @@
 #   parity       CudaParity.* and CudaDeterminism.* and the allocation tests ($OUT/parity.txt)
 #   parity-ftz   the same on the FTZ build
 #   timing       the issue's targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
+#   timing2      the same again (the spread between two runs)
 #   timing-ftz   the same on the FTZ build
 #   variants     block shapes and kernels at K = 16,384 (env overrides)
 #   ncu          Nsight Compute, full set with per-instruction samples, on the chunked kernel
@@ -48,7 +49,7 @@ parity() {  # build dir, label
 timing() {  # build dir, label
   {
     "$1/bin/mppid-gpu-timing" --iters 1000 "${TARGETS[@]}" quadrotor_forest:4096
-    "$1/bin/mppid-gpu-timing" --iters 60 --warmup 5 quadrotor_forest:1048576
+    "$1/bin/mppid-gpu-timing" --iters 100 --warmup 5 quadrotor_forest:1048576
   } >"$OUT/timing-$2.json" 2>&1
   sed -nE 's/^ *\{"task": "([^"]*)", "rollouts": ([0-9]*), .*"median_us": ([0-9.]*), "p99_us": ([0-9.]*).*/'"$2"' \1 K=\2 median \3 p99 \4/p' "$OUT/timing-$2.json"
 }
@@ -77,11 +78,14 @@ for step in "$@"; do
     cpucheck)
       # The CPU side of a change to core/ (fsincos): core's tests with the SIMD targets, -Werror.
       stamp "cpu build"
-      cmake -S . -B /root/build-cpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=OFF -DMPPID_WERROR=ON -DMPPID_LCM=OFF \
+      # (-Werror off: this machine's newer g++ warns in code outside core; the log is searched
+      # for warnings in core's headers instead.)
+      cmake -S . -B /root/build-cpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=OFF -DMPPID_WERROR=OFF -DMPPID_LCM=OFF \
         -DMPPID_SIMD=ON -DMPPID_BENCH=OFF -DMPPID_TESTS=ON -DRANDOM123_INCLUDE_DIR="$D/usr/include" \
         -DCMAKE_PREFIX_PATH="$D/usr" >"$OUT/configure-cpu.log" 2>&1 &&
-        ninja -C /root/build-cpu -j"$(nproc)" core_tests core_simd_tests core_alloc_tests closed_loop_tests >"$OUT/build-cpu.log" 2>&1 ||
+        ninja -C /root/build-cpu -k 0 -j"$(nproc)" core_tests core_simd_tests core_alloc_tests closed_loop_tests >"$OUT/build-cpu.log" 2>&1 ||
         { echo "CPU BUILD FAILED"; grep -E "error|warning" "$OUT/build-cpu.log" | head -20; }
+      echo "warnings in core/: $(grep -cE 'core/include/.*warning|core/src/.*warning' "$OUT/build-cpu.log")"
       export LD_LIBRARY_PATH="$D/usr/lib/x86_64-linux-gnu:$LD_LIBRARY_PATH"
       for t in core_tests core_simd_tests core_alloc_tests closed_loop_tests; do
         timeout 300 /root/build-cpu/bin/$t >"$OUT/cpu-$t.log" 2>&1
@@ -91,15 +95,13 @@ for step in "$@"; do
     parity) parity "$B" base ;;
     parity-ftz) parity "$B-ftz" ftz ;;
     timing) timing "$B" base ;;
+    timing2) timing "$B" again ;;
     timing-ftz) timing "$B-ftz" ftz ;;
     variants)
       {
-        for c in 6 8 10 12; do
-          row "team chunk=$c warps=8" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=8 -- --iters 300 team3_forest:1200
-        done
-        row "team chunked" MPPID_CUDA_KERNEL=chunked -- --iters 100 team9_forest:6000
-        row "team9 lanes, K=1024" -- --iters 300 team9_forest:1024
-        row "team9 chunked, K=1024" MPPID_CUDA_KERNEL=chunked -- --iters 300 team9_forest:1024
+        for c in 16 20; do row "team chunk=$c" MPPID_CUDA_CHUNK=$c -- --iters 1000 team3_forest:1200; done
+        row "lanes (v4 path)" MPPID_CUDA_KERNEL=lanes -- --iters 1000 quadrotor_forest:16384 team3_forest:1200
+        row "lanes redraw" MPPID_CUDA_NOISE=redraw -- --iters 100 --warmup 5 quadrotor_forest:1048576
       } | tee "$OUT/variants.txt" ;;
     ncu)
       command -v ncu >/dev/null || { echo "no ncu"; continue; }

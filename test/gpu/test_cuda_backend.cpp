@@ -350,6 +350,14 @@ TEST(CudaDeterminism, SameSeedSamePlanTeam9) {
   EXPECT_EQ(a, b);
 }
 
+// team3 at K = 1200 flies the chunked team kernel (its crash rounds, atomic crash bits and
+// block sums must not depend on timing).
+TEST(CudaDeterminism, SameSeedSamePlanTeam3ChunkedKernel) {
+  SKIP_WITHOUT_CUDA();
+  const auto a = run_cycles<Team3Forest>(1200, 5), b = run_cycles<Team3Forest>(1200, 5);
+  EXPECT_EQ(a, b);
+}
+
 TEST(CudaDeterminism, RepeatedUpdateOnOneBackendIsIdentical) {
   SKIP_WITHOUT_CUDA();
   auto sc = gpu_test::make_scenario<QuadrotorForest>(100000, 100);
