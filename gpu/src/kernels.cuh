@@ -205,6 +205,9 @@ struct RolloutIo {
 // The G lanes of a rollout run the same dynamics on the same numbers (so they agree bit for
 // bit) and split the obstacle loop (forest.cuh). With few rollouts the GPU is mostly idle and
 // a rollout's serial chain of steps sets the time; G > 1 shortens each step's link of it.
+// At most 64 registers (eight blocks of 128 a multiprocessor, no spills): 32 warps an SM at
+// K = 1 M, -2.7 % on an H100 against 75 registers and 24 warps. u_keep (or null): the
+// perturbed controls kept for the update, [(i K + k) NU + n].
 template <class T, int G>
 __global__ void __launch_bounds__(128, 8) rollout_single(const Input<T>* in, const float* plan, RolloutIo<T::kNu> io, float* S,
                                unsigned char* crashed_out, float* u_keep, int K, int horizon, float dt, int substeps,
