@@ -87,7 +87,7 @@ TEST(SettingsInput, TheCudaSectionMayCarryDaemonSettings) {
   // A file section that is not a map cannot take the cuda section's keys (fuzz_settings found
   // `daemon: 1` escaping as YAML::BadSubscript: test/fuzz/regressions/fuzz_settings).
   EXPECT_EQ(config_error(std::string(kGood) + "daemon: 1\ncuda: {daemon: {trigger: state}}\n"),
-            "cuda: daemon: expected a map");
+            "cuda.daemon: expected a map");
 }
 
 // `cpu_targets:` (issue 10, item 4): what the CPU backend flies with on each SIMD target. The
@@ -128,7 +128,7 @@ TEST(SettingsInput, ABadCpuTargetEntryNamesItself) {
   EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {sse4: {mppi: {rollouts: 0}}}\n"),
             "cpu_targets.sse4: mppi.rollouts: must be >= 1");
   EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {sse4: {planner: {x: 1}}}\n"),
-            "cpu_targets.sse4: planner: unknown section (mppi, model, cost, daemon)");
+            "cpu_targets.sse4.planner: unknown section (mppi, model, cost, daemon)");
   EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: [1, 2]\n"),
             "cpu_targets: expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
   EXPECT_EQ(config_error(std::string(kGood) + "cpu_targets: {scalar: {mppi: {rollouts: 4}}, off: {}}\n"),

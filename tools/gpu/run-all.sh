@@ -117,7 +117,7 @@ export MPPID_BUILD_DIR="$B"
 if want test; then
   # The CUDA tests alone (they time nothing, but share one GPU), then the rest in parallel.
   timeout 900 ctest --test-dir "$B" -L gpu -V >"$RES/ctest-gpu.log" 2>&1 || fail "ctest -L gpu"
-  # -j6: DaemonBinary.SigtermStopsWithin100msWithFinalStatus measured 140 ms at -j8 there.
+  # -j6: DaemonBinary.SigtermStopsWithin100msWithFinalStatus (now SigtermStopsPromptlyWithFinalStatus, bound 1.5 s) measured 140 ms at -j8 there.
   timeout 1200 ctest --test-dir "$B" -LE gpu --output-on-failure -j6 >"$RES/ctest.log" 2>&1 || fail "ctest (all but gpu)"
   grep -ho '\[parity\].*' "$RES/ctest-gpu.log" >"$RES/parity.txt" 2>/dev/null || true
   note "- ctest, CUDA tests: $(grep -E 'tests passed|tests failed' "$RES/ctest-gpu.log" | tail -1)"

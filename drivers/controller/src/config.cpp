@@ -168,7 +168,6 @@ namespace {
 // and without the variant sections (`cuda:`, `cpu_targets:`): a variant has none of its own.
 // Errors name the part; the caller puts the variant's name in front.
 YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section) {
-  if (!section.IsMap()) fail("(section)", "expected a map of mppi/model/cost/daemon overrides");
   YAML::Node out = YAML::Clone(root);
   out.remove("cuda");
   out.remove("cpu_targets");
@@ -244,9 +243,18 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   std::vector<std::string> rest;
   for (const auto& o : overrides)
     if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
+  // Errors name the variant: "cuda.sim: unknown section" (its own keys), "cuda: mppi.rollouts:
+  // must be >= 1" (the merged settings).
   const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
+    if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
+    YAML::Node merged;
     try {
-      return std::make_shared<const AppConfig>(parse_impl(merged_with(file, section), rest, true));
+      merged = merged_with(file, section);
+    } catch (const ConfigError& e) {
+      throw ConfigError(name + "." + e.what());
+    }
+    try {
+      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true));
     } catch (const ConfigError& e) {
       throw ConfigError(name + ": " + e.what());
     }
