@@ -276,20 +276,36 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
 
 }  // namespace
 
+// The variant a backend takes here and its section name, or null (the file's own settings).
+const AppConfig* AppConfig::variant(const std::string& resolved, std::string* name) const {
+  const AppConfig* v = nullptr;
+  std::string n;
+  if (resolved == "cuda" && cuda) {
+    v = cuda.get();
+    n = "cuda";
+  } else if (resolved == "cpu" && !cpu_targets.empty()) {
+    simd::Target t{};
+    // A setting this machine cannot run is CpuBackend's error to report, with the file's settings.
+    if (simd::parse_setting(mppi.simd, &t) && simd::supported(t)) {
+      if (const auto it = cpu_targets.find(simd::name(t)); it != cpu_targets.end()) {
+        v = it->second.get();
+        n = std::string("cpu_targets.") + it->first;
+      }
+    }
+  }
+  if (name != nullptr) *name = n;
+  return v;
+}
+
 std::string AppConfig::variant_for(const std::string& resolved) const {
-  if (resolved == "cuda") return cuda ? "cuda" : "";
-  if (resolved != "cpu" || cpu_targets.empty()) return "";
-  simd::Target t{};
-  // A setting this machine cannot run is CpuBackend's error to report, with the file's settings.
-  if (!simd::parse_setting(mppi.simd, &t) || !simd::supported(t)) return "";
-  return cpu_targets.count(simd::name(t)) ? std::string("cpu_targets.") + simd::name(t) : "";
+  std::string name;
+  variant(resolved, &name);
+  return name;
 }
 
 const AppConfig& AppConfig::for_backend(const std::string& resolved) const {
-  const std::string v = variant_for(resolved);
-  if (v.empty()) return *this;
-  if (v == "cuda") return *cuda;
-  return *cpu_targets.at(v.substr(std::string("cpu_targets.").size()));
+  const AppConfig* v = variant(resolved, nullptr);
+  return v != nullptr ? *v : *this;
 }
 
 AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {

@@ -115,10 +115,10 @@ int main(int argc, char** argv) {
     };
     if (cfg.cuda) check_daemon(*cfg.cuda, "cuda");
     for (const auto& [target, v] : cfg.cpu_targets) check_daemon(*v, "cpu_targets." + target);
-    const std::string resolved = mppi::app::resolve_backend(cfg.backend);
-    const auto& flying = cfg.for_backend(resolved);
-    if (const std::string v = cfg.variant_for(resolved); !v.empty())
-      spdlog::info("settings: the file's {} section applies on this machine", v);
+    std::string section;
+    const mppi::app::AppConfig* variant = cfg.variant(mppi::app::resolve_backend(cfg.backend), &section);
+    const auto& flying = variant != nullptr ? *variant : cfg;
+    if (variant != nullptr) spdlog::info("settings: the file's {} section applies on this machine", section);
     ds = mppi::daemon::parse_daemon_settings(flying.root["daemon"], cfg.task, nu);
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: {}", e.what());

@@ -47,6 +47,8 @@ struct AppConfig {
   const AppConfig& for_backend(const std::string& resolved) const;
   // Which section for_backend(resolved) takes: "cuda", "cpu_targets.<target>" or "" (the file's).
   std::string variant_for(const std::string& resolved) const;
+  // The variant for_backend(resolved) takes (null: the file's settings), and its section name.
+  const AppConfig* variant(const std::string& resolved, std::string* name) const;
   // This config flying the optimizer settings S whatever the backend (S comes from a running
   // controller, already the backend's own): a live update rebuilds from it. Setting only
   // `mppi` would leave the `cuda:` (or `cpu_targets:`) section's stale settings to the backend.
