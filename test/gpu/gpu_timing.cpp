@@ -1,6 +1,8 @@
 // mppid-gpu-timing: time one full CUDA update (state and plan up, sample, roll out, weigh,
 // update, plan down) with steady_clock around RolloutBackend::update(), and print JSON.
-//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] CASE...     CASE = task:K[:T]
+//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] CASE...   CASE = task:K[:T]
+// --period-us P: one update every P us on an absolute grid (the daemon's 20,000 at 50 Hz), the
+// GPU and this thread idle in between, instead of back to back: the tail an idle GPU adds.
 // The forest tasks run with the obstacle grid the optimizer builds each cycle (Task::prepare
 // from the plan), as in the daemon; --no-grid: every search scans all 32 cylinders.
 // e.g. mppid-gpu-timing quadrotor_forest:16384 team9_forest:6000 team3_forest:1200
@@ -12,6 +14,7 @@
 #include <ctime>
 #include <exception>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "mppi/gpu/cuda_backend.hpp"
@@ -28,7 +31,7 @@ struct Result {
 };
 
 template <class T>
-Result time_case(const std::string& name, int k, int t, int iters, int warmup, bool grid) {
+Result time_case(const std::string& name, int k, int t, int iters, int warmup, bool grid, int period_us) {
   auto sc = mppi::gpu_test::make_scenario<T>(k, t);
   auto backend = mppi::make_cuda_backend<T>(sc.settings);
   auto plan = mppi::gpu_test::initial_plan(sc.settings);
@@ -37,8 +40,13 @@ Result time_case(const std::string& name, int k, int t, int iters, int warmup, b
   mppi::UpdateStats stats;
   std::vector<double> us;
   us.reserve(static_cast<std::size_t>(iters));
+  auto release = std::chrono::steady_clock::now();
   for (int n = 0; n < warmup + iters; ++n) {
     if (n % 50 == 0) plan = plan0;  // keep the problem stationary
+    if (period_us > 0) {
+      release += std::chrono::microseconds(period_us);
+      std::this_thread::sleep_until(release);
+    }
     const auto t0 = std::chrono::steady_clock::now();
     backend->update(sc.x0.data(), sc.params, static_cast<std::uint32_t>(n), plan.data(), &stats);
     const auto t1 = std::chrono::steady_clock::now();
@@ -65,7 +73,7 @@ Result time_case(const std::string& name, int k, int t, int iters, int warmup, b
 }  // namespace
 
 int main(int argc, char** argv) {
-  int iters = 1000, warmup = 50;
+  int iters = 1000, warmup = 50, period_us = 0;
   bool grid = true;
   std::vector<std::string> cases;
   for (int a = 1; a < argc; ++a) {
@@ -73,8 +81,9 @@ int main(int argc, char** argv) {
     if (arg == "--iters" && a + 1 < argc) iters = std::atoi(argv[++a]);
     else if (arg == "--warmup" && a + 1 < argc) warmup = std::atoi(argv[++a]);
     else if (arg == "--no-grid") grid = false;
+    else if (arg == "--period-us" && a + 1 < argc) period_us = std::atoi(argv[++a]);
     else if (arg == "--help" || arg == "-h") {
-      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] task:K[:T]...\n");
+      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] task:K[:T]...\n");
       return 0;
     } else cases.push_back(arg);
   }
@@ -94,9 +103,9 @@ int main(int argc, char** argv) {
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   std::printf("{\n  \"device\": \"%s\",\n  \"date\": \"%s\",\n  \"cuda_graph\": %s,\n  \"iterations\": %d,\n"
-              "  \"warmup\": %d,\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
+              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
               mppi::cuda_device_name().c_str(), date, graph != nullptr && std::string(graph) == "0" ? "false" : "true",
-              iters, warmup, grid ? "true" : "false", env.c_str());
+              iters, warmup, period_us, grid ? "true" : "false", env.c_str());
   bool first = true;
   int status = 0;
   for (const auto& c : cases) {
@@ -109,7 +118,7 @@ int main(int argc, char** argv) {
     try {
       const bool known = mppi::visit_task(name, [&](auto tag) {
         using T = typename decltype(tag)::type;
-        r = time_case<T>(name, k, t, iters, warmup, grid);
+        r = time_case<T>(name, k, t, iters, warmup, grid, period_us);
       });
       if (!known) throw std::runtime_error("unknown task " + name);
     } catch (const std::exception& e) {

@@ -120,8 +120,36 @@ TEST(ControlLoop, StateTriggerStartsEachCycleWhenItsStateArrives) {
   const auto t = r.loop.timing_total();
   EXPECT_EQ(t.misses, 0);
   EXPECT_NEAR(t.latency.max_ms, 2.0, 0.011);
+  EXPECT_EQ(t.wake.count, 10);
+  EXPECT_NEAR(t.wake.max_ms, 0.0, 0.011);
+  EXPECT_EQ(t.optimize.count, 10);
+  EXPECT_NEAR(t.optimize.mean_ms, 2.0, 0.011);
   EXPECT_EQ(r.loop.counters().state_triggered.load(), 10);
   EXPECT_EQ(r.loop.counters().clock_triggered.load(), 0);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
+// Where state -> command went: a state that arrived 0.4 ms before the loop's thread looked
+// (the thread ran late) shows in the wake-up, not in the compute time or the optimizer's.
+TEST(ControlLoop, StateTriggerReportsTheWakeUpApartFromTheOptimizer) {
+  Rig r(state_trigger(), expect16_waking());
+  r.ctl.compute_ns = [](int) { return 3 * kMs; };
+  r.loop.start();
+  const std::int64_t t0 = r.clock.now_ns();
+  for (int k = 0; k < 4; ++k) {
+    r.clock.set(t0 + 5 * kMs + k * 20 * kMs);
+    r.state(++r.seq);
+    r.clock.advance(400'000);
+    r.cycle();
+  }
+  const auto t = r.loop.timing_total();
+  EXPECT_EQ(r.loop.counters().state_triggered.load(), 4);
+  EXPECT_EQ(t.wake.count, 4);
+  EXPECT_NEAR(t.wake.min_ms, 0.4, 0.011);
+  EXPECT_NEAR(t.wake.max_ms, 0.4, 0.011);
+  EXPECT_NEAR(t.optimize.max_ms, 3.0, 0.011);
+  EXPECT_NEAR(t.compute.max_ms, 3.0, 0.011);
+  EXPECT_NEAR(t.latency.max_ms, 3.4, 0.011);  // wake-up + compute
   EXPECT_FALSE(r.tx.any_nonfinite());
 }
 

@@ -89,7 +89,8 @@ fi
   echo "- GPU: $(nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader 2>&1)"
   echo "- CPU: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'); $(. /etc/os-release && echo "$PRETTY_NAME")"
   # A copied tree (no .git of its own) names its source in .gpuwork-commit, when there is one.
-  commit="$(cat .gpuwork-commit 2>/dev/null || true)"
+  # MPPID_COMMIT (set on the command line that ships the tree) wins.
+  commit="${MPPID_COMMIT:-$(cat .gpuwork-commit 2>/dev/null || true)}"
   [[ -n "$commit" || ! -d .git && ! -f .git ]] || commit="$(git rev-parse --short HEAD 2>/dev/null)"
   echo "- commit: ${commit:-unknown}; stages: $STAGES; quick: $QUICK"
 } >>"$SUMMARY"

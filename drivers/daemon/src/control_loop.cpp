@@ -137,6 +137,7 @@ bool ControlLoop::step_state_triggered(const std::atomic<bool>& stop) {
     clock_->sleep_until_or(in_->state_wake, latest);  // each state (and a signal) re-checks
     now = clock_->now_ns();
   }
+  if (!grace_started_) monitor_.record_wake(std::max<std::int64_t>(0, now - trigger_recv_ns_));
   schedule_.begin_at(now);
   cycle(now, schedule_.deadline_ns(), now, false);
   return true;
@@ -280,6 +281,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       c_->set_stop_flag(stop);
     }
     if (guarded) guard_arm(deadline_ns, state_seq);
+    const std::int64_t optimize_start = clock_->now_ns();
     try {
       last_stats_ = c_->iterate(x0, u_.data());
       if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
@@ -295,6 +297,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       spdlog::error("optimizer error: {}", e.what());
     }
     const std::int64_t done = clock_->now_ns();
+    monitor_.record_optimize(done - optimize_start);
     missed_deadline = !lockstep && done > deadline_ns;
     const int guard_steps = guarded ? guard_disarm() : 0;
     if (guard_steps > 0) {

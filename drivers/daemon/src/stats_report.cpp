@@ -32,6 +32,8 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   out += line("state sampled -> command-out", t.latency);
   out += line("state age at cycle start", t.age);
   out += line("lead (sample -> expected actuation)", t.lead);
+  out += line("optimizer update", t.optimize);
+  if (loop.settings().trigger == Trigger::kState) out += line("state in -> its cycle's start", t.wake);
   out += fmt::format("  latency expected={:.3f} ms (estimator rejected {}), future states={}, plan skips={}, "
                      "repeated ticks={}\n",
                      static_cast<double>(loop.latency_estimate_ns()) * 1e-6, v(c.latency_rejected), v(c.future_states),
@@ -63,7 +65,8 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       f.task, f.backend, f.rollouts, f.horizon, f.rate_hz, f.seconds, f.lockstep, f.realtime, t.cycles, t.misses,
       t.late_start_misses, t.max_consecutive_misses, loop.skipped_periods());
   out += json("compute", t.compute) + "," + json("period", t.period) + "," + json("jitter", t.jitter) + "," +
-         json("latency", t.latency) + "," + json("age", t.age) + "," + json("lead", t.lead) + ",";
+         json("latency", t.latency) + "," + json("age", t.age) + "," + json("lead", t.lead) + "," +
+         json("optimize", t.optimize) + "," + json("wake", t.wake) + ",";
   out += fmt::format("\"latency_expected_ms\":{:.3f},\"future_states\":{},\"plan_skips\":{},\"repeated_ticks\":{},",
                      static_cast<double>(loop.latency_estimate_ns()) * 1e-6, v(c.future_states), v(c.plan_skips),
                      v(c.repeated_ticks));

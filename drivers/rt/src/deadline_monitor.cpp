@@ -53,8 +53,19 @@ void DeadlineMonitor::record_lead(std::int64_t ns) {
   t_.lead.add(ns);
 }
 
+void DeadlineMonitor::record_wake(std::int64_t ns) {
+  w_.wake.add(ns);
+  t_.wake.add(ns);
+}
+
+void DeadlineMonitor::record_optimize(std::int64_t ns) {
+  w_.optimize.add(ns);
+  t_.optimize.add(ns);
+}
+
 void DeadlineMonitor::reset_window() {
-  for (Histogram* h : {&w_.compute, &w_.period, &w_.jitter, &w_.latency, &w_.age, &w_.lead}) h->clear();
+  for (Histogram* h : {&w_.compute, &w_.period, &w_.jitter, &w_.latency, &w_.age, &w_.lead, &w_.wake, &w_.optimize})
+    h->clear();
 }
 
 TimingSummary DeadlineMonitor::summarise(const Set& s) const {
@@ -65,6 +76,8 @@ TimingSummary DeadlineMonitor::summarise(const Set& s) const {
   out.latency = s.latency.summary();
   out.age = s.age.summary();
   out.lead = s.lead.summary();
+  out.wake = s.wake.summary();
+  out.optimize = s.optimize.summary();
   out.cycles = cycles_;
   out.misses = misses_;
   out.late_start_misses = late_start_misses_;

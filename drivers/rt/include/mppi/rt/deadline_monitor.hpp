@@ -1,7 +1,8 @@
 // Timing of the control loop: compute time, period between cycle starts, jitter
 // (|period - nominal|), state-to-command latency, the state's age at the cycle's start, the
-// lead the state was predicted over, deadline misses and the current run of consecutive
-// misses. Two views: a window, reset each time the status is published, and
+// lead the state was predicted over, where a cycle's time went (the wake-up: a state's
+// arrival -> its cycle's start; the optimizer: the update inside the cycle), deadline misses
+// and the current run of consecutive misses. Two views: a window, reset each time the status is published, and
 // totals since start for the --stats summary. Nothing allocates after construction.
 #pragma once
 
@@ -12,7 +13,7 @@
 namespace mppi::rt {
 
 struct TimingSummary {
-  DurationSummary compute, period, jitter, latency, age, lead;
+  DurationSummary compute, period, jitter, latency, age, lead, wake, optimize;
   std::int64_t cycles = 0;
   std::int64_t misses = 0;
   // Misses of cycles whose own work (start -> end) fit in one period: the thread woke late
@@ -39,6 +40,11 @@ class DeadlineMonitor {
   // predicted over (sample time -> expected actuation).
   void record_age(std::int64_t ns);
   void record_lead(std::int64_t ns);
+  // A state-triggered cycle: the state's arrival (inbox) -> the cycle's start (the loop's
+  // thread ran). Together with age and compute, where state -> command went.
+  void record_wake(std::int64_t ns);
+  // The optimizer's update inside a cycle (Controller::iterate).
+  void record_optimize(std::int64_t ns);
 
   TimingSummary window() const { return summarise(w_); }
   TimingSummary total() const { return summarise(t_); }
@@ -53,8 +59,15 @@ class DeadlineMonitor {
  private:
   struct Set {
     Set(std::int64_t bin, int bins)
-        : compute(bin, bins), period(bin, bins), jitter(bin, bins), latency(bin, bins), age(bin, bins), lead(bin, bins) {}
-    Histogram compute, period, jitter, latency, age, lead;
+        : compute(bin, bins),
+          period(bin, bins),
+          jitter(bin, bins),
+          latency(bin, bins),
+          age(bin, bins),
+          lead(bin, bins),
+          wake(bin, bins),
+          optimize(bin, bins) {}
+    Histogram compute, period, jitter, latency, age, lead, wake, optimize;
   };
   TimingSummary summarise(const Set& s) const;
 
