@@ -1,21 +1,22 @@
 #!/usr/bin/env bash
 # Where the CUDA daemon's state -> command time goes, on the GPU machine, in one call:
-#   tools/gpu/latency-probe.sh [--seconds 60] [--rollouts 16384] [--results DIR]
+#   tools/gpu/latency-probe.sh [--seconds 60] [--runs 1] [--rollouts 16384] [--results DIR]
 # 1. builds the stack (tools/gpu/run-all.sh --stages build, into build-gpu/ unless it is there);
 # 2. mppid-gpu-timing quadrotor_forest:K back to back, then one update every 20 ms with the GPU
 #    and the thread idle in between (--period-us 20000, as in the daemon);
-# 3. daemon-bench --realtime --backend cuda at K, trigger state: state in -> command out, split
+# 3. --runs times daemon-bench --realtime --backend cuda at K, trigger state: state in -> command out, split
 #    into the state's wait for its cycle ("wake") and the optimizer's update ("optimize"), with
 #    the daemon's threads (top -H) and the GPU's clock sampled during the run.
 # Results (JSON, logs, a summary) land in DIR and in $OUT when it is set (the device tool).
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$ROOT"
-SECONDS_RUN=60 K=16384 RES="$ROOT/results/latency-$(date -u +%Y%m%d-%H%M%S)"
+SECONDS_RUN=60 RUNS=1 K=16384 RES="$ROOT/results/latency-$(date -u +%Y%m%d-%H%M%S)"
 while (($#)); do
   case "$1" in
     --seconds) SECONDS_RUN="$2"; shift ;;
     --rollouts) K="$2"; shift ;;
+    --runs) RUNS="$2"; shift ;;
     --results) RES="$2"; shift ;;
     -h|--help) sed -n '2,11s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "latency-probe.sh: unknown argument '$1'" >&2; exit 2 ;;
@@ -31,6 +32,7 @@ if [[ ! -x "$B/bin/mppid" || ! -x "$B/bin/mppid-gpu-timing" ]]; then
   tools/gpu/run-all.sh --stages build --results "$RES/build" >/dev/null 2>&1 || { say "build failed"; tail -30 "$RES/build/build.log"; exit 1; }
 fi
 D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
+export PATH="$D/bin:$PATH"
 export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 say "built ($B)"
 {
@@ -51,7 +53,7 @@ bench() {  # label, extra env...
   local label=$1; shift
   (
     sleep $((SECONDS_RUN / 2))
-    pid=$(pgrep -n -x mppid) && top -b -H -n 2 -d 5 -p "$pid" >"$RES/top-$label.txt" 2>&1
+    pid=$(pidof mppid | cut -d' ' -f1) && top -b -H -n 2 -d 5 -p "$pid" >"$RES/top-$label.txt" 2>&1
     nvidia-smi --query-gpu=clocks.sm,pstate,utilization.gpu --format=csv,noheader >"$RES/gpu-$label.txt" 2>&1
   ) &
   env "$@" drivers/daemon/tools/daemon-bench --build "$B" --seconds "$SECONDS_RUN" --realtime --backend cuda \
@@ -66,6 +68,6 @@ print(f"- daemon {sys.argv[2]}: misses {d['misses']} of {d['cycles']}; state->co
 PY
   say "daemon-bench $label done"
 }
-bench default
+for ((r = 1; r <= RUNS; r++)); do bench "run$r"; done
 cat "$RES/summary.md"
 if [[ -n "${OUT:-}" ]]; then tar czf "$OUT/latency-probe.tgz" -C "$RES" . && cp "$RES/summary.md" "$OUT/"; fi
