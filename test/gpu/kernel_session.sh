@@ -8,6 +8,8 @@
 #   build-ftz    the same with MPPID_CUDA_FTZ=ON into $B-ftz
 #   parity       CudaParity.* and CudaDeterminism.* and the allocation tests ($OUT/parity.txt)
 #   parity-ftz   the same on the FTZ build
+#   build-fast, parity-fast, timing-fast: the same with MPPID_CUDA_FAST_MATH=ON ($B-fast)
+#   build-fmad, parity-fmad, timing-fmad: the same with MPPID_CUDA_FMAD=ON ($B-fmad)
 #   timing       the issue's targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
 #   timing2      the same again (the spread between two runs)
 #   timing-ftz   the same on the FTZ build
@@ -75,6 +77,14 @@ for step in "$@"; do
       stamp "build $B-ftz"
       build "$B-ftz" -DMPPID_CUDA_FTZ=ON || { echo "FTZ BUILD FAILED"; grep -E 'error' "$OUT/build-$(basename "$B")-ftz.log" | head; }
       stamp "built ftz" ;;
+    build-fast)
+      stamp "build $B-fast"
+      build "$B-fast" -DMPPID_CUDA_FAST_MATH=ON || { echo "FAST BUILD FAILED"; grep -E 'error' "$OUT/build-$(basename "$B")-fast.log" | head; }
+      stamp "built fast" ;;
+    build-fmad)
+      stamp "build $B-fmad"
+      build "$B-fmad" -DMPPID_CUDA_FMAD=ON || { echo "FMAD BUILD FAILED"; grep -E 'error' "$OUT/build-$(basename "$B")-fmad.log" | head; }
+      stamp "built fmad" ;;
     cpucheck)
       # The CPU side of a change to core/ (fsincos): core's tests with the SIMD targets, -Werror.
       stamp "cpu build"
@@ -94,9 +104,13 @@ for step in "$@"; do
       stamp "cpu tests done" ;;
     parity) parity "$B" base ;;
     parity-ftz) parity "$B-ftz" ftz ;;
+    parity-fast) parity "$B-fast" fast ;;
+    parity-fmad) parity "$B-fmad" fmad ;;
     timing) timing "$B" base ;;
     timing2) timing "$B" again ;;
     timing-ftz) timing "$B-ftz" ftz ;;
+    timing-fast) timing "$B-fast" fast ;;
+    timing-fmad) timing "$B-fmad" fmad ;;
     variants)
       {
         for c in 16 20; do row "team chunk=$c" MPPID_CUDA_CHUNK=$c -- --iters 1000 team3_forest:1200; done
