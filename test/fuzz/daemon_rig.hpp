@@ -11,6 +11,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -139,5 +140,20 @@ inline const std::vector<std::string>& tasks() {
 
 // Quiet logs (the loop logs every rejected parameter and mode change).
 inline void quiet() { spdlog::set_level(spdlog::level::off); }
+
+// One input of a daemon target, what its LLVMFuzzerTestOneInput returns: the message's bytes,
+// then one byte picking the task. A fresh rig for that task (tick_on_state as Rig's), then
+// feed(rig, message, length) offers the message and the valid states around it, then the
+// cycles for the ticks queued so far run.
+template <class Feed>
+int run_input(const std::uint8_t* data, std::size_t size, Feed feed, bool tick_on_state = true) {
+  [[maybe_unused]] static const bool quieted = (quiet(), true);  // before the first rig logs
+  if (size < 1) return 0;
+  const std::vector<std::string>& names = tasks();
+  Rig rig(names[data[size - 1] % names.size()], tick_on_state);
+  feed(rig, data, size - 1);
+  rig.run_cycles();
+  return 0;
+}
 
 }  // namespace mppi::fuzz
