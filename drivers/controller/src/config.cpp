@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <initializer_list>
 #include <set>
+#include <utility>
 
 #include "mppi/params.hpp"
 #include "mppi/simd.hpp"
@@ -75,39 +77,74 @@ void apply_override(YAML::Node root, const std::string& text) {
   }
 }
 
+// The fields of a map section ("mppi", "ddp"): a key not in `known` is an error
+// ("mppi.foo: unknown field"), before any value is read; read() takes a field's value, as
+// the field's type, when the section gives it (else the default stays), and its errors name
+// the field ("ddp.mu_init: ...").
+class Fields {
+ public:
+  Fields(const YAML::Node& node, std::string section, const std::set<std::string>& known)
+      : node_(node), section_(std::move(section)) {
+    for (const auto& kv : node_) {
+      const auto name = key_name(kv.first, section_);
+      if (!known.count(name)) fail(section_ + "." + name, "unknown field");
+    }
+  }
+
+  std::string path(const char* field) const { return section_ + "." + field; }
+
+  void require(std::initializer_list<const char*> fields) const {
+    for (const char* field : fields)
+      if (!node_[field]) fail(path(field), "missing");
+  }
+
+  template <class T>
+  void read(const char* field, T& out) const {
+    if (node_[field]) read_value(node_[field], path(field), out);
+  }
+
+ private:
+  template <class T>
+  static void read_value(const YAML::Node& n, const std::string& field, T& out) {
+    out = scalar<T>(n, field);
+  }
+  static void read_value(const YAML::Node& n, const std::string& field, std::vector<float>& out) {
+    out = floats(n, field);
+  }
+
+  const YAML::Node& node_;
+  std::string section_;
+};
+
 void read_mppi(const YAML::Node& m, MppiSettings& s) {
   if (!m || !m.IsMap()) fail("mppi", "missing section");
   static const std::set<std::string> known = {
       "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
       "control_cost_scale", "weighting", "smoothing_window", "seed", "threads", "simd", "chunk_rollouts",
       "min_rollouts", "noise_groups"};
-  for (const auto& kv : m) {
-    const auto name = key_name(kv.first, "mppi");
-    if (!known.count(name)) fail("mppi." + name, "unknown field");
-  }
-  for (const char* required : {"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"})
-    if (!m[required]) fail(std::string("mppi.") + required, "missing");
-  s.rollouts = scalar<int>(m["rollouts"], "mppi.rollouts");
-  s.horizon = scalar<int>(m["horizon"], "mppi.horizon");
-  s.dt = scalar<float>(m["dt"], "mppi.dt");
-  if (m["substeps"]) s.substeps = scalar<int>(m["substeps"], "mppi.substeps");
-  s.lambda = scalar<float>(m["lambda"], "mppi.lambda");
-  s.nu = scalar<float>(m["nu"], "mppi.nu");
-  s.sigma = floats(m["sigma"], "mppi.sigma");
-  s.u_min = floats(m["u_min"], "mppi.u_min");
-  s.u_max = floats(m["u_max"], "mppi.u_max");
-  s.u_init = floats(m["u_init"], "mppi.u_init");
-  if (m["u_nominal"]) s.u_nominal = floats(m["u_nominal"], "mppi.u_nominal");
-  if (m["control_cost_scale"]) s.control_cost_scale = scalar<float>(m["control_cost_scale"], "mppi.control_cost_scale");
+  const Fields f(m, "mppi", known);
+  f.require({"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"});
+  f.read("rollouts", s.rollouts);
+  f.read("horizon", s.horizon);
+  f.read("dt", s.dt);
+  f.read("substeps", s.substeps);
+  f.read("lambda", s.lambda);
+  f.read("nu", s.nu);
+  f.read("sigma", s.sigma);
+  f.read("u_min", s.u_min);
+  f.read("u_max", s.u_max);
+  f.read("u_init", s.u_init);
+  f.read("u_nominal", s.u_nominal);
+  f.read("control_cost_scale", s.control_cost_scale);
   if (m["weighting"] && !parse_weighting(scalar<std::string>(m["weighting"], "mppi.weighting"), &s.weighting))
     fail("mppi.weighting", "must be cost_to_go or trajectory");
-  if (m["smoothing_window"]) s.smoothing_window = scalar<int>(m["smoothing_window"], "mppi.smoothing_window");
-  if (m["seed"]) s.seed = scalar<std::uint64_t>(m["seed"], "mppi.seed");
-  if (m["threads"]) s.threads = scalar<int>(m["threads"], "mppi.threads");
-  if (m["simd"]) s.simd = scalar<std::string>(m["simd"], "mppi.simd");
-  if (m["chunk_rollouts"]) s.chunk_rollouts = scalar<int>(m["chunk_rollouts"], "mppi.chunk_rollouts");
-  if (m["min_rollouts"]) s.min_rollouts = scalar<int>(m["min_rollouts"], "mppi.min_rollouts");
-  if (m["noise_groups"]) s.noise_groups = scalar<int>(m["noise_groups"], "mppi.noise_groups");
+  f.read("smoothing_window", s.smoothing_window);
+  f.read("seed", s.seed);
+  f.read("threads", s.threads);
+  f.read("simd", s.simd);
+  f.read("chunk_rollouts", s.chunk_rollouts);
+  f.read("min_rollouts", s.min_rollouts);
+  f.read("noise_groups", s.noise_groups);
 }
 
 void read_ddp(const YAML::Node& m, DdpSettings& d) {
@@ -116,34 +153,28 @@ void read_ddp(const YAML::Node& m, DdpSettings& d) {
       "max_iterations", "line_search_steps", "mu_init", "mu_min", "mu_max", "mu_factor", "fd_step",
       "fd_hessian_step", "convexify", "r", "initial_plan", "obstacle_weight", "obstacle_margin", "obstacle_softness",
       "ground_weight", "ground_margin", "ground_softness", "speed_weight", "speed_limit", "exp_cap", "obstacle_reach"};
-  for (const auto& kv : m) {
-    const auto name = key_name(kv.first, "ddp");
-    if (!known.count(name)) fail("ddp." + name, "unknown field");
-  }
-  auto num = [&](const char* name, double& field) {
-    if (m[name]) field = scalar<double>(m[name], std::string("ddp.") + name);
-  };
-  if (m["max_iterations"]) d.max_iterations = scalar<int>(m["max_iterations"], "ddp.max_iterations");
-  if (m["line_search_steps"]) d.line_search_steps = scalar<int>(m["line_search_steps"], "ddp.line_search_steps");
-  num("mu_init", d.mu_init);
-  num("mu_min", d.mu_min);
-  num("mu_max", d.mu_max);
-  num("mu_factor", d.mu_factor);
-  num("fd_step", d.fd_step);
-  num("fd_hessian_step", d.fd_hessian_step);
-  if (m["convexify"]) d.convexify = scalar<bool>(m["convexify"], "ddp.convexify");
-  if (m["r"]) d.r = floats(m["r"], "ddp.r");
-  if (m["initial_plan"]) d.initial_plan = floats(m["initial_plan"], "ddp.initial_plan");
-  num("obstacle_weight", d.obstacle_weight);
-  num("obstacle_margin", d.obstacle_margin);
-  num("obstacle_softness", d.obstacle_softness);
-  num("ground_weight", d.ground_weight);
-  num("ground_margin", d.ground_margin);
-  num("ground_softness", d.ground_softness);
-  num("speed_weight", d.speed_weight);
-  num("speed_limit", d.speed_limit);
-  num("exp_cap", d.exp_cap);
-  num("obstacle_reach", d.obstacle_reach);
+  const Fields f(m, "ddp", known);
+  f.read("max_iterations", d.max_iterations);
+  f.read("line_search_steps", d.line_search_steps);
+  f.read("mu_init", d.mu_init);
+  f.read("mu_min", d.mu_min);
+  f.read("mu_max", d.mu_max);
+  f.read("mu_factor", d.mu_factor);
+  f.read("fd_step", d.fd_step);
+  f.read("fd_hessian_step", d.fd_hessian_step);
+  f.read("convexify", d.convexify);
+  f.read("r", d.r);
+  f.read("initial_plan", d.initial_plan);
+  f.read("obstacle_weight", d.obstacle_weight);
+  f.read("obstacle_margin", d.obstacle_margin);
+  f.read("obstacle_softness", d.obstacle_softness);
+  f.read("ground_weight", d.ground_weight);
+  f.read("ground_margin", d.ground_margin);
+  f.read("ground_softness", d.ground_softness);
+  f.read("speed_weight", d.speed_weight);
+  f.read("speed_limit", d.speed_limit);
+  f.read("exp_cap", d.exp_cap);
+  f.read("obstacle_reach", d.obstacle_reach);
 }
 
 void read_params(const YAML::Node& root, const char* section, AppConfig& c) {

@@ -55,16 +55,14 @@ struct AppConfig {
   AppConfig with_mppi(const MppiSettings& s) const {
     AppConfig c = *this;
     c.mppi = s;
-    if (cuda) {
-      auto cc = std::make_shared<AppConfig>(*cuda);
-      cc->mppi = s;
-      c.cuda = std::move(cc);
-    }
-    for (auto& [name, v] : c.cpu_targets) {
-      auto cv = std::make_shared<AppConfig>(*v);
-      cv->mppi = s;
-      v = std::move(cv);
-    }
+    const auto set_mppi = [&s](std::shared_ptr<const AppConfig>& section) {  // a copy: the old one is shared
+      if (!section) return;
+      auto v = std::make_shared<AppConfig>(*section);
+      v->mppi = s;
+      section = std::move(v);
+    };
+    set_mppi(c.cuda);
+    for (auto& entry : c.cpu_targets) set_mppi(entry.second);
     return c;
   }
 };
