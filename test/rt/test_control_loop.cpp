@@ -8,6 +8,7 @@
 #include <cstring>
 #include <chrono>
 #include <limits>
+#include <optional>
 #include <thread>
 
 #include "fakes.hpp"
@@ -45,18 +46,24 @@ transport::Inbox::Expect expect16_waking() {
   return e;
 }
 
+// A state of the shape expect16() takes (16 values, one vehicle, model 1), sequence number
+// `seq`, received at `recv_ns`; its values and sample time are the caller's.
+void shape_state(transport::StateSample& s, std::int64_t seq, std::int64_t recv_ns) {
+  s.seq = seq;
+  s.nx = 16;
+  s.vehicle_count = 1;
+  s.n = 16;
+  s.model = 1;
+  s.recv_ns = recv_ns;
+}
+
 struct Rig {
   explicit Rig(daemon::LoopSettings s = {}, transport::Inbox::Expect e = expect16())
       : inbox(e), loop(&ctl, &clock, &tx, &inbox, s) {}
 
   Reject state(std::int64_t n, float fill = 1.0f, std::int64_t sample_us = -1) {
     auto& s = inbox.state_buffer();
-    s.seq = n;
-    s.nx = 16;
-    s.vehicle_count = 1;
-    s.n = 16;
-    s.model = 1;
-    s.recv_ns = clock.now_ns();
+    shape_state(s, n, clock.now_ns());
     s.sample_utime = sample_us >= 0 ? sample_us : clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) s.x[i] = fill;
     return inbox.offer_state();
@@ -78,6 +85,37 @@ struct Rig {
   daemon::ControlLoop loop;
   std::atomic<bool> run{false};
   std::int64_t seq = 0;
+};
+
+// The deadline guard's tests run on the real clock (the guard sleeps on CLOCK_MONOTONIC),
+// with the guard on; the fake controller's own clock is not read.
+struct GuardRig {
+  explicit GuardRig(daemon::LoopSettings s = {}) : inbox(expect16()), loop(&ctl, &clock, &tx, &inbox, guarded(s)) {}
+  static daemon::LoopSettings guarded(daemon::LoopSettings s) {
+    s.deadline_guard = true;
+    return s;
+  }
+
+  // States 1..n, each received now and followed by its real-time cycle; `fill`: the states'
+  // values (none: the inbox's buffers as they are, zeros).
+  void cycles(int n, std::optional<float> fill = std::nullopt) {
+    for (int k = 1; k <= n; ++k) {
+      auto& st = inbox.state_buffer();
+      shape_state(st, k, clock.now_ns());
+      if (fill)
+        for (int i = 0; i < 16; ++i) st.x[i] = *fill;
+      inbox.offer_state();
+      ASSERT_TRUE(loop.step_realtime(run));
+    }
+  }
+
+  rt::MonotonicClock clock;
+  FakeClock unused;
+  FakeController ctl{&unused};
+  RecordingTransport tx;
+  transport::Inbox inbox;
+  daemon::ControlLoop loop;
+  std::atomic<bool> run{false};
 };
 
 }  // namespace
@@ -523,51 +561,32 @@ TEST(ControlLoop, FinalStatusIsUnhealthy) {
 TEST(ControlLoop, DeadlineGuardKeepsCommandsFlowingThroughAStall) {
   // Real clock: the guard sleeps on CLOCK_MONOTONIC. Iteration 3 stalls ~75 ms; the guard
   // publishes the held plan at the deadline and each period after until it returns.
-  rt::MonotonicClock clock;
-  FakeClock unused;
-  FakeController ctl(&unused);
-  RecordingTransport tx;
-  transport::Inbox inbox(expect16());
-  daemon::LoopSettings s;
-  s.deadline_guard = true;
-  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
-  ctl.compute_ns = [](int n) {
+  GuardRig r;
+  r.ctl.compute_ns = [](int n) {
     if (n == 3) std::this_thread::sleep_for(std::chrono::milliseconds(75));
     return std::int64_t{0};
   };
-  std::atomic<bool> run{false};
-  for (int k = 1; k <= 6; ++k) {
-    auto& st = inbox.state_buffer();
-    st.seq = k;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
-    st.recv_ns = clock.now_ns();
-    for (int i = 0; i < 16; ++i) st.x[i] = 1.0f;
-    inbox.offer_state();
-    ASSERT_TRUE(loop.step_realtime(run));
-  }
+  ASSERT_NO_FATAL_FAILURE(r.cycles(6, 1.0f));
   // Every cycle is covered exactly once: by its own command or by the guard's.
-  const long guard = loop.counters().guard_commands.load();
-  const long takeovers = loop.counters().guard_takeovers.load();
+  const long guard = r.loop.counters().guard_commands.load();
+  const long takeovers = r.loop.counters().guard_takeovers.load();
   EXPECT_GE(takeovers, 1);
-  ASSERT_EQ(static_cast<long>(tx.commands.size()), 6 - takeovers + guard);
+  ASSERT_EQ(static_cast<long>(r.tx.commands.size()), 6 - takeovers + guard);
   // The stalled cycle (state 3): held-plan steps from cycle 2's plan, one per period,
   // ~3 of them (20, 40, 60 ms into a 75 ms stall); its late result is not published.
   std::vector<float> held;
-  for (const auto& c : tx.commands)
+  for (const auto& c : r.tx.commands)
     if (c.state_seq == 3) {
       EXPECT_EQ(c.mode, Mode::kHoldPlan);
       held.push_back(c.u[0]);
     }
   ASSERT_GE(held.size(), 2u);
   for (std::size_t g = 0; g < held.size(); ++g) EXPECT_FLOAT_EQ(held[g], 1021.0f + static_cast<float>(g));
-  EXPECT_EQ(tx.commands.front().mode, Mode::kNormal);
-  EXPECT_EQ(tx.commands.back().mode, Mode::kNormal);
-  for (std::size_t i = 1; i < tx.commands.size(); ++i) EXPECT_EQ(tx.commands[i].seq, tx.commands[i - 1].seq + 1);
-  EXPECT_GE(loop.timing_total().misses, 1);
-  EXPECT_FALSE(tx.any_nonfinite());
+  EXPECT_EQ(r.tx.commands.front().mode, Mode::kNormal);
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kNormal);
+  for (std::size_t i = 1; i < r.tx.commands.size(); ++i) EXPECT_EQ(r.tx.commands[i].seq, r.tx.commands[i - 1].seq + 1);
+  EXPECT_GE(r.loop.timing_total().misses, 1);
+  EXPECT_FALSE(r.tx.any_nonfinite());
 }
 
 TEST(ControlLoop, AnytimeStopsTheOptimizerBeforeTheDeadline) {
@@ -575,119 +594,66 @@ TEST(ControlLoop, AnytimeStopsTheOptimizerBeforeTheDeadline) {
   // (5 ms before the deadline), then report a partial update: 3 from enough rollouts (its
   // command goes out), 5 from too few (no update: the held plan goes out). The others are
   // never stopped.
-  rt::MonotonicClock clock;
-  FakeClock unused;
-  FakeController ctl(&unused);
-  RecordingTransport tx;
-  transport::Inbox inbox(expect16());
   daemon::LoopSettings s;
-  s.deadline_guard = true;
   s.anytime_margin_ns = 5 * kMs;
-  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
+  GuardRig r(s);
   bool stopped[8] = {};
-  ctl.fault = [&](int n, std::vector<float>*, UpdateStats* st) {
+  r.ctl.fault = [&](int n, std::vector<float>*, UpdateStats* st) {
     if (n == 3 || n == 5) {
       // Work until told to stop; give up after 200 ms (the test then fails below).
       const auto give_up = std::chrono::steady_clock::now() + std::chrono::milliseconds(200);
-      while (!(ctl.stop_flag != nullptr && ctl.stop_flag->load()) && std::chrono::steady_clock::now() < give_up)
+      while (!(r.ctl.stop_flag != nullptr && r.ctl.stop_flag->load()) && std::chrono::steady_clock::now() < give_up)
         std::this_thread::sleep_for(std::chrono::microseconds(100));
       st->partial = true;
       st->rollouts = 100;
       st->updated = n == 3;
     }
-    stopped[n] = ctl.stop_flag != nullptr && ctl.stop_flag->load();
+    stopped[n] = r.ctl.stop_flag != nullptr && r.ctl.stop_flag->load();
     return false;
   };
-  std::atomic<bool> run{false};
-  for (int k = 1; k <= 7; ++k) {
-    auto& st = inbox.state_buffer();
-    st.seq = k;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
-    st.recv_ns = clock.now_ns();
-    for (int i = 0; i < 16; ++i) st.x[i] = 1.0f;
-    inbox.offer_state();
-    ASSERT_TRUE(loop.step_realtime(run));
-  }
+  ASSERT_NO_FATAL_FAILURE(r.cycles(7, 1.0f));
   for (int n = 1; n <= 7; ++n) EXPECT_EQ(stopped[n], n == 3 || n == 5) << "iteration " << n;
-  EXPECT_EQ(loop.counters().partial_updates.load(), 2);
-  EXPECT_EQ(loop.counters().anytime_holds.load(), 1);
-  EXPECT_EQ(loop.counters().optimizer_errors.load() + loop.counters().optimizer_nonfinite.load(), 0);
+  EXPECT_EQ(r.loop.counters().partial_updates.load(), 2);
+  EXPECT_EQ(r.loop.counters().anytime_holds.load(), 1);
+  EXPECT_EQ(r.loop.counters().optimizer_errors.load() + r.loop.counters().optimizer_nonfinite.load(), 0);
   // Unless a loaded machine preempted the loop past a deadline anyway, every cycle's own
   // command went out: iteration 3's update, and for 5 the held plan (cycle 4's, shifted).
-  if (loop.counters().guard_takeovers.load() == 0) {
-    ASSERT_EQ(tx.commands.size(), 7u);
-    EXPECT_EQ(tx.commands[2].mode, Mode::kNormal);
-    EXPECT_FLOAT_EQ(tx.commands[2].u[0], 1030.0f);
-    EXPECT_EQ(tx.commands[4].mode, Mode::kHoldPlan);
-    EXPECT_FLOAT_EQ(tx.commands[4].u[0], 1041.0f);
-    EXPECT_EQ(tx.commands[5].mode, Mode::kNormal);
+  if (r.loop.counters().guard_takeovers.load() == 0) {
+    ASSERT_EQ(r.tx.commands.size(), 7u);
+    EXPECT_EQ(r.tx.commands[2].mode, Mode::kNormal);
+    EXPECT_FLOAT_EQ(r.tx.commands[2].u[0], 1030.0f);
+    EXPECT_EQ(r.tx.commands[4].mode, Mode::kHoldPlan);
+    EXPECT_FLOAT_EQ(r.tx.commands[4].u[0], 1041.0f);
+    EXPECT_EQ(r.tx.commands[5].mode, Mode::kNormal);
   }
-  EXPECT_FALSE(tx.any_nonfinite());
+  EXPECT_FALSE(r.tx.any_nonfinite());
 }
 
 TEST(ControlLoop, DeadlineGuardStaysQuietWhenOnTime) {
-  rt::MonotonicClock clock;
-  FakeClock unused;
-  FakeController ctl(&unused);
-  RecordingTransport tx;
-  transport::Inbox inbox(expect16());
-  daemon::LoopSettings s;
-  s.deadline_guard = true;
-  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
-  std::atomic<bool> run{false};
-  for (int k = 1; k <= 10; ++k) {
-    auto& st = inbox.state_buffer();
-    st.seq = k;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
-    st.recv_ns = clock.now_ns();
-    inbox.offer_state();
-    ASSERT_TRUE(loop.step_realtime(run));
-  }
+  GuardRig r;
+  ASSERT_NO_FATAL_FAILURE(r.cycles(10));
   // The guard acts only on a miss (none expected here; a heavily loaded machine may
   // still preempt the test past a deadline, which the invariant below allows).
-  EXPECT_LE(loop.counters().guard_takeovers.load(), loop.timing_total().misses);
-  const long takeovers = loop.counters().guard_takeovers.load();
-  EXPECT_EQ(static_cast<long>(tx.commands.size()), 10 - takeovers + loop.counters().guard_commands.load());
+  EXPECT_LE(r.loop.counters().guard_takeovers.load(), r.loop.timing_total().misses);
+  const long takeovers = r.loop.counters().guard_takeovers.load();
+  EXPECT_EQ(static_cast<long>(r.tx.commands.size()), 10 - takeovers + r.loop.counters().guard_commands.load());
 }
 
 TEST(ControlLoop, DeadlineGuardFallsToFailsafeWhenTheStallOutlastsTheFailsafeTimeout) {
-  rt::MonotonicClock clock;
-  FakeClock unused;
-  FakeController ctl(&unused);
-  RecordingTransport tx;
-  transport::Inbox inbox(expect16());
   daemon::LoopSettings s;
-  s.deadline_guard = true;
   s.state_timeout_ns = 30 * kMs;
   s.failsafe_timeout_ns = 60 * kMs;
-  daemon::ControlLoop loop(&ctl, &clock, &tx, &inbox, s);
-  ctl.compute_ns = [](int n) {
+  GuardRig r(s);
+  r.ctl.compute_ns = [](int n) {
     if (n == 2) std::this_thread::sleep_for(std::chrono::milliseconds(150));
     return std::int64_t{0};
   };
-  std::atomic<bool> run{false};
-  for (int k = 1; k <= 2; ++k) {
-    auto& st = inbox.state_buffer();
-    st.seq = k;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
-    st.recv_ns = clock.now_ns();
-    inbox.offer_state();
-    ASSERT_TRUE(loop.step_realtime(run));
-  }
+  ASSERT_NO_FATAL_FAILURE(r.cycles(2));
   std::vector<Mode> guard_modes;
-  for (const auto& c : tx.commands)
+  for (const auto& c : r.tx.commands)
     if (c.state_seq == 2) guard_modes.push_back(c.mode);
   ASSERT_GE(guard_modes.size(), 5u);  // ~7 over a 150 ms stall
   EXPECT_EQ(guard_modes.front(), Mode::kHoldPlan);
   EXPECT_EQ(guard_modes.back(), Mode::kFailsafe);  // past 60 ms of stall
-  EXPECT_FALSE(tx.any_nonfinite());
+  EXPECT_FALSE(r.tx.any_nonfinite());
 }
