@@ -17,6 +17,12 @@
 #include "mppi/gpu/cuda_backend.hpp"
 #include "mppi/optimizer.hpp"
 #include "scenarios.hpp"
+#ifdef MPPID_TEST_TASK_FILES
+#include <filesystem>
+
+#include "mppi/app/config.hpp"
+#include "mppi/params.hpp"
+#endif
 
 namespace mppi {
 namespace {
@@ -186,6 +192,39 @@ TEST(CudaParity, Team3ForestTrajectoryWeighting) {
   SKIP_WITHOUT_CUDA();
   check_parity<Team3Forest>("team3_forest", Weighting::kTrajectory);
 }
+
+#ifdef MPPID_TEST_TASK_FILES
+// Every task file as the CUDA backend flies it: the file's `cuda:` settings (rollouts, horizon,
+// weighting, noise groups, control-cost scale) and its model and cost values, on the test
+// scenario's start, goals and obstacles. The tests above use the scenarios' own settings
+// (T = 100); a flight's differ (team3: T = 50, its cost weights), and a kernel path that only
+// those settings take must agree with the CPU as well.
+TEST(CudaParity, EveryTaskFileAsFlown) {
+  SKIP_WITHOUT_CUDA();
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(MPPID_TASKS_DIR)) {
+    if (entry.path().extension() != ".yaml") continue;
+    const app::AppConfig file = app::load_config(entry.path().string());
+    if (file.controller != "mppi") continue;
+    const app::AppConfig& cfg = file.for_backend("cuda");
+    const std::string name = entry.path().filename().string();
+    const bool known = visit_task(cfg.task, [&](auto tag) {
+      using T = typename decltype(tag)::type;
+      check_parity<T>(name.c_str(), cfg.mppi.weighting, [&](gpu_test::Scenario<T>& sc) {
+        sc.settings = cfg.mppi;
+        sc.settings.threads = 0;
+        for (const auto& [key, value] : cfg.params) {
+          const std::string err = set_task_param<T>(sc.params, key, value);
+          ASSERT_TRUE(err.empty()) << name << ": " << err;
+        }
+      });
+    });
+    EXPECT_TRUE(known) << name << ": task " << cfg.task;
+    ++files;
+  }
+  EXPECT_GE(files, 8);
+}
+#endif
 
 // With the obstacle grid the optimizer builds each cycle (Task::prepare), as the daemon runs
 // them: the chunked kernel, the lane kernel at one lane per rollout and the team kernel search

@@ -165,6 +165,11 @@ class FakeController final : public Controller {
     return true;
   }
   int predict(const float*, const float*, float*, int) const override { return 0; }
+  int positions(const float* x, float* xyz, int capacity) const override {
+    if (capacity < 1) return 0;
+    for (int d = 0; d < 3; ++d) xyz[d] = x[d];
+    return 1;
+  }
   const std::vector<float>& plan() const override { return plan_; }
   const MppiSettings& settings() const override { return s_; }
   std::vector<float> rollout_costs() const override { return {}; }

@@ -191,6 +191,42 @@ TEST(ControlLoop, StateTriggerReportsTheWakeUpApartFromTheOptimizer) {
   EXPECT_FALSE(r.tx.any_nonfinite());
 }
 
+// No goal or reference yet: the loop holds every vehicle where the first state put it (the
+// task's default goal is the origin, which a vehicle 2 m up would dive to), and the first
+// reference that comes replaces that.
+TEST(ControlLoop, BeforeAnyGoalTheVehiclesHoldWhereTheFirstStatePutThem) {
+  Rig r;
+  r.ctl.compute_ns = [](int) { return 1 * kMs; };
+  r.state(++r.seq, 2.0f);  // x = y = z = 2
+  r.cycle();
+  ASSERT_GE(r.ctl.inputs_set, 1);
+  for (int d = 0; d < 3; ++d) {
+    EXPECT_FLOAT_EQ(r.ctl.inputs.goals[0][d], 2.0f);
+    EXPECT_FLOAT_EQ(r.ctl.inputs.reference.center[d], 2.0f);
+  }
+  EXPECT_EQ(r.ctl.inputs.reference.kind, Reference::kHold);
+  EXPECT_EQ(r.loop.counters().holds_without_goal.load(), 1);
+  // Later states do not move the held goal.
+  r.state(++r.seq, 3.0f);
+  r.cycle();
+  EXPECT_FLOAT_EQ(r.ctl.inputs.goals[0][2], 2.0f);
+  // A goal arrives: it replaces the hold.
+  auto& ref = r.inbox.reference_buffer();
+  ref.seq = 1;
+  ref.kind = 0;
+  ref.vehicle_count = 1;
+  ref.goals[0][0] = 30.0f;
+  ref.goals[0][1] = 0.0f;
+  ref.goals[0][2] = 1.5f;
+  r.inbox.offer_reference();
+  r.state(++r.seq, 3.0f);
+  r.cycle();
+  EXPECT_FLOAT_EQ(r.ctl.inputs.goals[0][0], 30.0f);
+  EXPECT_FLOAT_EQ(r.ctl.inputs.goals[0][2], 1.5f);
+  EXPECT_EQ(r.loop.counters().holds_without_goal.load(), 1);
+  EXPECT_FALSE(r.tx.any_nonfinite());
+}
+
 // The same script on the clock's grid: each state waits 13 ms for its cycle.
 TEST(ControlLoop, ClockTriggerMakesAStateWaitForTheGrid) {
   Rig r;

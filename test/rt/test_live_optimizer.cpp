@@ -177,9 +177,12 @@ TEST(LiveUpdate, ResampleKeepsTheStepsAndFillsWithUInit) {
 
 TEST(LiveUpdate, SwapHappensBetweenCyclesWithThePlanAndTaskStateCarriedOver) {
   LiveRig r(LiveOptimizer::Mode::kSynchronous);
-  TaskInputs in;
-  in.goals[0][0] = 42.0f;
-  r.loop->controller().set_inputs(in);
+  // A goal through the inbox, as mppid gets it (the loop sets the controller's inputs).
+  auto& ref = r.inbox->reference_buffer();
+  ref.seq = 1;
+  ref.vehicle_count = 1;
+  ref.goals[0][0] = 42.0f;
+  r.inbox->offer_reference();
   for (int k = 0; k < 5; ++k) r.fresh_cycle();
   FakeController* old = &r.fake();
   ASSERT_EQ(old->iterations, 5);

@@ -72,6 +72,12 @@ class Controller {
   // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
   virtual int predict(const float* x0, const float* plan, float* xyz, int capacity) const = 0;
+  // Each vehicle's position in state x (nx floats), xyz, vehicle by vehicle: vehicles() of
+  // them, or 0 when capacity is smaller (or the controller has no positions).
+  virtual int positions(const float* x, float* xyz, int capacity) const {
+    (void)x, (void)xyz, (void)capacity;
+    return 0;
+  }
 
   // Live optimizer updates: a controller built with new optimizer settings takes over from
   // `from` (the one running): the task's parameters as they stand (goals, obstacles,
@@ -172,6 +178,11 @@ class TaskController final : public Controller {
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     return predict_positions<T>(params_, mppi_.settings(), x0, plan, xyz, capacity);
+  }
+  int positions(const float* x, float* xyz, int capacity) const override {
+    if (capacity < T::kVehicles) return 0;
+    for (int j = 0; j < T::kVehicles; ++j) T::Vehicle::position(x + j * T::kVehicleNx, xyz + 3 * j);
+    return T::kVehicles;
   }
 
   bool adopt(const Controller& from) override {

@@ -458,10 +458,25 @@ void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_
     std::copy_n(o.items, o.count, obstacles_all_.items);
     have_obstacles_ = true;
   }
+  if (!have_reference_ && !holding_ && in_->state.writes() > 0) hold_where_the_state_is(x);
   if (have_obstacles_) select_obstacles(x);
   if (have_reference_ && in_->state.writes() > 0)
     inputs_.reference_time = static_cast<float>(static_cast<double>(x.sample_utime - reference_t0_utime_) * 1e-6);
-  if (have_reference_ || have_obstacles_) c_->set_inputs(inputs_);
+  if (have_reference_ || have_obstacles_ || holding_) c_->set_inputs(inputs_);
+}
+
+// Before the first goal or reference: every vehicle's goal (and a tracking task's held
+// point) is where the first state put it, so the loop hovers in place until one arrives.
+// The task's own default is the origin, which a vehicle 2 m up would dive to: a real-time
+// team flight on a loaded host whose first goal message came ~1 s late did exactly that.
+void ControlLoop::hold_where_the_state_is(const transport::StateSample& x) {
+  float xyz[3 * TaskInputs::kMaxVehicles];
+  if (c_->positions(x.x, xyz, TaskInputs::kMaxVehicles) != inputs_.vehicle_count) return;
+  for (int v = 0; v < inputs_.vehicle_count; ++v) std::copy_n(xyz + 3 * v, 3, inputs_.goals[v]);
+  inputs_.reference.kind = Reference::kHold;
+  std::copy_n(xyz, 3, inputs_.reference.center);
+  holding_ = true;
+  counters_.holds_without_goal.fetch_add(1, std::memory_order_relaxed);
 }
 
 // Keep the kCapacity cylinders nearest to any vehicle (surface distance), in place.

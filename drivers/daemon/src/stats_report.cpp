@@ -41,6 +41,7 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   if (loop.settings().trigger == Trigger::kState)
     out += fmt::format("  trigger state: cycles started by a state={}, by the grace running out={}\n",
                        v(c.state_triggered), v(c.clock_triggered));
+  if (v(c.holds_without_goal) > 0) out += "  held where the first state was until a goal or reference came\n";
   out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} send_failures={} (failsafe entries {})\n",
                      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
                      v(c.publish_failures), v(c.failsafe_entries));
@@ -76,14 +77,14 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       "\"guard_takeovers\":{},\"guard_commands\":{},\"partial_updates\":{},\"anytime_holds\":{},"
       "\"states\":{},\"rejected_nan\":{},\"rejected_duplicate\":{},\"rejected_out_of_order\":{},"
       "\"rejected_shape\":{},\"rejected_time\":{},\"rejected_undecodable\":{},\"params_applied\":{},"
-      "\"params_rejected\":{},\"trigger\":\"{}\",\"state_triggered\":{},\"clock_triggered\":{},"
+      "\"params_rejected\":{},\"held_without_goal\":{},\"trigger\":\"{}\",\"state_triggered\":{},\"clock_triggered\":{},"
       "\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
       v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.late_holds), v(c.stale_cycles),
       v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds), v(in.states),
       v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
       v(in.rejected_time), v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected),
-      loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), f.rss_start_kb, f.rss_end_kb);
+      v(c.holds_without_goal), loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), f.rss_start_kb, f.rss_end_kb);
   return out;
 }
 

@@ -114,6 +114,7 @@ struct LoopCounters {
   std::atomic<std::int64_t> anytime_holds{0};     // anytime: below min_rollouts, held plan published
   std::atomic<std::int64_t> state_triggered{0};   // trigger state: cycles a state started
   std::atomic<std::int64_t> clock_triggered{0};   // trigger state: cycles started without one (grace ran out)
+  std::atomic<std::int64_t> holds_without_goal{0};  // no goal or reference yet: held where the first state was
 };
 
 class ControlLoop {
@@ -201,6 +202,7 @@ class ControlLoop {
   void service_live();
   void swap_in(OptimizerBundle* b);
   void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
+  void hold_where_the_state_is(const transport::StateSample& x);
   void select_obstacles(const transport::StateSample& x);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
   void send_command(transport::Command* msg, transport::Mode mode, const float* u, std::int64_t state_seq);
@@ -238,6 +240,7 @@ class ControlLoop {
   std::vector<float> distances_;
   std::int64_t reference_t0_utime_ = 0;
   bool have_reference_ = false;
+  bool holding_ = false;  // goals set from the first state (no goal or reference yet)
   bool have_obstacles_ = false;
 
   std::vector<float> held_;     // the plan to fall back on: T x nu, step 0 = next command
