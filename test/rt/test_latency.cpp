@@ -341,3 +341,23 @@ TEST(DisturbanceObserver, RealModelConvergesToTheMismatch) {
   EXPECT_NEAR(obs.estimate()[2], -9.81f * 0.05f / 1.05f, 0.01f);
   EXPECT_NEAR(obs.estimate()[0], 0.0f, 1e-4f);
 }
+
+// Controller::positions, the hold before any goal reads it: each vehicle's xyz from a state,
+// vehicle by vehicle (team3: x, y, z at 16 j), for the MPPI and the DDP controllers alike.
+TEST(Controllers, PositionsAreEachVehiclesXyz) {
+  const std::string dir = std::string(MPPID_SOURCE_DIR) + "/config/tasks/";
+  auto team = app::make_controller(
+      app::load_config(dir + "team3_forest.yaml", {"mppi.rollouts=16", "mppi.horizon=5", "mppi.simd=off"}));
+  std::vector<float> x(48, 0.0f);
+  for (int j = 0; j < 3; ++j)
+    for (int d = 0; d < 3; ++d) x[static_cast<std::size_t>(16 * j + d)] = static_cast<float>(10 * j + d + 1);
+  float xyz[9] = {};
+  ASSERT_EQ(team->positions(x.data(), xyz, 3), 3);
+  for (int j = 0; j < 3; ++j)
+    for (int d = 0; d < 3; ++d) EXPECT_FLOAT_EQ(xyz[3 * j + d], static_cast<float>(10 * j + d + 1));
+  EXPECT_EQ(team->positions(x.data(), xyz, 2), 0) << "room for fewer vehicles than the task has";
+  auto ddp = app::make_controller(app::load_config(dir + "quadrotor_forest.yaml",
+                                                   {"controller=ddp", "mppi.horizon=5", "mppi.simd=off"}));
+  ASSERT_EQ(ddp->positions(x.data(), xyz, 1), 1);
+  EXPECT_FLOAT_EQ(xyz[2], 3.0f);
+}

@@ -136,6 +136,14 @@ int predict_positions(const typename T::Params& params, const MppiSettings& s, c
   return per * T::kVehicles;
 }
 
+// Each vehicle's position in state x, xyz (Controller::positions).
+template <class T>
+int vehicle_positions(const float* x, float* xyz, int capacity) {
+  if (capacity < T::kVehicles) return 0;
+  for (int j = 0; j < T::kVehicles; ++j) T::Vehicle::position(x + j * T::kVehicleNx, xyz + 3 * j);
+  return T::kVehicles;
+}
+
 template <class T>
 class TaskController final : public Controller {
  public:
@@ -180,9 +188,7 @@ class TaskController final : public Controller {
     return predict_positions<T>(params_, mppi_.settings(), x0, plan, xyz, capacity);
   }
   int positions(const float* x, float* xyz, int capacity) const override {
-    if (capacity < T::kVehicles) return 0;
-    for (int j = 0; j < T::kVehicles; ++j) T::Vehicle::position(x + j * T::kVehicleNx, xyz + 3 * j);
-    return T::kVehicles;
+    return vehicle_positions<T>(x, xyz, capacity);
   }
 
   bool adopt(const Controller& from) override {

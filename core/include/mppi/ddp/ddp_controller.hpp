@@ -208,6 +208,9 @@ class DdpController final : public Controller {
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     return predict_positions<T>(*params_, settings_, x0, plan, xyz, capacity);
   }
+  int positions(const float* x, float* xyz, int capacity) const override {
+    return vehicle_positions<T>(x, xyz, capacity);
+  }
 
   // Live updates: a DDP controller of the same task built with new settings takes over the
   // task's parameters as they stand (not the plan: the caller resamples it).
