@@ -38,30 +38,20 @@ void DeadlineMonitor::record(std::int64_t start_ns, std::int64_t end_ns, bool mi
   }
 }
 
-void DeadlineMonitor::record_latency(std::int64_t ns) {
-  w_.latency.add(ns);
-  t_.latency.add(ns);
+void DeadlineMonitor::add(Histogram Set::*h, std::int64_t ns) {
+  (w_.*h).add(ns);
+  (t_.*h).add(ns);
 }
 
-void DeadlineMonitor::record_age(std::int64_t ns) {
-  w_.age.add(ns);
-  t_.age.add(ns);
-}
+void DeadlineMonitor::record_latency(std::int64_t ns) { add(&Set::latency, ns); }
 
-void DeadlineMonitor::record_lead(std::int64_t ns) {
-  w_.lead.add(ns);
-  t_.lead.add(ns);
-}
+void DeadlineMonitor::record_age(std::int64_t ns) { add(&Set::age, ns); }
 
-void DeadlineMonitor::record_wake(std::int64_t ns) {
-  w_.wake.add(ns);
-  t_.wake.add(ns);
-}
+void DeadlineMonitor::record_lead(std::int64_t ns) { add(&Set::lead, ns); }
 
-void DeadlineMonitor::record_optimize(std::int64_t ns) {
-  w_.optimize.add(ns);
-  t_.optimize.add(ns);
-}
+void DeadlineMonitor::record_wake(std::int64_t ns) { add(&Set::wake, ns); }
+
+void DeadlineMonitor::record_optimize(std::int64_t ns) { add(&Set::optimize, ns); }
 
 void DeadlineMonitor::reset_window() {
   for (Histogram* h : {&w_.compute, &w_.period, &w_.jitter, &w_.latency, &w_.age, &w_.lead, &w_.wake, &w_.optimize})

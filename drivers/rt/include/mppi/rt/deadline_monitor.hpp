@@ -70,6 +70,7 @@ class DeadlineMonitor {
     Histogram compute, period, jitter, latency, age, lead, wake, optimize;
   };
   TimingSummary summarise(const Set& s) const;
+  void add(Histogram Set::*h, std::int64_t ns);  // into the window and the totals
 
   std::int64_t period_;
   Set w_, t_;
