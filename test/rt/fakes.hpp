@@ -205,4 +205,13 @@ class FakeController final : public Controller {
   bool in_iterate_ = false;
 };
 
+// The header of a one-vehicle, 16-state quadrotor state (the shape the rigs' inboxes expect).
+inline void shape_state(transport::StateSample& s, std::int64_t seq) {
+  s.seq = seq;
+  s.nx = 16;
+  s.vehicle_count = 1;
+  s.n = 16;
+  s.model = 1;
+}
+
 }  // namespace mppi::test

@@ -48,22 +48,14 @@ transport::Inbox::Expect expect16_waking() {
 
 // A state of the shape expect16() takes (16 values, one vehicle, model 1), sequence number
 // `seq`, received at `recv_ns`; its values and sample time are the caller's.
-void shape_state(transport::StateSample& s, std::int64_t seq, std::int64_t recv_ns) {
-  s.seq = seq;
-  s.nx = 16;
-  s.vehicle_count = 1;
-  s.n = 16;
-  s.model = 1;
-  s.recv_ns = recv_ns;
-}
-
 struct Rig {
   explicit Rig(daemon::LoopSettings s = {}, transport::Inbox::Expect e = expect16())
       : inbox(e), loop(&ctl, &clock, &tx, &inbox, s) {}
 
   Reject state(std::int64_t n, float fill = 1.0f, std::int64_t sample_us = -1) {
     auto& s = inbox.state_buffer();
-    shape_state(s, n, clock.now_ns());
+    mppi::test::shape_state(s, n);
+    s.recv_ns = clock.now_ns();
     s.sample_utime = sample_us >= 0 ? sample_us : clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) s.x[i] = fill;
     return inbox.offer_state();
@@ -101,7 +93,8 @@ struct GuardRig {
   void cycles(int n, std::optional<float> fill = std::nullopt) {
     for (int k = 1; k <= n; ++k) {
       auto& st = inbox.state_buffer();
-      shape_state(st, k, clock.now_ns());
+      mppi::test::shape_state(st, k);
+      st.recv_ns = clock.now_ns();
       if (fill)
         for (int i = 0; i < 16; ++i) st.x[i] = *fill;
       inbox.offer_state();

@@ -32,11 +32,7 @@ transport::Inbox::Expect expect16(bool tick_on_state = false) {
 
 Reject offer(transport::Inbox* in, std::int64_t seq, std::int64_t sample_utime) {
   auto& s = in->state_buffer();
-  s.seq = seq;
-  s.nx = 16;
-  s.vehicle_count = 1;
-  s.n = 16;
-  s.model = 1;
+  mppi::test::shape_state(s, seq);
   s.sample_utime = sample_utime;
   for (int i = 0; i < 16; ++i) s.x[i] = 1.0f;
   return in->offer_state();
