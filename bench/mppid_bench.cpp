@@ -62,19 +62,6 @@ std::vector<int> parse_list(const std::string& text) {
   return out;
 }
 
-// The scenario's forest, widened (same 4 m spacing, same seed) until it holds `at_least`
-// cylinders: a scene with more obstacles than the controller is told about.
-void grow_forest(mppi::offline::Scenario* s, int at_least, int vehicles) {
-  if (s->forest.empty() || static_cast<int>(s->forest.size()) >= at_least) return;
-  std::vector<std::array<float, 2>> clear;
-  for (int j = 0; j < vehicles; ++j) {
-    clear.push_back({s->x0[0], s->inputs.goals[j][1]});
-    clear.push_back({s->inputs.goals[j][0], s->inputs.goals[j][1]});
-  }
-  for (float e = 4.0f; static_cast<int>(s->forest.size()) < at_least; e += 4.0f)
-    s->forest = mppi::offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, clear);
-}
-
 std::string escape(const std::string& s) {
   std::string o;
   for (char c : s) {
@@ -137,17 +124,7 @@ int main(int argc, char** argv) {
           std::cerr << "mppid-bench: skipping simd=" << target << ": " << e.what() << std::endl;
           continue;
         }
-        auto scenario = mppi::offline::default_scenario(*c, 4.0f, 1);
-        grow_forest(&scenario, scene_obstacles, c->vehicles());
-        scenario.inputs.obstacles.count = std::min<int>({obstacle_count, static_cast<int>(scenario.forest.size()),
-                                                         mppi::ObstacleSet::kCapacity});
-        // The nearest ones first, as the daemon sends them.
-        auto forest = scenario.forest;
-        const float x0 = scenario.x0[0], y0 = scenario.x0[1];
-        std::sort(forest.begin(), forest.end(), [&](const mppi::Cylinder& a, const mppi::Cylinder& b) {
-          return std::hypot(a.x - x0, a.y - y0) - a.radius < std::hypot(b.x - x0, b.y - y0) - b.radius;
-        });
-        for (int i = 0; i < scenario.inputs.obstacles.count; ++i) scenario.inputs.obstacles.items[i] = forest[i];
+        const auto scenario = mppi::offline::bench_scenario(*c, obstacle_count, scene_obstacles);
         c->set_inputs(scenario.inputs);
         std::vector<float> u(static_cast<std::size_t>(c->nu()));
         std::vector<double> us(static_cast<std::size_t>(iterations));

@@ -73,6 +73,38 @@ TEST(SettingsInput, TheTriggerIsClockOrStateAndItsFractionsAreBounded) {
   EXPECT_DOUBLE_EQ(d.loop.state_trigger_grace, 1.0);
 }
 
+// daemon.spin (the loop and receive threads poll instead of sleeping): a boolean, off by default.
+TEST(SettingsInput, SpinIsABooleanOffByDefault) {
+  const auto off = daemon::parse_daemon_settings(YAML::Load("rate_hz: 50"), "cartpole_swingup", 1);
+  EXPECT_FALSE(off.spin);
+  const auto on = daemon::parse_daemon_settings(YAML::Load("spin: true"), "cartpole_swingup", 1);
+  EXPECT_TRUE(on.spin);
+  EXPECT_THROW(daemon::parse_daemon_settings(YAML::Load("spin: fast"), "cartpole_swingup", 1), app::ConfigError);
+}
+
+// The loop rate as a dial (tools/gpu/rate_dial.py: one plan step a period, the horizon the same
+// in seconds): every task file's settings for the CUDA backend take 50 to 400 Hz, and the
+// default anytime margin (3 ms) stays within a quarter of the period.
+TEST(SettingsInput, EveryTaskFileTakesEveryLoopRateOfTheDialOnCuda) {
+  int files = 0;
+  for (const char* task : {"cartpole_swingup", "quadrotor_forest", "quadrotor_rate_forest", "quadrotor_rate_track",
+                           "quadrotor_track", "racecar_ellipse", "team3_forest", "team9_forest"}) {
+    for (const double rate : {50.0, 100.0, 200.0, 400.0}) {
+      const app::AppConfig file = app::load_config(app::default_config_path(task), {"daemon.rate_hz=" + std::to_string(rate)});
+      const app::AppConfig& c = file.for_backend("cuda");
+      const int nu = static_cast<int>(c.mppi.u_init.size());
+      try {
+        const auto d = daemon::parse_daemon_settings(c.root["daemon"], c.task, nu);
+        EXPECT_LE(static_cast<double>(d.loop.anytime_margin_ns), 0.25e9 / rate + 1.0) << task << " at " << rate;
+      } catch (const app::ConfigError& e) {
+        ADD_FAILURE() << task << " at " << rate << " Hz: " << e.what();
+      }
+    }
+    ++files;
+  }
+  EXPECT_EQ(files, 8);
+}
+
 // A `cuda:` section may carry daemon settings (the GPU's state trigger): merged key by key
 // into the file's daemon section, the rest of which stays.
 TEST(SettingsInput, TheCudaSectionMayCarryDaemonSettings) {

@@ -90,6 +90,11 @@ class RolloutBackend {
   // early (CUDA) ignores it.
   virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
 
+  // Whether update() prepares the parameters for the cycle itself (Task::prepare: the forest
+  // cost's obstacle grid over the plan's path, which the CUDA backend builds on the device
+  // from x0 and the plan it is given). The optimizer then skips Task::prepare and passes the
+  // parameters as they are; any grid in them is ignored.
+  virtual bool prepares_params() const { return false; }
   // Bytes allocated at start-up (host, device).
   virtual std::size_t host_bytes() const = 0;
   virtual std::size_t device_bytes() const { return 0; }

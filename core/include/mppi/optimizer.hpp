@@ -2,7 +2,8 @@
 // update per control cycle, smooths the plan inside the limits, hands out u_0 and warm
 // starts the next cycle by shifting (u_{N-1} <- u_init). Before each update it lets the
 // task's cost prepare for the cycle from the plan's noise-free path (Task::prepare: the
-// forest cost's obstacle culling), on its own copy of the parameters.
+// forest cost's obstacle culling), on its own copy of the parameters, unless the backend
+// does that itself (RolloutBackend::prepares_params).
 #pragma once
 
 #include <algorithm>
@@ -43,7 +44,7 @@ class Mppi {
   // held plan goes out and the plan shifts, as fallback() does.
   const UpdateStats& iterate(const float* x0, const Params& params, float* u_out) {
     const Params* p = &params;
-    if constexpr (Task::kUsesPath) {
+    if (Task::kUsesPath && !backend_->prepares_params()) {
       *work_ = params;
       Task::prepare(*work_, x0, plan_.data(), settings_.horizon, settings_.dt, settings_.substeps, path_.data());
       p = work_.get();

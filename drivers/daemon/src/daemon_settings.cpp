@@ -1,5 +1,6 @@
 #include "mppi/daemon/daemon_settings.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <set>
@@ -89,7 +90,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "spin"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -105,9 +106,11 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
       static_cast<int>(number(section, "watchdog_max_optimizer_errors", l.watchdog_max_optimizer_errors, 1, 1e6));
   if (section["lockstep"]) l.lockstep = scalar<bool>(section["lockstep"], "lockstep");
   if (section["deadline_guard"]) l.deadline_guard = scalar<bool>(section["deadline_guard"], "deadline_guard");
+  if (section["spin"]) d.spin = scalar<bool>(section["spin"], "spin");
+  // Default 3 ms, at most a quarter of the period (faster loops: tools/gpu/rate_dial.py).
+  const double default_margin_ms = std::min(static_cast<double>(l.anytime_margin_ns) / 1e6, 250.0 / l.rate_hz);
   l.anytime_margin_ns =
-      std::llround(number(section, "anytime_margin_ms", static_cast<double>(l.anytime_margin_ns) / 1e6, 0.0,
-                          1000.0 / l.rate_hz) * 1e6);
+      std::llround(number(section, "anytime_margin_ms", default_margin_ms, 0.0, 1000.0 / l.rate_hz) * 1e6);
   const std::string trigger = text(section, "trigger", "clock");
   if (trigger != "clock" && trigger != "state") fail("trigger", "must be clock or state");
   l.trigger = trigger == "state" ? Trigger::kState : Trigger::kClock;

@@ -162,7 +162,7 @@ int main(int argc, char** argv) {
   // ---- transport --------------------------------------------------------------------
   // The plan message buffer is sized once, for the longest horizon a live update may set.
   const int max_plan_steps = ds.live.enabled ? std::max(controller->horizon(), ds.live.max_horizon) : controller->horizon();
-  mppi::rt::MonotonicClock clock;
+  mppi::rt::MonotonicClock clock(ds.spin && !ds.loop.lockstep);
   std::unique_ptr<mppi::transport::LcmTransport> tx;
   try {
     tx = std::make_unique<mppi::transport::LcmTransport>(ds.lcm_url, ds.channels, &clock,
@@ -266,6 +266,7 @@ int main(int argc, char** argv) {
   // ---- run ---------------------------------------------------------------------------
   // States and ticks must be taken in while the optimizer fills the cores.
   if (realtime && ds.realtime.fifo_priority > 0) tx->set_receive_fifo_priority(std::min(99, ds.realtime.fifo_priority + 2));
+  tx->set_receive_spin(ds.spin && !ds.loop.lockstep);
   tx->start(inbox.get());
   const long rss_start = mppi::rt::resident_kb();
   const std::int64_t t_start = mppi::rt::monotonic_ns();

@@ -72,7 +72,7 @@ void LcmTransport::start(Inbox* inbox) {
       receive_fifo_ok_.store(pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0);
     }
     while (running_.load(std::memory_order_relaxed)) {
-      if (lcm_.handleTimeout(timeout_ms_) < 0) break;
+      if (lcm_.handleTimeout(receive_spin_ ? 0 : timeout_ms_) < 0) break;
     }
   });
 }

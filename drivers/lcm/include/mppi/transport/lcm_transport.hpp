@@ -53,6 +53,9 @@ class LcmTransport final : public Transport {
   // A refusal leaves it at its policy; receive_priority_ok() says which happened.
   void set_receive_fifo_priority(int priority) { receive_fifo_ = priority; }
   bool receive_priority_ok() const { return receive_fifo_ok_.load(); }
+  // Before start(): the receive thread polls the socket (handleTimeout(0) in a loop) instead of
+  // sleeping in it: a busy core, no wake-up between a datagram and its decode.
+  void set_receive_spin(bool spin) { receive_spin_ = spin; }
   void stop() override;
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
@@ -77,6 +80,7 @@ class LcmTransport final : public Transport {
   Inbox* inbox_ = nullptr;
   std::thread thread_;
   int receive_fifo_ = 0;
+  bool receive_spin_ = false;
   std::atomic<bool> receive_fifo_ok_{false};
   std::atomic<bool> running_{false};
 

@@ -1,0 +1,175 @@
+#!/usr/bin/env bash
+# The whole control cycle on the GPU machine, this tree against a base tree in the same call
+# (issue 24): the cost of Controller::iterate around the update, the daemon's state -> command,
+# and the update at the loop rates of tools/gpu/rate_dial.py. Offline, from carried trees
+# (tools/gpu/README.md): run from this tree, with .devdeps beside it.
+#
+#   tools/gpu/cycle_session.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60] STEP...
+#   STEP: build cudatest bench daemon rates
+#     build     configure and build the targets below in this tree (and --base) at once
+#     cudatest  the CUDA tests of this tree (parity, device obstacle grid)
+#     bench     mppid-bench (Controller::iterate) and mppid-gpu-timing (the update alone) on the
+#               issue's three configurations, base and this tree interleaved, twice; this tree's
+#               update with the host's obstacle grid (MPPID_CUDA_GRID=host) and on mppid-bench's scene
+#     daemon    daemon-bench --realtime --backend cuda K = 16384 (state trigger): base, this tree,
+#               this tree with daemon.spin
+#     rates     mppid-gpu-timing on mppid-bench's scene at the plan lengths of 100-400 Hz, and
+#               daemon-bench at 400 Hz (states at 400 Hz) for --rate-seconds
+# Results: $OUT (or results/cycle-<time>): one log per step, summary.md last.
+set -uo pipefail
+HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+cd "$HERE"
+BASE="" DAEMON_S=30 RATE_S=60 STEPS=()
+while (($#)); do
+  case "$1" in
+    --base) BASE="$(cd "$2" && pwd)"; shift ;;
+    --daemon-seconds) DAEMON_S="$2"; shift ;;
+    --rate-seconds) RATE_S="$2"; shift ;;
+    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    *) STEPS+=("$1") ;;
+  esac
+  shift
+done
+D="${MPPID_DEVDEPS:-$HERE/.devdeps}"
+RES="${OUT:-$HERE/results/cycle-$(date -u +%Y%m%d-%H%M%S)}"
+mkdir -p "$RES"
+SUMMARY="$RES/summary.md"
+T0=$(date +%s)
+status=0
+say() { printf '[cycle %4ds] %s\n' $(($(date +%s) - T0)) "$*" | tee -a "$RES/session.log"; }
+fail() { say "FAILED: $*"; status=1; }
+want() { [[ " ${STEPS[*]} " == *" $1 "* ]]; }
+B_THIS=/root/build-this B_BASE=/root/build-base
+
+# ---- setup (as tools/gpu/run-all.sh) ----
+export PATH="$D/bin:$PATH"
+export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+PY="$(command -v python3)"
+"$PY" -c 'import lcm' 2>/dev/null ||
+  "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl >>"$RES/session.log" 2>&1
+LCM_DIR="$("$PY" -c 'import lcm,os;print(os.path.join(os.path.dirname(os.path.dirname(lcm.__file__)),"lib","lcm","cmake"))')"
+for tree in "$HERE" ${BASE:+"$BASE"}; do
+  mkdir -p "$tree/.venv/bin"
+  for n in python python3; do printf '#!/bin/sh\nexec %s "$@"\n' "$PY" >"$tree/.venv/bin/$n"; chmod +x "$tree/.venv/bin/$n"; done
+done
+{
+  echo "# cycle session ($(date -u +%FT%TZ))"
+  echo "- GPU: $(nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader 2>&1)"
+  echo "- CPU: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
+  echo "- this tree: ${MPPID_COMMIT:-$(cat .gpuwork-commit 2>/dev/null || echo unknown)}; base: ${BASE:-none} ${MPPID_BASE_COMMIT:-}"
+} >"$SUMMARY"
+
+build() {  # tree dir
+  local cfg=(-S "$1" -B "$2" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90
+             -DMPPID_WERROR=OFF -DMPPID_LCM=ON -DMPPID_TESTS=ON -DMPPID_BENCH=ON
+             -DRANDOM123_INCLUDE_DIR="$D/usr/include" -Dlcm_DIR="$LCM_DIR" -DMPPID_GLIB_LIBRARY="$D/lib/libglib-2.0.so.0")
+  [[ -d "$D/usr/lib/x86_64-linux-gnu/cmake" ]] && cfg+=(-DCMAKE_PREFIX_PATH="$D/usr")
+  [[ -d "$D/googletest" ]] && cfg+=(-DMPPID_GTEST_SOURCE="$D/googletest")
+  cmake "${cfg[@]}" >"$RES/configure-$(basename "$2").log" 2>&1 &&
+    ninja -C "$2" -j"$(nproc)" mppid-bench mppid-gpu-timing cuda_backend_tests mppid mppid-peer >"$RES/build-$(basename "$2").log" 2>&1
+}
+
+if want build; then
+  build "$HERE" "$B_THIS" & p1=$!
+  if [[ -n "$BASE" ]]; then build "$BASE" "$B_BASE" & p2=$!; wait $p2 || fail "build base"; fi
+  wait $p1 || fail "build this"
+  say "build done"
+fi
+
+if want cudatest; then
+  timeout 300 "$B_THIS/bin/cuda_backend_tests" >"$RES/cudatest.log" 2>&1 || fail "cuda_backend_tests"
+  echo "- cuda_backend_tests: $(grep -E '^\[  (PASSED|FAILED)  \]' "$RES/cudatest.log" | tr '\n' ' ')" >>"$SUMMARY"
+  grep -E '^\[  FAILED  \]' "$RES/cudatest.log" | sed 's/^/    /' >>"$SUMMARY"
+  say "cudatest done"
+fi
+
+bench_row() {  # label build: the three configurations of issue 24, one JSON line each
+  for m in "quadrotor 16384" "quadrotor_rate 16384" "team3 1200"; do
+    set -- $m
+    "$B/bin/mppid-bench" --model "$1" --backend cuda --rollouts "$2" --horizon 100 --obstacles 32 --iterations 1000 |
+      sed "s/^{/{\"tree\":\"$LABEL\",/"
+  done
+}
+if want bench; then
+  cases=(quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000)
+  bench_cases=(quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200)
+  for round in 1 2; do
+    for LABEL in base this; do
+      B=$B_THIS; [[ $LABEL == base ]] && B=$B_BASE
+      [[ $LABEL == base && -z "$BASE" ]] && continue
+      bench_row >>"$RES/bench.jsonl" 2>>"$RES/bench.err" || fail "mppid-bench $LABEL"
+      "$B/bin/mppid-gpu-timing" --iters 1000 "${cases[@]}" | sed "s/^{/{\"tree\": \"$LABEL\", \"round\": $round,/" \
+        >>"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "gpu-timing $LABEL"
+    done
+    "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
+      sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene.json" 2>>"$RES/bench.err"
+    MPPID_CUDA_GRID=host "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
+      sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene-hostgrid.json" 2>>"$RES/bench.err"
+  done
+  {
+    echo; echo "| tree | task | K | mppid-bench median us | p99 |"; echo "|---|---|---:|---:|---:|"
+    "$PY" -c '
+import json, sys
+for l in open(sys.argv[1]):
+    if l.startswith("{"):
+        r = json.loads(l); print(f"| {r[\"tree\"]} | {r[\"task\"]} | {r[\"rollouts\"]} | {r[\"median_us\"]:.1f} | {r[\"p99_us\"]:.1f} |")' "$RES/bench.jsonl"
+    echo; echo "| file | tree/round | task | K | gpu-timing median us | p99 |"; echo "|---|---|---|---:|---:|---:|"
+    for f in gpu-timing gpu-timing-bench-scene gpu-timing-bench-scene-hostgrid; do
+      "$PY" -c '
+import json, re, sys
+for doc in re.findall(r"\{\"tree\".*?\n\}\n", open(sys.argv[1]).read(), re.S):
+    d = json.loads(doc)
+    for r in d["results"]:
+        print(f"| {sys.argv[2]} | {d[\"tree\"]}/{d[\"round\"]} | {r[\"task\"]} | {r[\"rollouts\"]} | {r[\"median_us\"]} | {r[\"p99_us\"]} |")' "$RES/$f.json" "$f"
+    done
+  } >>"$SUMMARY"
+  say "bench done"
+fi
+
+daemon_run() {  # label tree build [mppid args...]
+  local label=$1 tree=$2 b=$3; shift 3
+  "$tree/drivers/daemon/tools/daemon-bench" --build "$b" --seconds "$DAEMON_S" --realtime --backend cuda "$@" \
+    >"$RES/daemon-$label.json" 2>"$RES/daemon-$label.err" || fail "daemon-bench $label"
+  "$PY" -c '
+import json, sys
+d = json.load(open(sys.argv[1]))["daemon"]
+f = lambda k: f"{d[k][\"mean_ms\"]:.3f} / {d[k][\"p99_ms\"]:.2f}"
+print(f"| {sys.argv[2]} | {d[\"rate_hz\"]} | {d[\"rollouts\"]} | {d[\"cycles\"]} | {d[\"misses\"]} | {f(\"latency\")} | {f(\"age\")} | {f(\"wake\")} | {f(\"optimize\")} | {f(\"compute\")} |")' \
+    "$RES/daemon-$label.json" "$label" >>"$RES/daemon-table.md" 2>>"$RES/daemon-$label.err"
+}
+if want daemon; then
+  k=(-- --set mppi.rollouts=16384 --set daemon.trigger=state)
+  [[ -n "$BASE" ]] && daemon_run base "$BASE" "$B_BASE" "${k[@]}"
+  daemon_run this "$HERE" "$B_THIS" "${k[@]}"
+  daemon_run this-spin "$HERE" "$B_THIS" "${k[@]}" --set daemon.spin=true
+  say "daemon done"
+fi
+
+if want rates; then
+  {
+    "$B_THIS/bin/mppid-gpu-timing" --iters 300 --scene bench quadrotor_forest:16384:200 quadrotor_forest:8192:400 \
+      quadrotor_forest:16384:400 quadrotor_forest:4096:800 quadrotor_forest:8192:800 team3_forest:1200:100 \
+      team3_forest:1200:200 team3_forest:1200:400 quadrotor_rate_track:4096:150 quadrotor_rate_track:4096:300 \
+      quadrotor_rate_track:4096:600
+  } >"$RES/gpu-timing-rates.json" 2>>"$RES/bench.err" || fail "gpu-timing rates"
+  mapfile -t sets < <("$PY" tools/gpu/rate_dial.py sets quadrotor_forest 400 --rollouts 4096)
+  args=(--); for s in "${sets[@]}"; do args+=(--set "$s"); done
+  DAEMON_S=$RATE_S daemon_run this-400hz "$HERE" "$B_THIS" --rate-in 400 "${args[@]}"
+  {
+    echo; echo "| gpu-timing (bench scene), plan lengths of the rates | K | T | median us | p99 |"; echo "|---|---:|---:|---:|---:|"
+    grep '"task"' "$RES/gpu-timing-rates.json" |
+      sed -E 's/.*"task": "([^"]*)", "rollouts": ([0-9]*), "horizon": ([0-9]*), "median_us": ([0-9.]*), "p99_us": ([0-9.]*).*/| \1 | \2 | \3 | \4 | \5 |/'
+  } >>"$SUMMARY"
+  say "rates done"
+fi
+
+if [[ -f "$RES/daemon-table.md" ]]; then
+  {
+    echo; echo "| daemon-bench ($DAEMON_S s; 400 Hz: $RATE_S s) | Hz | K | cycles | misses | state->command mean / p99 ms | age | wake | optimize | compute |"
+    echo "|---|---:|---:|---:|---:|---|---|---|---|---|"
+    cat "$RES/daemon-table.md"
+  } >>"$SUMMARY"
+fi
+say "all done, status $status"
+cat "$SUMMARY"
+exit $status
