@@ -15,7 +15,8 @@
 #               this tree with daemon.spin
 #     rates     mppid-gpu-timing on mppid-bench's scene at the plan lengths of 100-400 Hz, and
 #               daemon-bench at 400 Hz (states at 400 Hz) for --rate-seconds
-# Results: $OUT (or results/cycle-<time>): one log per step, summary.md last.
+# Results: results/cycle-<time>/ (one log per step, summary.md last); with $OUT set (the device
+# tool), summary.md and everything as cycle.tgz there.
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$HERE"
@@ -31,7 +32,7 @@ while (($#)); do
   shift
 done
 D="${MPPID_DEVDEPS:-$HERE/.devdeps}"
-RES="${OUT:-$HERE/results/cycle-$(date -u +%Y%m%d-%H%M%S)}"
+RES="$HERE/results/cycle-$(date -u +%Y%m%d-%H%M%S)"
 mkdir -p "$RES"
 SUMMARY="$RES/summary.md"
 T0=$(date +%s)
@@ -172,4 +173,8 @@ if [[ -f "$RES/daemon-table.md" ]]; then
 fi
 say "all done, status $status"
 cat "$SUMMARY"
+if [[ -n "${OUT:-}" ]]; then
+  cp "$SUMMARY" "$OUT/"
+  tar -C "$(dirname "$RES")" -czf "$OUT/cycle.tgz" "$(basename "$RES")"
+fi
 exit $status
