@@ -502,6 +502,7 @@ __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
   extern __shared__ __align__(16) unsigned char smem[];
   const ChunkedBlock<T, kKeep> b(in, plan, u_keep, K, horizon, chunk, dt, substeps, smem);
   b.prologue(c);
+  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
   for (int ci = 0; ci < b.nchunks; ++ci) {
     // The producer of chunk ci + 1 (none after the last chunk: every warp consumes).
     const int producer = ci + 1 < b.nchunks ? producer_warp(ci + 1, b.slot, b.warps) : -1;

@@ -248,6 +248,7 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
     }
   }
   __syncthreads();
+  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
 
   for (int ci = 0; ci < nchunks; ++ci) {
     const int producer = ci + 1 < nchunks ? producer_warp(ci + 1, slot, warps) : -1;

@@ -424,7 +424,7 @@ class CudaBackend final : public RolloutBackend<T> {
                        st, reinterpret_cast<const ObstacleSet*>(params + cost_at + offsetof(C, obstacles)),
                        reinterpret_cast<const ObstacleGridLayout*>(d_in_.as<unsigned char>() + layout_offset_),
                        d_grid_lists_.as<std::uint8_t>(), d_grid_counts_.as<int>(),
-                       reinterpret_cast<ObstacleGrid*>(params + cost_at + offsetof(C, obstacle_grid))),
+                       reinterpret_cast<ObstacleGrid*>(params + cost_at + offsetof(C, obstacle_grid)), pdl_),
                    [&] { return what("launching the obstacle grid build"); });
       }
     }
@@ -438,11 +438,25 @@ class CudaBackend final : public RolloutBackend<T> {
     }
     if (chunked_) {
       // Rollouts, costs and each block's weighted sums in one kernel; then the blocks combined.
+      // Behind the device's obstacle grid, a programmatic dependent launch: the noise and the
+      // first chunk's dynamics run while the grid is packed (griddep_wait before the costs).
       const int threads = 32 * chunk_warps_;
-      chunked_kernel()<<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
-          d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
-          d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
-          inv_lambda_, trajectory_ ? 1 : 0, c_);
+      cudaLaunchConfig_t cfg{};
+      cfg.gridDim = dim3(static_cast<unsigned>(chunk_blocks_));
+      cfg.blockDim = dim3(static_cast<unsigned>(threads));
+      cfg.dynamicSmemBytes = chunk_smem_;
+      cfg.stream = st;
+      cudaLaunchAttribute attr[1];
+      attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+      attr[0].val.programmaticStreamSerializationAllowed = 1;
+      cfg.attrs = attr;
+      cfg.numAttrs = pdl_ && device_grid_ ? 1 : 0;
+      float* u_keep = keep_u_ ? d_u_.as<float>() : nullptr;
+      lazy_check(cudaLaunchKernelEx(&cfg, chunked_kernel(), d_in, d_plan, d_cost_.as<float>(),
+                                    d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
+                                    d_stats_part_.as<StatsPart>(), u_keep, k_, t_, chunk_steps_, dt_, substeps_,
+                                    inv_lambda_, trajectory_ ? 1 : 0, c_),
+                 [&] { return what("launching the chunked rollout kernel"); });
       lazy_check(cudaGetLastError(), [&] {
         return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
                     std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");

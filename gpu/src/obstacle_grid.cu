@@ -9,25 +9,36 @@
 
 #include "cuda_check.cuh"
 #include "mppi/gpu/cuda_backend.hpp"
+#include "kernels.cuh"
 #include "obstacle_grid.cuh"
 
 namespace mppi::cuda_detail {
 namespace {
 
 constexpr unsigned kWarp = 0xffffffffu;
-constexpr int kListThreads = 256, kListBlocks = 128;  // 1024 warps over the (attempt, cell) rows
+// 2048 warps: every (attempt, cell) row of a grid at the cell limit in one round (attempt 0
+// has at most kMaxCells, the coarser ones about 0.8 kMaxCells together).
+constexpr int kListThreads = 256, kListBlocks = 256;
 constexpr int kPackThreads = ObstacleGrid::kMaxCells;  // one thread a cell
 
 __global__ void __launch_bounds__(kListThreads) grid_lists(const ObstacleSet* set, const ObstacleGridLayout* layout,
                                                            std::uint8_t* lists, int* counts) {
+  griddep_launch_dependents();  // grid_pack may be scheduled now; it waits for these lists
   const ObstacleGridLayout& L = *layout;
   const int lane = static_cast<int>(threadIdx.x) & 31;
   const int first_warp = static_cast<int>((blockIdx.x * blockDim.x + threadIdx.x) >> 5);
   const int warps = static_cast<int>((gridDim.x * blockDim.x) >> 5);
-  for (int row = first_warp; row < L.attempts * ObstacleGrid::kMaxCells; row += warps) {
-    const ObstacleGridLayout::Attempt& a = L.attempt[row / ObstacleGrid::kMaxCells];
-    const int cell = row % ObstacleGrid::kMaxCells;
-    if (cell >= a.cx * a.cy) continue;  // the same for the whole warp
+  int cells_total = 0;
+  for (int a = 0; a < L.attempts; ++a) cells_total += L.attempt[a].cx * L.attempt[a].cy;
+  // Work item w: the cells of attempt 0, then those of attempt 1, ... (no idle warps).
+  for (int w = first_warp; w < cells_total; w += warps) {
+    int attempt = 0, cell = w;
+    for (int n = L.attempt[0].cx * L.attempt[0].cy; cell >= n; n = L.attempt[attempt].cx * L.attempt[attempt].cy) {
+      cell -= n;
+      ++attempt;
+    }
+    const ObstacleGridLayout::Attempt& a = L.attempt[attempt];
+    const int row = attempt * ObstacleGrid::kMaxCells + cell;
     const int ix = cell % a.cx, iy = cell / a.cx;
     const grid_bounds::Box b = grid_bounds::cells(L.lox, L.loy, a.side, ix, iy, ix + 1, iy + 1, L.grow);
     double u = 1e300;  // the host's HUGE_VAL: the layout has at least one cylinder
@@ -48,6 +59,8 @@ __global__ void __launch_bounds__(kListThreads) grid_lists(const ObstacleSet* se
 
 __global__ void __launch_bounds__(kPackThreads) grid_pack(const ObstacleGridLayout* layout, const std::uint8_t* lists,
                                                           const int* counts, ObstacleGrid* grid) {
+  griddep_launch_dependents();  // the rollouts may start their noise and dynamics now
+  griddep_wait();               // grid_lists is complete and its lists visible
   using Scan = cub::BlockScan<int, kPackThreads>;
   __shared__ typename Scan::TempStorage scan;
   __shared__ int used[ObstacleSet::kCapacity];
@@ -96,12 +109,23 @@ __global__ void __launch_bounds__(kPackThreads) grid_pack(const ObstacleGridLayo
 }  // namespace
 
 cudaError_t enqueue_obstacle_grid(cudaStream_t st, const ObstacleSet* set, const ObstacleGridLayout* layout,
-                                  std::uint8_t* lists, int* counts, ObstacleGrid* grid) {
+                                  std::uint8_t* lists, int* counts, ObstacleGrid* grid, bool pdl) {
   grid_lists<<<kListBlocks, kListThreads, 0, st>>>(set, layout, lists, counts);
   const cudaError_t e = cudaGetLastError();
   if (e != cudaSuccess) return e;
-  grid_pack<<<1, kPackThreads, 0, st>>>(layout, lists, counts, grid);
-  return cudaGetLastError();
+  // grid_pack as a programmatic dependent launch of grid_lists (sm_90 on; elsewhere a plain
+  // launch): scheduled while the lists are computed, it waits for them on the device.
+  cudaLaunchConfig_t cfg{};
+  cfg.gridDim = dim3(1);
+  cfg.blockDim = dim3(kPackThreads);
+  cfg.stream = st;
+  cudaLaunchAttribute attr[1];
+  attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
+  attr[0].val.programmaticStreamSerializationAllowed = 1;
+  cfg.attrs = attr;
+  cfg.numAttrs = pdl ? 1 : 0;
+  return cudaLaunchKernelEx(&cfg, grid_pack, layout, static_cast<const std::uint8_t*>(lists),
+                            static_cast<const int*>(counts), grid);
 }
 
 }  // namespace mppi::cuda_detail
@@ -121,7 +145,7 @@ ObstacleGrid build_obstacle_grid_on_device(const ObstacleSet& set, const float* 
   check(cudaMemcpy(d_layout.as<void>(), &layout, sizeof(layout), cudaMemcpyHostToDevice), "cudaMemcpy of the layout");
   check(cudaMemset(d_grid.as<void>(), 0xff, sizeof(ObstacleGrid)), "cudaMemset of the grid");  // poisoned
   check(enqueue_obstacle_grid(nullptr, d_set.as<ObstacleSet>(), d_layout.as<ObstacleGridLayout>(),
-                              d_lists.as<std::uint8_t>(), d_counts.as<int>(), d_grid.as<ObstacleGrid>()),
+                              d_lists.as<std::uint8_t>(), d_counts.as<int>(), d_grid.as<ObstacleGrid>(), true),
         "launching the obstacle grid build");
   ObstacleGrid grid;
   check(cudaMemcpy(&grid, d_grid.as<void>(), sizeof(grid), cudaMemcpyDeviceToHost), "the obstacle grid build");

@@ -30,8 +30,10 @@ constexpr std::size_t kGridListBytes = kGridCells * ObstacleSet::kCapacity;
 constexpr std::size_t kGridCountBytes = kGridCells * sizeof(int);
 
 // Enqueues the build of *grid from the cylinders *set and the layout *layout (all in device
-// memory) on stream st (gpu/src/obstacle_grid.cu). Returns the launch error, if any.
+// memory) on stream st (gpu/src/obstacle_grid.cu). Returns the launch error, if any. pdl: the
+// pack is a programmatic dependent launch of the lists and lets the kernel after it be one
+// too (sm_90 on), which must then griddep_wait() before it reads the grid.
 cudaError_t enqueue_obstacle_grid(cudaStream_t st, const ObstacleSet* set, const ObstacleGridLayout* layout,
-                                  std::uint8_t* lists, int* counts, ObstacleGrid* grid);
+                                  std::uint8_t* lists, int* counts, ObstacleGrid* grid, bool pdl);
 
 }  // namespace mppi::cuda_detail

@@ -4,28 +4,36 @@
 # and the update at the loop rates of tools/gpu/rate_dial.py. Offline, from carried trees
 # (tools/gpu/README.md): run from this tree, with .devdeps beside it.
 #
-#   tools/gpu/cycle_session.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60] STEP...
-#   STEP: build cudatest bench daemon rates
+#   tools/gpu/cycle_session.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60]
+#        [--seeds 3] [--session-seconds 570] STEP...
+#   STEP: build cudatest bench daemon rates flights
 #     build     configure and build the targets below in this tree (and --base) at once
 #     cudatest  the CUDA tests of this tree (parity, device obstacle grid)
 #     bench     mppid-bench (Controller::iterate) and mppid-gpu-timing (the update alone) on the
 #               issue's three configurations, base and this tree interleaved, twice; this tree's
-#               update with the host's obstacle grid (MPPID_CUDA_GRID=host) and on mppid-bench's scene
+#               update with the host's obstacle grid (MPPID_CUDA_GRID=host: the kernels against
+#               the base's) and on mppid-bench's scene (with either grid)
 #     daemon    daemon-bench --realtime --backend cuda K = 16384 (state trigger): base, this tree,
 #               this tree with daemon.spin
 #     rates     mppid-gpu-timing on mppid-bench's scene at the plan lengths of 100-400 Hz, and
 #               daemon-bench at 400 Hz (states at 400 Hz) for --rate-seconds
+#     flights   real-time SITL campaigns at each loop rate (rate_dial.py; seeds 51..): CUDA at
+#               50/100/200/400 Hz on 3 cores each, the CPU backend at 50/100 Hz on 2 cores each,
+#               all at once (the CUDA flights share the GPU), until --session-seconds after the
+#               session's start less 25 s; the table (rate_table.py) in summary.md
 # Results: results/cycle-<time>/ (one log per step, summary.md last); with $OUT set (the device
 # tool), summary.md and everything as cycle.tgz there.
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$HERE"
-BASE="" DAEMON_S=30 RATE_S=60 STEPS=()
+BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 SESSION_S=570 STEPS=()
 while (($#)); do
   case "$1" in
     --base) BASE="$(cd "$2" && pwd)"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
     --rate-seconds) RATE_S="$2"; shift ;;
+    --seeds) SEEDS="$2"; shift ;;
+    --session-seconds) SESSION_S="$2"; shift ;;
     -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) STEPS+=("$1") ;;
   esac
@@ -67,7 +75,8 @@ build() {  # tree dir
   [[ -d "$D/usr/lib/x86_64-linux-gnu/cmake" ]] && cfg+=(-DCMAKE_PREFIX_PATH="$D/usr")
   [[ -d "$D/googletest" ]] && cfg+=(-DMPPID_GTEST_SOURCE="$D/googletest")
   cmake "${cfg[@]}" >"$RES/configure-$(basename "$2").log" 2>&1 &&
-    ninja -C "$2" -j"$(nproc)" mppid-bench mppid-gpu-timing cuda_backend_tests mppid mppid-peer >"$RES/build-$(basename "$2").log" 2>&1
+    ninja -C "$2" -j"$(nproc)" mppid-bench mppid-gpu-timing cuda_backend_tests mppid mppid-peer mppid-sim mppi_lcm_python \
+      >"$RES/build-$(basename "$2").log" 2>&1
 }
 
 if want build; then
@@ -102,28 +111,15 @@ if want bench; then
       "$B/bin/mppid-gpu-timing" --iters 1000 "${cases[@]}" | sed "s/^{/{\"tree\": \"$LABEL\", \"round\": $round,/" \
         >>"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "gpu-timing $LABEL"
     done
+    # The kernels alone, base against this (both search the host's grid): rollout_chunked's phases.
+    MPPID_CUDA_GRID=host "$B_THIS/bin/mppid-gpu-timing" --iters 1000 "${cases[@]}" |
+      sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-hostgrid.json" 2>>"$RES/bench.err"
     "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
       sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene.json" 2>>"$RES/bench.err"
     MPPID_CUDA_GRID=host "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
       sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene-hostgrid.json" 2>>"$RES/bench.err"
   done
-  {
-    echo; echo "| tree | task | K | mppid-bench median us | p99 |"; echo "|---|---|---:|---:|---:|"
-    "$PY" -c '
-import json, sys
-for l in open(sys.argv[1]):
-    if l.startswith("{"):
-        r = json.loads(l); print(f"| {r[\"tree\"]} | {r[\"task\"]} | {r[\"rollouts\"]} | {r[\"median_us\"]:.1f} | {r[\"p99_us\"]:.1f} |")' "$RES/bench.jsonl"
-    echo; echo "| file | tree/round | task | K | gpu-timing median us | p99 |"; echo "|---|---|---|---:|---:|---:|"
-    for f in gpu-timing gpu-timing-bench-scene gpu-timing-bench-scene-hostgrid; do
-      "$PY" -c '
-import json, re, sys
-for doc in re.findall(r"\{\"tree\".*?\n\}\n", open(sys.argv[1]).read(), re.S):
-    d = json.loads(doc)
-    for r in d["results"]:
-        print(f"| {sys.argv[2]} | {d[\"tree\"]}/{d[\"round\"]} | {r[\"task\"]} | {r[\"rollouts\"]} | {r[\"median_us\"]} | {r[\"p99_us\"]} |")' "$RES/$f.json" "$f"
-    done
-  } >>"$SUMMARY"
+  "$PY" tools/gpu/cycle_tables.py bench "$RES" >>"$SUMMARY"
   say "bench done"
 fi
 
@@ -131,12 +127,7 @@ daemon_run() {  # label tree build [mppid args...]
   local label=$1 tree=$2 b=$3; shift 3
   "$tree/drivers/daemon/tools/daemon-bench" --build "$b" --seconds "$DAEMON_S" --realtime --backend cuda "$@" \
     >"$RES/daemon-$label.json" 2>"$RES/daemon-$label.err" || fail "daemon-bench $label"
-  "$PY" -c '
-import json, sys
-d = json.load(open(sys.argv[1]))["daemon"]
-f = lambda k: f"{d[k][\"mean_ms\"]:.3f} / {d[k][\"p99_ms\"]:.2f}"
-print(f"| {sys.argv[2]} | {d[\"rate_hz\"]} | {d[\"rollouts\"]} | {d[\"cycles\"]} | {d[\"misses\"]} | {f(\"latency\")} | {f(\"age\")} | {f(\"wake\")} | {f(\"optimize\")} | {f(\"compute\")} |")' \
-    "$RES/daemon-$label.json" "$label" >>"$RES/daemon-table.md" 2>>"$RES/daemon-$label.err"
+  "$PY" tools/gpu/cycle_tables.py daemon "$label" "$RES/daemon-$label.json" >>"$RES/daemon-table.md" 2>>"$RES/daemon-$label.err"
 }
 if want daemon; then
   k=(-- --set mppi.rollouts=16384 --set daemon.trigger=state)
@@ -164,6 +155,43 @@ if want rates; then
   say "rates done"
 fi
 
+# One (backend, rate) on its own cores: its three task groups' campaigns in turn, each stopped
+# at the session's flight deadline (finished flights are kept).
+fly_rate() {  # backend rate cores forest_rollouts
+  local be=$1 rate=$2 cores=$3 k_forest=$4 dir="$RES/flights/$1-$2" scen="$RES/scenarios-$2"
+  mkdir -p "$dir" "$scen"
+  for s in forest_4m forest_4m_robust team3_fixed rate_track_circle_fast; do
+    "$PY" tools/gpu/rate_dial.py scenario "$s" "$rate" "$scen/$s.yaml"
+  done
+  local group task scenarios k line sets
+  while read -r group task scenarios k; do
+    sets=()
+    local dial=("$PY" tools/gpu/rate_dial.py sets "$task" "$rate" --backend "$be")
+    [[ $be == cuda ]] && dial+=(--rollouts "$k")
+    while read -r line; do sets+=(--set "$line"); done < <("${dial[@]}")
+    [[ $be == cuda ]] && sets+=(--set daemon.trigger=state)
+    local left=$((FLIGHT_END - $(date +%s)))
+    ((left > 20)) || break
+    taskset -c "$cores" timeout -s INT -k 20 "$left" tools/sitl campaign --realtime --backend "$be" --realtime-jobs 1 \
+      --scenarios "$scenarios" --seeds "$SEEDS" --first-seed 51 --no-plots "${sets[@]}" --out "$dir/$group" \
+      >"$dir/$group.log" 2>&1 || say "campaign $be-$rate $group: exit $? (see its log)"
+  done <<LIST
+forest quadrotor_forest $scen/forest_4m.yaml,$scen/forest_4m_robust.yaml $k_forest
+track quadrotor_rate_track $scen/rate_track_circle_fast.yaml 4096
+team3 team3_forest $scen/team3_fixed.yaml 1200
+LIST
+}
+if want flights; then
+  export MPPID_BUILD_DIR="$B_THIS"
+  FLIGHT_END=$((T0 + SESSION_S - 25))
+  fly_rate cuda 50 0-2 16384 & fly_rate cuda 100 3-5 16384 & fly_rate cuda 200 6-8 8192 & fly_rate cuda 400 9-11 4096 &
+  fly_rate cpu 50 12-13 0 & fly_rate cpu 100 14-15 0 &
+  wait
+  { echo; echo "## Loop rates (real time, seeds 51-$((50 + SEEDS)), all flights at once)"; echo
+    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/session.log"
+  say "flights done"
+fi
+
 if [[ -f "$RES/daemon-table.md" ]]; then
   {
     echo; echo "| daemon-bench ($DAEMON_S s; 400 Hz: $RATE_S s) | Hz | K | cycles | misses | state->command mean / p99 ms | age | wake | optimize | compute |"
@@ -175,6 +203,6 @@ say "all done, status $status"
 cat "$SUMMARY"
 if [[ -n "${OUT:-}" ]]; then
   cp "$SUMMARY" "$OUT/"
-  tar -C "$(dirname "$RES")" -czf "$OUT/cycle.tgz" "$(basename "$RES")"
+  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' -czf "$OUT/cycle.tgz" "$(basename "$RES")"
 fi
 exit $status
