@@ -5,8 +5,8 @@
 # (tools/gpu/README.md): run from this tree, with .devdeps beside it.
 #
 #   tools/gpu/cycle_session.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60]
-#        [--seeds 3] [--session-seconds 570] STEP...
-#   STEP: build cudatest bench daemon rates flights
+#        [--seeds 3] [--first-seed 51] [--session-seconds 570] STEP...
+#   STEP: build cudatest bench daemon rates flights pdl spin400 track
 #     build     configure and build the targets below in this tree (and --base) at once
 #     cudatest  the CUDA tests of this tree (parity, device obstacle grid)
 #     bench     mppid-bench (Controller::iterate) and mppid-gpu-timing (the update alone) on the
@@ -21,18 +21,23 @@
 #               50/100/200/400 Hz on 3 cores each, the CPU backend at 50/100 Hz on 2 cores each,
 #               all at once (the CUDA flights share the GPU), until --session-seconds after the
 #               session's start less 25 s; the table (rate_table.py) in summary.md
+#     pdl       this tree's update with and without programmatic dependent launches
+#               (MPPID_CUDA_PDL=0), test and bench scenes
+#     spin400   daemon-bench at 400 Hz (as in rates) with daemon.spin
+#     track     rate_track_circle_fast alone at 50/100/200/400 Hz on CUDA, 4 cores each, at once
 # Results: results/cycle-<time>/ (one log per step, summary.md last); with $OUT set (the device
 # tool), summary.md and everything as cycle.tgz there.
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$HERE"
-BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 SESSION_S=570 STEPS=()
+BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 FIRST_SEED=51 SESSION_S=570 STEPS=()
 while (($#)); do
   case "$1" in
     --base) BASE="$(cd "$2" && pwd)"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
     --rate-seconds) RATE_S="$2"; shift ;;
     --seeds) SEEDS="$2"; shift ;;
+    --first-seed) FIRST_SEED="$2"; shift ;;
     --session-seconds) SESSION_S="$2"; shift ;;
     -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) STEPS+=("$1") ;;
@@ -157,14 +162,15 @@ fi
 
 # One (backend, rate) on its own cores: its three task groups' campaigns in turn, each stopped
 # at the session's flight deadline (finished flights are kept).
-fly_rate() {  # backend rate cores forest_rollouts
-  local be=$1 rate=$2 cores=$3 k_forest=$4 dir="$RES/flights/$1-$2" scen="$RES/scenarios-$2"
+fly_rate() {  # backend rate cores forest_rollouts [groups, default: forest track team3]
+  local be=$1 rate=$2 cores=$3 k_forest=$4 groups=${5:-forest track team3} dir="$RES/flights/$1-$2" scen="$RES/scenarios-$2"
   mkdir -p "$dir" "$scen"
   for s in forest_4m forest_4m_robust team3_fixed rate_track_circle_fast; do
     "$PY" tools/gpu/rate_dial.py scenario "$s" "$rate" "$scen/$s.yaml"
   done
   local group task scenarios k line sets
   while read -r group task scenarios k; do
+    [[ " $groups " == *" $group "* ]] || continue
     sets=()
     local dial=("$PY" tools/gpu/rate_dial.py sets "$task" "$rate" --backend "$be")
     [[ $be == cuda ]] && dial+=(--rollouts "$k")
@@ -173,7 +179,7 @@ fly_rate() {  # backend rate cores forest_rollouts
     local left=$((FLIGHT_END - $(date +%s)))
     ((left > 20)) || break
     taskset -c "$cores" timeout -s INT -k 20 "$left" tools/sitl campaign --realtime --backend "$be" --realtime-jobs 1 \
-      --scenarios "$scenarios" --seeds "$SEEDS" --first-seed 51 --no-plots "${sets[@]}" --out "$dir/$group" \
+      --scenarios "$scenarios" --seeds "$SEEDS" --first-seed "$FIRST_SEED" --no-plots "${sets[@]}" --out "$dir/$group" \
       >"$dir/$group.log" 2>&1 || say "campaign $be-$rate $group: exit $? (see its log)"
   done <<LIST
 forest quadrotor_forest $scen/forest_4m.yaml,$scen/forest_4m_robust.yaml $k_forest
@@ -187,9 +193,36 @@ if want flights; then
   fly_rate cuda 50 0-2 16384 & fly_rate cuda 100 3-5 16384 & fly_rate cuda 200 6-8 8192 & fly_rate cuda 400 9-11 4096 &
   fly_rate cpu 50 12-13 0 & fly_rate cpu 100 14-15 0 &
   wait
-  { echo; echo "## Loop rates (real time, seeds 51-$((50 + SEEDS)), all flights at once)"; echo
+  { echo; echo "## Loop rates (real time, seeds $FIRST_SEED-$((FIRST_SEED + SEEDS - 1)), all flights at once)"; echo
     "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/session.log"
   say "flights done"
+fi
+
+if want pdl; then
+  for pdl in 1 0; do
+    MPPID_CUDA_PDL=$pdl "$B_THIS/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 \
+      team3_forest:1200 | sed "s/^{/{\"tree\": \"this-pdl$pdl\", \"round\": 1,/" >>"$RES/gpu-timing-pdl.json"
+    MPPID_CUDA_PDL=$pdl "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench quadrotor_forest:16384 \
+      quadrotor_rate_forest:16384 team3_forest:1200 | sed "s/^{/{\"tree\": \"this-pdl$pdl\", \"round\": 2,/" >>"$RES/gpu-timing-pdl.json"
+  done 2>>"$RES/bench.err"
+  "$PY" tools/gpu/cycle_tables.py bench "$RES" >>"$SUMMARY"
+  say "pdl done"
+fi
+
+if want spin400; then
+  sets=(); while read -r line; do sets+=(--set "$line"); done < <("$PY" tools/gpu/rate_dial.py sets quadrotor_forest 400 --rollouts 4096)
+  DAEMON_S=$RATE_S daemon_run this-400hz-spin "$HERE" "$B_THIS" --rate-in 400 -- "${sets[@]}" --set daemon.spin=true
+  say "spin400 done"
+fi
+
+if want track; then
+  export MPPID_BUILD_DIR="$B_THIS"
+  FLIGHT_END=$((T0 + SESSION_S - 25))
+  fly_rate cuda 50 0-3 0 track & fly_rate cuda 100 4-7 0 track & fly_rate cuda 200 8-11 0 track & fly_rate cuda 400 12-15 0 track &
+  wait
+  { echo; echo "## rate_track_circle_fast alone (real time, CUDA, seeds $FIRST_SEED-$((FIRST_SEED + SEEDS - 1)), four rates at once)"; echo
+    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/session.log"
+  say "track done"
 fi
 
 if [[ -f "$RES/daemon-table.md" ]]; then
@@ -203,6 +236,6 @@ say "all done, status $status"
 cat "$SUMMARY"
 if [[ -n "${OUT:-}" ]]; then
   cp "$SUMMARY" "$OUT/"
-  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' -czf "$OUT/cycle.tgz" "$(basename "$RES")"
+  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' --exclude='truth.jsonl' --exclude='*.png' --exclude='build-*.log' -czf "$OUT/cycle.tgz" "$(basename "$RES")"
 fi
 exit $status

@@ -18,8 +18,10 @@ def timing_docs(path: Path):
 
 
 def bench(res: Path) -> None:
-    print("\n| tree | task | K | mppid-bench median us | p99 |\n|---|---|---:|---:|---:|")
-    for line in (res / "bench.jsonl").read_text().splitlines():
+    lines = (res / "bench.jsonl").read_text().splitlines() if (res / "bench.jsonl").exists() else []
+    if lines:
+        print("\n| tree | task | K | mppid-bench median us | p99 |\n|---|---|---:|---:|---:|")
+    for line in lines:
         if line.startswith("{"):
             r = json.loads(line)
             print(f"| {r['tree']} | {r['task']} | {r['rollouts']} | {r['median_us']:.1f} | {r['p99_us']:.1f} |")
