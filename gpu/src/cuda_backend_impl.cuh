@@ -387,16 +387,8 @@ class CudaBackend final : public RolloutBackend<T> {
   // finalize_blocks for `parts` chunks or blocks per step, after the kernel that wrote them.
   void launch_finalize(cudaStream_t st, int parts, float* plan_out, DeviceStats* stats) {
     const float* d_plan = reinterpret_cast<const float*>(d_in_.as<unsigned char>() + align16(sizeof(Input<T>)));
-    cudaLaunchConfig_t cfg{};
-    cfg.gridDim = dim3(static_cast<unsigned>(t_));
-    cfg.blockDim = dim3(kReduceBlock);
-    cfg.dynamicSmemBytes = 0;
-    cfg.stream = st;
-    cudaLaunchAttribute attr[1];
-    attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
-    attr[0].val.programmaticStreamSerializationAllowed = 1;
-    cfg.attrs = attr;
-    cfg.numAttrs = pdl_ ? 1 : 0;
+    cudaLaunchAttribute attr;
+    const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(t_)), dim3(kReduceBlock), 0, st, pdl_, &attr);
     const float* part = d_part_.as<float>();
     const StatsPart* stats_part = d_stats_part_.as<StatsPart>();
     const float* pmin = d_pmin_.as<float>();
@@ -441,16 +433,10 @@ class CudaBackend final : public RolloutBackend<T> {
       // Behind the device's obstacle grid, a programmatic dependent launch: the noise and the
       // first chunk's dynamics run while the grid is packed (griddep_wait before the costs).
       const int threads = 32 * chunk_warps_;
-      cudaLaunchConfig_t cfg{};
-      cfg.gridDim = dim3(static_cast<unsigned>(chunk_blocks_));
-      cfg.blockDim = dim3(static_cast<unsigned>(threads));
-      cfg.dynamicSmemBytes = chunk_smem_;
-      cfg.stream = st;
-      cudaLaunchAttribute attr[1];
-      attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
-      attr[0].val.programmaticStreamSerializationAllowed = 1;
-      cfg.attrs = attr;
-      cfg.numAttrs = pdl_ && device_grid_ ? 1 : 0;
+      cudaLaunchAttribute attr;
+      const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(chunk_blocks_)),
+                                                   dim3(static_cast<unsigned>(threads)), chunk_smem_, st,
+                                                   pdl_ && device_grid_, &attr);
       float* u_keep = keep_u_ ? d_u_.as<float>() : nullptr;
       lazy_check(cudaLaunchKernelEx(&cfg, chunked_kernel(), d_in, d_plan, d_cost_.as<float>(),
                                     d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),

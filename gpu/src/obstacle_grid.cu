@@ -115,15 +115,8 @@ cudaError_t enqueue_obstacle_grid(cudaStream_t st, const ObstacleSet* set, const
   if (e != cudaSuccess) return e;
   // grid_pack as a programmatic dependent launch of grid_lists (sm_90 on; elsewhere a plain
   // launch): scheduled while the lists are computed, it waits for them on the device.
-  cudaLaunchConfig_t cfg{};
-  cfg.gridDim = dim3(1);
-  cfg.blockDim = dim3(kPackThreads);
-  cfg.stream = st;
-  cudaLaunchAttribute attr[1];
-  attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
-  attr[0].val.programmaticStreamSerializationAllowed = 1;
-  cfg.attrs = attr;
-  cfg.numAttrs = pdl ? 1 : 0;
+  cudaLaunchAttribute attr;
+  const cudaLaunchConfig_t cfg = launch_config(dim3(1), dim3(kPackThreads), 0, st, pdl, &attr);
   return cudaLaunchKernelEx(&cfg, grid_pack, layout, static_cast<const std::uint8_t*>(lists),
                             static_cast<const int*>(counts), grid);
 }

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "mppi/cpu_backend.hpp"
+#include "cuda_skip.hpp"
 #include "mppi/gpu/cuda_backend.hpp"
 #include "mppi/optimizer.hpp"
 #include "scenarios.hpp"
@@ -26,12 +27,6 @@
 
 namespace mppi {
 namespace {
-
-#define SKIP_WITHOUT_CUDA()                                           \
-  do {                                                                \
-    std::string why_;                                                 \
-    if (!cuda_device_available(&why_)) GTEST_SKIP() << "no CUDA device: " << why_; \
-  } while (0)
 
 constexpr float kCostTolerance = 1e-5f;  // relative, per rollout
 constexpr float kPlanTolerance = 1e-4f;  // relative to max(1, |u|)

@@ -10,16 +10,11 @@
 
 #include "../core/grid_fixtures.hpp"
 #include "mppi/costs/obstacles.hpp"
+#include "cuda_skip.hpp"
 #include "mppi/gpu/cuda_backend.hpp"
 
 namespace mppi {
 namespace {
-
-#define SKIP_WITHOUT_CUDA()                                                        \
-  do {                                                                             \
-    std::string why_;                                                              \
-    if (!cuda_device_available(&why_)) GTEST_SKIP() << "no CUDA device: " << why_; \
-  } while (0)
 
 using testing::expect_exact;
 using testing::forest;
