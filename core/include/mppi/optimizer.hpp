@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "mppi/backend.hpp"
+#include "mppi/held_plan.hpp"
 #include "mppi/settings.hpp"
 
 namespace mppi {
@@ -27,14 +28,13 @@ class Mppi {
   Mppi(const MppiSettings& s, std::unique_ptr<RolloutBackend<Task>> backend)
       : settings_(s),
         backend_(std::move(backend)),
-        plan_(static_cast<std::size_t>(s.horizon) * kNu),
+        plan_(s.horizon, s.u_init),
         scratch_(plan_.size()),
         path_(static_cast<std::size_t>(s.horizon + 1) * Task::kVehicles * 2),
         work_(std::make_unique<Params>()) {
     const std::string err = validate(s, kNu);
     if (!err.empty()) throw std::invalid_argument(err);
     if (!backend_) throw std::invalid_argument("backend: none given");
-    reset();
   }
 
   // One control cycle from state x0: update the plan, smooth it, write u_0 to u_out and
@@ -51,7 +51,7 @@ class Mppi {
     backend_->update(x0, *p, cycle_++, plan_.data(), &stats_);
     if (stats_.updated && settings_.smoothing_window > 1) smooth();
     std::copy_n(plan_.data(), kNu, u_out);
-    shift();
+    plan_.shift();
     return stats_;
   }
 
@@ -65,33 +65,26 @@ class Mppi {
   // The fallback after a missed deadline or a bad update: the previous plan, shifted.
   void fallback(float* u_out) {
     std::copy_n(plan_.data(), kNu, u_out);
-    shift();
+    plan_.shift();
   }
 
   // Drop the first `steps` controls and append u_init as often (warm start; one step per
   // cycle, more when time moved on further: skipped cycles, an older state).
-  void shift(int steps = 1) {
-    const int t = settings_.horizon;
-    steps = std::clamp(steps, 0, t);
-    if (steps == 0) return;
-    std::copy(plan_.begin() + static_cast<std::ptrdiff_t>(steps) * kNu, plan_.end(), plan_.begin());
-    for (int i = t - steps; i < t; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
-  }
+  void shift(int steps = 1) { plan_.shift(steps); }
 
-  void reset() {
-    for (int i = 0; i < settings_.horizon; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
-  }
+  void reset() { plan_.reset(); }
 
   // Replace the plan (tests; a restored plan). Values are clamped into the limits.
   void set_plan(const std::vector<float>& plan) { set_plan(plan.data()); }
   void set_plan(const float* plan) {
+    float* out = plan_.data();
     for (std::size_t n = 0; n < plan_.size(); ++n) {
       const int j = static_cast<int>(n % kNu);
-      plan_[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);
+      out[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);
     }
   }
 
-  const std::vector<float>& plan() const { return plan_; }
+  const std::vector<float>& plan() const { return plan_.values(); }
   const UpdateStats& stats() const { return stats_; }
   const MppiSettings& settings() const { return settings_; }
   RolloutBackend<Task>& backend() { return *backend_; }
@@ -114,7 +107,7 @@ class Mppi {
       const float inv = 1.0f / static_cast<float>(hi - lo + 1);
       for (int j = 0; j < kNu; ++j) {
         float acc = 0.0f;
-        for (int m = lo; m <= hi; ++m) acc += plan_[m * kNu + j];
+        for (int m = lo; m <= hi; ++m) acc += plan_.data()[m * kNu + j];
         scratch_[i * kNu + j] = std::clamp(acc * inv, settings_.u_min[j], settings_.u_max[j]);
       }
     }
@@ -123,7 +116,7 @@ class Mppi {
 
   MppiSettings settings_;
   std::unique_ptr<RolloutBackend<Task>> backend_;
-  std::vector<float> plan_;
+  HeldPlan plan_;  // the warm start
   std::vector<float> scratch_;
   std::vector<float> path_;       // the plan's noise-free path, xy per step and vehicle
   std::unique_ptr<Params> work_;  // the parameters as prepared for this cycle
