@@ -159,6 +159,8 @@ def main(argv=None) -> int:
         return 0 if score.get("success") else 1
     if a.cmd == "campaign":
         from .campaign import parse_seeds, resolve_scenarios, run_campaign
+        from .flight import interrupt_on_stop_signals
+        interrupt_on_stop_signals()
         names = [s.strip() for s in a.scenarios.split(",") if s.strip()]
         try:
             resolve_scenarios(names)
@@ -218,7 +220,9 @@ def main(argv=None) -> int:
             a.json.write_text(json.dumps(rows, indent=2))
         return 0
     if a.cmd == "tune":
+        from .flight import interrupt_on_stop_signals
         from .tune import main_tune
+        interrupt_on_stop_signals()
         return main_tune(a)
     if a.cmd == "plot":
         from .plots import plot_flight

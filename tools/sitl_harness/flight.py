@@ -360,9 +360,7 @@ def fly(spec: FlightSpec) -> dict:
     """Runs one flight, scores it and plots it; returns the score (also in score.json)."""
     from . import plots, score
 
-    # SIGTERM from outside is handled like Ctrl-C: clean up, then leave.
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    interrupt_on_stop_signals()
     flight = Flight(spec)
     info = {}
     try:
@@ -379,6 +377,22 @@ def fly(spec: FlightSpec) -> dict:
             result.setdefault("warnings", []).append(f"plots failed: {e!r}")
             (flight.out / "score.json").write_text(json.dumps(result, indent=2))
     return result
+
+
+def _interrupt(*_):
+    raise KeyboardInterrupt
+
+
+def interrupt_on_stop_signals() -> None:
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread: a flight (a campaign, a
+    study) stops, cleans up and leaves. SIGINT needs this too: Python installs its Ctrl-C
+    handler only where SIGINT was not ignored at start, and a background job of a
+    non-interactive shell (`tools/test.sh &`, a CI step, `nohup`) starts with it ignored. A
+    campaign so started ignored an explicit SIGINT and flew on to its last flight (the cause
+    of test_campaign_ctrl_c's 40 s time-outs "under load": the suite ran as a background job)."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, _interrupt)
 
 
 def lcm_url_for_port(port: int) -> str:
