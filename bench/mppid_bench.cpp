@@ -120,6 +120,7 @@ int main(int argc, char** argv) {
 #ifdef MPPID_HAVE_CUDA
   if (backend == "cuda") gpu = mppi::cuda_device_name();
 #endif
+  int measured = 0;  // rows printed
   try {
     for (int k : ks) {
       for (int n : ns) {
@@ -172,12 +173,19 @@ int main(int argc, char** argv) {
                   << ",\"simd\":\"" << target << "\",\"forest_size\":" << scenario.forest.size()
                   << ",\"machine\":{\"cpu\":\"" << escape(cpu_name()) << "\",\"cores\":" << std::thread::hardware_concurrency()
                   << ",\"gpu\":\"" << escape(gpu) << "\",\"load_average\":" << load_average() << "}}" << std::endl;
+        ++measured;
         }
        }
       }
     }
   } catch (const std::exception& e) {
     std::cerr << "mppid-bench: " << e.what() << std::endl;
+    return 1;
+  }
+  // Every configuration skipped (a CUDA backend without a GPU, SIMD targets this CPU lacks):
+  // no figure, so no success either.
+  if (measured == 0) {
+    std::cerr << "mppid-bench: nothing measured: every configuration was skipped (see above)" << std::endl;
     return 1;
   }
   return 0;
