@@ -2,6 +2,8 @@
 // hover, the rate quadrotor's state, a team of three.
 #pragma once
 
+#include <initializer_list>
+#include <utility>
 #include <vector>
 
 #include "mppi/costs/forest.hpp"
@@ -29,6 +31,15 @@ inline MppiSettings quadrotor_settings(int k, int t, float lambda, float sigma, 
   s.control_cost_scale = 0.01f;
   s.threads = threads;
   return s;
+}
+
+// A model's state: `base` (zero if none) with the named entries set, e.g.
+// state_with<Racecar>({{Racecar::VX, 5.0f}, {Racecar::FX, 30.0f}}).
+template <class Model>
+std::vector<float> state_with(std::initializer_list<std::pair<int, float>> set, std::vector<float> base = {}) {
+  if (base.empty()) base.assign(Model::kNx, 0.0f);
+  for (const auto& [i, v] : set) base[static_cast<std::size_t>(i)] = v;
+  return base;
 }
 
 // A model's state derivative at (x, u).

@@ -147,6 +147,17 @@ class Flight:
             for sig, h in saved.items():
                 signal.signal(sig, h)
 
+    def _signal_group(self, sig, wait_s: float) -> bool:
+        """sig to the flight's process group, then up to wait_s for it to be gone; True if gone."""
+        try:
+            os.killpg(self.pgid, sig)
+        except ProcessLookupError:
+            pass
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and _group_alive(self.pgid):
+            time.sleep(0.05)
+        return not _group_alive(self.pgid)
+
     def _cleanup(self):
         for name in ("sim", "controller", "inject"):
             self._terminate(name, 3.0)
@@ -154,21 +165,8 @@ class Flight:
             time.sleep(0.3)  # the logger drains what is still in its socket
         self._terminate("logger", 3.0)
         if self.holder is not None:
-            try:
-                os.killpg(self.pgid, signal.SIGTERM)
-            except ProcessLookupError:
-                pass
-            deadline = time.monotonic() + 2.0
-            while time.monotonic() < deadline and _group_alive(self.pgid):
-                time.sleep(0.05)
-            if _group_alive(self.pgid):
-                try:
-                    os.killpg(self.pgid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
-                deadline = time.monotonic() + 5.0
-                while time.monotonic() < deadline and _group_alive(self.pgid):
-                    time.sleep(0.05)
+            if not self._signal_group(signal.SIGTERM, 2.0):
+                self._signal_group(signal.SIGKILL, 5.0)
             for p in list(self.procs.values()) + [self.holder]:
                 try:
                     p.wait(timeout=5)

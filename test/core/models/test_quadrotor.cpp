@@ -184,10 +184,7 @@ TEST(Quadrotor, EulerRatesInvertTheBodyRateMap) {
       EXPECT_NEAR(dx[Q::ROLL + a], rates[a], 1e-5 * (1.0 + std::fabs(rates[a]))) << "angle " << a << " case phi=" << c[0];
   }
   // A hand case: phi = 0, theta = 0 makes W the identity.
-  auto x = quad_hover_state(p);
-  x[Q::WX] = 0.25f;
-  x[Q::WY] = -0.5f;
-  x[Q::WZ] = 0.75f;
+  const auto x = state_with<Q>({{Q::WX, 0.25f}, {Q::WY, -0.5f}, {Q::WZ, 0.75f}}, quad_hover_state(p));
   const std::vector<float> u(x.begin() + Q::M1, x.end());
   const auto dx = derivative_of<Q>(p, x, u);
   EXPECT_FLOAT_EQ(dx[Q::ROLL], 0.25f);
@@ -205,10 +202,7 @@ TEST(Quadrotor, MotorsAreFirstOrderLags) {
   const auto dx = derivative_of<Q>(p, x, u);
   for (int i = 0; i < 4; ++i) EXPECT_FLOAT_EQ(dx[Q::M1 + i], 20.0f * (desired[i] - speeds[i])) << i;
   // Velocity integrates into position.
-  x[Q::VX] = 1.0f;
-  x[Q::VY] = -2.0f;
-  x[Q::VZ] = 0.5f;
-  const auto dx2 = derivative_of<Q>(p, x, u);
+  const auto dx2 = derivative_of<Q>(p, state_with<Q>({{Q::VX, 1.0f}, {Q::VY, -2.0f}, {Q::VZ, 0.5f}}, x), u);
   EXPECT_EQ(dx2[Q::PX], 1.0f);
   EXPECT_EQ(dx2[Q::PY], -2.0f);
   EXPECT_EQ(dx2[Q::PZ], 0.5f);

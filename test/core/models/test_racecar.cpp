@@ -18,10 +18,7 @@ using RC = Racecar;
 
 TEST(Racecar, StraightDrivingHasNoLateralForce) {
   const RC::Params p;
-  std::vector<float> x(RC::kNx, 0.0f);
-  x[RC::PSI] = 0.4f;
-  x[RC::VX] = 5.0f;
-  x[RC::FX] = 30.0f;
+  const auto x = state_with<RC>({{RC::PSI, 0.4f}, {RC::VX, 5.0f}, {RC::FX, 30.0f}});
   const auto dx = derivative_of<RC>(p, x, {0.0f, 30.0f});
   EXPECT_NEAR(dx[RC::X], 5.0 * std::cos(0.4), 1e-5);
   EXPECT_NEAR(dx[RC::Y], 5.0 * std::sin(0.4), 1e-5);
@@ -77,10 +74,7 @@ TEST(Racecar, BrushTireShape) {
 
 TEST(Racecar, SteeringAndDriveTrackTheirSetpoints) {
   const RC::Params p;
-  std::vector<float> x(RC::kNx, 0.0f);
-  x[RC::VX] = 3.0f;
-  x[RC::DELTA] = 0.1f;
-  x[RC::FX] = 20.0f;
+  auto x = state_with<RC>({{RC::VX, 3.0f}, {RC::DELTA, 0.1f}, {RC::FX, 20.0f}});
   const auto dx = derivative_of<RC>(p, x, {0.3f, 5.0f});
   EXPECT_FLOAT_EQ(dx[RC::DELTA], 10.0f * (0.3f - 0.1f));  // towards delta_des
   EXPECT_FLOAT_EQ(dx[RC::FX], 10.0f * (5.0f - 20.0f));
@@ -92,12 +86,7 @@ TEST(Racecar, SteeringAndDriveTrackTheirSetpoints) {
 }
 
 TEST(Integration, EulerConvergesToRk4Racecar) {
-  std::vector<float> x(RC::kNx, 0.0f);
-  x[RC::VX] = 5.0f;
-  x[RC::BETA] = 0.01f;
-  x[RC::R] = 0.1f;
-  x[RC::DELTA] = 0.02f;
-  x[RC::FX] = 10.0f;
+  const auto x = state_with<RC>({{RC::VX, 5.0f}, {RC::BETA, 0.01f}, {RC::R, 0.1f}, {RC::DELTA, 0.02f}, {RC::FX, 10.0f}});
   check_integrator<RC>(RC::Params{}, x, {0.05f, 20.0f}, "racecar");
 }
 

@@ -3,7 +3,10 @@
 // them. Fixed capacities keep the hot path free of allocation.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <string>
 
 #include "mppi/costs/obstacles.hpp"
 
@@ -77,6 +80,21 @@ struct ParamResult {
   std::int64_t cycle = 0;  // the loop cycle from which it is in effect, or at which it was refused
   char reason[192] = {};   // "" when applied; "field: reason"
 };
+
+// The answer to update p: its key and value, applied or refused with `why` (cut to fit).
+inline ParamResult answer_to(const ParamUpdate& p, bool applied, const std::string& why, std::int64_t cycle = 0) {
+  ParamResult r;
+  r.update_seq = p.seq;
+  std::memcpy(r.key, p.key, sizeof(r.key));
+  r.key[sizeof(r.key) - 1] = '\0';
+  r.value = p.value;
+  r.applied = applied;
+  r.cycle = cycle;
+  const std::size_t n = std::min(why.size(), sizeof(r.reason) - 1);
+  std::memcpy(r.reason, why.data(), n);
+  r.reason[n] = '\0';
+  return r;
+}
 
 struct ClockTick {
   std::int64_t seq = 0;
