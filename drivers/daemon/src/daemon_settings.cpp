@@ -89,7 +89,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -134,7 +134,8 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   if (const YAML::Node c = section["channels"]) {
     if (!c.IsMap()) fail("channels", "expected a map");
     check_known(c, "channels.",
-                {"state", "command", "status", "plan", "reference", "obstacles", "params", "param_result", "clock"});
+                {"state", "command", "status", "plan", "reference", "obstacles", "params", "param_result", "clock",
+                 "rollouts"});
     auto& ch = d.channels;
     ch.state = text(c, "state", ch.state, "channels.");
     ch.command = text(c, "command", ch.command, "channels.");
@@ -145,6 +146,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     ch.params = text(c, "params", ch.params, "channels.");
     ch.param_result = text(c, "param_result", ch.param_result, "channels.");
     ch.clock = text(c, "clock", ch.clock, "channels.");
+    ch.rollouts = text(c, "rollouts", ch.rollouts, "channels.");
   }
   // The default ceiling of the expected latency is one period: a cycle that needs longer
   // misses its deadline anyway (and the deadline guard covers it).
@@ -178,6 +180,16 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     if (n["estimate"]) ds.estimate = scalar<bool>(n["estimate"], "disturbance.estimate");
     ds.time_constant_s = number(n, "time_constant_s", ds.time_constant_s, 0.02, 100.0, "disturbance.");
     ds.limit = static_cast<float>(number(n, "limit", ds.limit, 0.0, 50.0, "disturbance."));
+  }
+  if (const YAML::Node n = section["rollouts"]) {
+    if (!n.IsMap()) fail("rollouts", "expected a map");
+    check_known(n, "rollouts.", {"hz", "top", "random"});
+    FanSettings& f = l.rollouts;
+    f.hz = number(n, "hz", f.hz, 0.0, l.rate_hz, "rollouts.");
+    f.top = static_cast<int>(number(n, "top", f.top, 0, FanSettings::kMaxRollouts, "rollouts."));
+    f.random = static_cast<int>(number(n, "random", f.random, 0, FanSettings::kMaxRollouts, "rollouts."));
+    if (f.top + f.random > FanSettings::kMaxRollouts)
+      fail("rollouts.random", "top + random must be at most " + std::to_string(FanSettings::kMaxRollouts));
   }
   if (const YAML::Node n = section["live"]) {
     if (!n.IsMap()) fail("live", "expected a map");

@@ -176,6 +176,12 @@ int main(int argc, char** argv) {
     return kExitRuntime;
   }
   spdlog::info("transport self-test passed on {}", ds.lcm_url);
+  if (const mppi::daemon::FanSettings& fan = ds.loop.rollouts; fan.hz > 0.0) {
+    const int n = fan.top + fan.random;
+    tx->reserve_rollouts(n, n * controller->vehicles() * (controller->horizon() + 1) * 3);
+    spdlog::info("rollouts: {} lowest-cost and {} random at {} Hz on {}", fan.top, fan.random, fan.hz,
+                 ds.channels.rollouts);
+  }
 
   mppi::transport::Inbox::Expect expect;
   expect.vehicles = controller->vehicles();

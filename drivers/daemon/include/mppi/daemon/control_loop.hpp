@@ -19,6 +19,7 @@
 #include "mppi/controller.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/command_gate.hpp"
@@ -85,6 +86,8 @@ struct LoopSettings {
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
   // out on time. 0: off.
   std::int64_t anytime_margin_ns = 0;
+  // A display sample of the rollouts on their own channel (tools/view); off by default.
+  FanSettings rollouts;
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -228,6 +231,7 @@ class ControlLoop {
   std::int64_t period_ns_;
   std::int64_t status_every_;
   std::int64_t plan_every_;
+  RolloutPublisher rollouts_;
 
   rt::PeriodicSchedule schedule_;
   rt::DeadlineMonitor monitor_;
