@@ -196,6 +196,7 @@ class Flight:
         finally:
             for sig, h in saved.items():
                 signal.signal(sig, h)
+        self._stop_view()  # after: its hold ends on Ctrl-C / SIGTERM
 
     def _cleanup(self):
         for name in ("sim", "controller", "inject"):
@@ -203,7 +204,6 @@ class Flight:
         if "logger" in self.procs and self.procs["logger"].poll() is None:
             time.sleep(0.3)  # the logger drains what is still in its socket
         self._terminate("logger", 3.0)
-        self._stop_view()
         if self.holder is not None:
             try:
                 os.killpg(self.pgid, signal.SIGTERM)
