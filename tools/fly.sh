@@ -10,8 +10,8 @@
 #            tools/fly.sh --lockstep    (lock-step, the controller's measured latency charged)
 #            tools/fly.sh --scenario rate_track_circle
 #            tools/fly.sh --view        (the live 3D view with the rollout fan: open the URL it
-#                                        prints; it keeps serving 10 min after the flight, Ctrl-C
-#                                        ends it; docs/view.md)
+#                                        prints; the flight starts 30 s later and the view keeps
+#                                        serving 10 min after it, Ctrl-C ends it; docs/view.md)
 #
 # Environment: MPPID_SETUP_ARGS passes arguments to setup.sh (e.g. "--no-apt").
 set -euo pipefail
@@ -35,7 +35,9 @@ pass=()
 hold=()
 for a in "$@"; do
   case "$a" in
-    --view) pass+=("$a"); [[ " $* " == *" --view-hold "* ]] || hold=(--view-hold 600) ;;
+    --view) pass+=("$a")
+            [[ " $* " == *" --view-hold "* ]] || hold+=(--view-hold 600)
+            [[ " $* " == *" --view-wait "* ]] || hold+=(--view-wait 30) ;;
     --lockstep) clock=() ;;
     --ideal|--latency|--realtime) clock=(); pass+=("$a") ;;
     *) pass+=("$a") ;;

@@ -94,12 +94,15 @@ void expect_fan_is_the_update(const std::string& simd, float cost_tolerance) {
   std::vector<float> sorted = costs;
   std::sort(sorted.begin(), sorted.end());
   for (int r = 0; r < fan.top; ++r) EXPECT_EQ(fan.cost[r], sorted[static_cast<std::size_t>(r)]) << r;
-  // The random ten: one from each tenth of the sample index.
+  // The random ten: one from each tenth of the sample index, none of them a top one.
   for (int m = 0; m < 10; ++m) {
     const int k = fan.index[static_cast<std::size_t>(fan.top + m)];
     EXPECT_GE(k, m * s.rollouts / 10);
     EXPECT_LT(k, (m + 1) * s.rollouts / 10);
+    EXPECT_EQ(std::count(fan.index.begin(), fan.index.begin() + fan.top, k), 0) << k;
   }
+  // So the weights shown never add up past the whole.
+  EXPECT_LE(std::accumulate(fan.weight.begin(), fan.weight.begin() + fan.count, 0.0), 1.0 + 1e-5);
   const float best = sorted.front();
   double sum = 0.0;
   for (float q : costs) sum += std::exp(-(static_cast<double>(q) - best) / s.lambda);
@@ -157,6 +160,14 @@ TEST(RolloutFan, NothingWithoutKeepAndOnlyForTheCycleKept) {
   EXPECT_EQ(fan.count, 8);
   c.iterate(x.data(), u.data());  // not kept: the fan of the cycle before is not offered again
   EXPECT_FALSE(c.fan(4, 4, &fan));
+}
+
+TEST(RolloutFan, RandomOnesSkipTheTopOnesEvenInSmallStrata) {
+  // 16 top of 40 rollouts and 20 random ones in strata of two: most strata hold a top one.
+  const int top[4] = {3, 4, 10, 11};
+  EXPECT_EQ(fan_detail::not_in(top, 4, 2, 4, 1), 2);   // draws 3 (taken): moves on, wraps to 2
+  EXPECT_EQ(fan_detail::not_in(top, 4, 10, 12, 0), 10);  // both taken: keeps the draw
+  EXPECT_EQ(fan_detail::not_in(top, 4, 4, 6, 0), 5);
 }
 
 TEST(RolloutFan, CapacityBoundsTheSample) {

@@ -104,7 +104,7 @@ def column(batches: list, name: str) -> list:
     """A component column's values over the entity's rows, in time order."""
     import pyarrow as pa
     table = pa.Table.from_batches(batches)
-    table = table.sort_by("time") if "time" in table.column_names else table
+    table = table.sort_by("log_time")  # the order they were logged in
     return [x for x in table.column(name).to_pylist() if x is not None]
 
 

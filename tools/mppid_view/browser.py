@@ -35,17 +35,17 @@ class HeadlessChromium:
              f"--remote-debugging-port={self.port}", f"--window-size={width},{height}",
              f"--user-data-dir={self.profile.name}", "about:blank"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-        self.ws = websocket.create_connection(self._page_socket(), timeout=60)
+        self.ws = None
         self.next_id = 0
 
-    def _page_socket(self, timeout: float = 30.0) -> str:
+    def _new_page(self, url: str, timeout: float = 30.0) -> str:
+        """A new tab on url (DevTools' /json/new): the start-up tab may still be replaced."""
         end = time.monotonic() + timeout
         while True:
             try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{self.port}/json", timeout=2) as r:
-                    pages = [t for t in json.load(r) if t.get("type") == "page"]
-                if pages:
-                    return pages[0]["webSocketDebuggerUrl"]
+                req = urllib.request.Request(f"http://127.0.0.1:{self.port}/json/new?{url}", method="PUT")
+                with urllib.request.urlopen(req, timeout=5) as r:
+                    return json.load(r)["webSocketDebuggerUrl"]
             except OSError:
                 pass
             if self.proc.poll() is not None or time.monotonic() > end:
@@ -63,14 +63,17 @@ class HeadlessChromium:
                 return reply.get("result", {})
 
     def open(self, url: str) -> None:
-        self.call("Page.navigate", url=url)
+        if self.ws is not None:
+            self.ws.close()
+        self.ws = websocket.create_connection(self._new_page(url), timeout=60)
 
     def screenshot(self) -> bytes:
         return base64.b64decode(self.call("Page.captureScreenshot", format="png")["data"])
 
     def close(self) -> None:
         try:
-            self.ws.close()
+            if self.ws is not None:
+                self.ws.close()
         finally:
             # chromium's own process group (start_new_session): the browser and its helpers.
             os.killpg(self.proc.pid, signal.SIGTERM)

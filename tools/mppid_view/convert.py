@@ -31,7 +31,7 @@ def convert(log_path: Path, rrd_path: Path, name: str | None = None) -> Counter:
             except ValueError:
                 counts[ev.channel + ":undecodable"] += 1
                 continue
-            if scene.log(ev.channel, msg, ev.timestamp):
+            if scene.log(ev.channel, msg):
                 counts[ev.channel] += 1
     finally:
         log.close()

@@ -42,12 +42,10 @@ class LiveView:
     def __init__(self, lcm_url: str, grpc_port: int, web_port: int, save: str | None = None, netns_pid: int = 0):
         self.types = lcm_types()
         self.rec = rr.RecordingStream("mppid", recording_id=f"live-{int(time.time())}")
-        if save:
-            self.rec.set_sinks(rr.GrpcServerSink(grpc_port=grpc_port), rr.FileSink(save),
-                               default_blueprint=blueprint())
-            self.grpc_uri = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
-        else:
-            self.grpc_uri = self.rec.serve_grpc(grpc_port=grpc_port, default_blueprint=blueprint())
+        # The gRPC server on loopback only; with --save, the same stream to a file too.
+        sinks = [rr.GrpcServerSink(bind_ip="127.0.0.1", port=grpc_port)] + ([rr.FileSink(save)] if save else [])
+        self.rec.set_sinks(*sinks, default_blueprint=blueprint())
+        self.grpc_uri = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
         rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=self.grpc_uri)
         self.url = viewer_url(web_port, grpc_port)
         self.scene = Scene(self.rec)
@@ -64,7 +62,7 @@ class LiveView:
         except ValueError:
             self.counts[channel + ":undecodable"] += 1
             return
-        if self.scene.log(channel, msg, time.time_ns() // 1000):
+        if self.scene.log(channel, msg):
             self.counts[channel] += 1
 
     def run(self, seconds: float | None = None) -> Counter:

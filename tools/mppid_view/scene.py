@@ -12,7 +12,9 @@ Entities (the blueprint arranges them):
   /timing/state_to_command_ms Scalars: each command's state sample -> command out (age + compute)
   /timing/misses              Scalars: the daemon's deadline misses so far (status)
   /optimizer/ess              Scalars: the effective sample size (status)
-Time: the timeline "time", seconds since the first message (its receive time, live or in the log).
+Time: the timeline "time", the flight's: seconds since the first state's sample time, each message
+stamped with the newest state's (a lock-step flight flies faster than the wall clock; real time
+or lock-step, the plots and the scene then share the simulator's seconds).
 """
 from __future__ import annotations
 
@@ -93,21 +95,25 @@ class Scene:
 
     def __init__(self, rec: rr.RecordingStream):
         self.rec = rec
-        self.t0_us: int | None = None
+        self.t0_us: int | None = None   # the first state's sample time
+        self.now_us = 0                 # the newest state's
         self.trails: dict[int, deque] = {}
         self.states = 0
         self.handlers = {"MPPI_STATE": self.state, "MPPI_PLAN": self.plan, "MPPI_ROLLOUTS": self.rollouts,
                          "MPPI_OBSTACLES": self.obstacles, "MPPI_REFERENCE": self.reference,
                          "MPPI_COMMAND": self.command, "MPPI_STATUS": self.status}
 
-    def log(self, channel: str, msg, t_us: int) -> bool:
-        """Draws one message received at t_us (microseconds); False for a channel not drawn."""
+    def log(self, channel: str, msg) -> bool:
+        """Draws one message; False for a channel not drawn."""
         h = self.handlers.get(channel)
         if h is None:
             return False
-        if self.t0_us is None:
-            self.t0_us = t_us
-        self.rec.set_time("time", duration=(t_us - self.t0_us) * 1e-6)
+        if channel == "MPPI_STATE":
+            if self.t0_us is None:
+                self.t0_us = msg.sample_utime
+            self.now_us = max(self.now_us, msg.sample_utime)
+        t0 = self.t0_us if self.t0_us is not None else self.now_us
+        self.rec.set_time("time", duration=(self.now_us - t0) * 1e-6)
         h(msg)
         return True
 

@@ -70,6 +70,7 @@ class FlightSpec:
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
     view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on
     view_hold: float = 0.0           # ... kept serving this long after the flight [s]
+    view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]
     view_port: int = 9090            # ... its web viewer's port; its gRPC server's is this + VIEW_GRPC_OFFSET
     rrd: bool = False                # flight.rrd: the LCM log converted for rerun's viewer
 
@@ -139,6 +140,9 @@ class Flight:
             time.sleep(0.05)
         url = next(l for l in path.read_text(errors="replace").splitlines() if l.startswith("view: http"))
         print(url, flush=True)
+        if spec.view_wait > 0:
+            print(f"view: the flight starts in {spec.view_wait:g} s (time to open the page)", flush=True)
+            time.sleep(spec.view_wait)
 
     def _stop_view(self):
         view = getattr(self, "view", None)

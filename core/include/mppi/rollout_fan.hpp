@@ -75,6 +75,7 @@ inline std::uint64_t mix(std::uint64_t z) {
 
 // The `want` lowest of costs[0..n) into idx, lowest first (ties: the lower index).
 inline int lowest(const float* costs, int n, int want, int* idx) {
+  if (want <= 0) return 0;
   int have = 0;
   for (int k = 0; k < n; ++k) {
     if (have == want && !(costs[k] < costs[idx[have - 1]])) continue;
@@ -86,6 +87,18 @@ inline int lowest(const float* costs, int n, int want, int* idx) {
     idx[at] = k;
   }
   return have;
+}
+
+// The draw's index in [lo, hi), moved on (cyclically within the stratum) past the indices
+// already taken as top ones, so no rollout appears twice; a stratum of top ones only keeps it.
+inline int not_in(const int* taken, int n_taken, std::int64_t lo, std::int64_t hi, std::uint64_t draw) {
+  const std::int64_t width = hi - lo;
+  const std::int64_t first = static_cast<std::int64_t>(draw % static_cast<std::uint64_t>(width));
+  for (std::int64_t step = 0; step < width; ++step) {
+    const int k = static_cast<int>(lo + (first + step) % width);
+    if (std::find(taken, taken + n_taken, k) == taken + n_taken) return k;
+  }
+  return static_cast<int>(lo + first);
 }
 
 }  // namespace fan_detail
@@ -140,7 +153,7 @@ bool fill_rollout_fan(const typename T::Params& p, const MppiSettings& s, const 
   for (int m = 0; m < random; ++m) {
     const std::int64_t lo = std::int64_t{m} * n / random, hi = std::int64_t{m + 1} * n / random;
     const std::uint64_t draw = fan_detail::mix(s.seed ^ fan_detail::mix((std::uint64_t{kept.cycle} << 20) + m));
-    fan->index[fan->count++] = static_cast<int>(lo + static_cast<std::int64_t>(draw % static_cast<std::uint64_t>(hi - lo)));
+    fan->index[fan->count++] = fan_detail::not_in(fan->index.data(), fan->top, lo, hi, draw);
   }
   // Normalised step-0 weights, with the backends' flush of tiny weights.
   float min_cost = kCostCeiling;

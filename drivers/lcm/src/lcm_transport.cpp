@@ -210,7 +210,7 @@ bool LcmTransport::publish_rollouts(const RolloutsView& r) {
   m.vehicles = r.vehicles;
   m.steps = r.steps;
   m.dt = r.dt;
-  m.lambda = r.lambda;
+  m.temperature = r.lambda;
   m.count = r.count;
   m.top = r.top;
   m.index.assign(r.index, r.index + n);
