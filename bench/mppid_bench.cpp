@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <fstream>
 #include <iostream>
@@ -79,11 +80,21 @@ void grow_forest(mppi::offline::Scenario* s, int at_least, int vehicles) {
 // one run: blocks of `every` cycles alternate between plain and fanned (the first cycle of a
 // fanned block keeps its rollouts, then a fan of top + random is rebuilt), so both see the
 // same machine. JSON fields: the cycle that keeps (its compute: the command's path), the
-// rebuild (after the command, off its path), and the mean per cycle of each kind of block.
+// rebuild (after the command, off its path), and the mean per cycle of each kind of block,
+// in wall time and in the CPU time of the whole process (all its threads: with
+// OMP_WAIT_POLICY=PASSIVE, as the daemon runs, that is the work done, which other load on the
+// machine does not change the way it changes wall time).
 struct FanCost {
   double plain_mean_us = 0, fanned_mean_us = 0, plain_median_us = 0, kept_median_us = 0, rebuild_median_us = 0;
+  double plain_cpu_mean_us = 0, fanned_cpu_mean_us = 0, kept_cpu_median_us = 0, plain_cpu_median_us = 0;
   std::size_t allocations = 0;  // heap allocations over the timed cycles
 };
+
+double process_cpu_us() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e6 + static_cast<double>(ts.tv_nsec) * 1e-3;
+}
 
 double median_of(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -94,34 +105,43 @@ FanCost measure_fan(mppi::Controller& c, const float* x0, int iterations, int ev
   mppi::RolloutFan fan;
   fan.reserve(top + random, c.vehicles(), c.horizon());
   std::vector<float> u(static_cast<std::size_t>(c.nu()));
-  std::vector<double> plain, kept, rebuild;
-  double plain_sum = 0, fanned_sum = 0;
+  std::vector<double> plain, kept, rebuild, plain_cpu, kept_cpu;
+  double plain_sum = 0, fanned_sum = 0, plain_cpu_sum = 0, fanned_cpu_sum = 0;
   int plain_n = 0, fanned_n = 0;
   plain.reserve(static_cast<std::size_t>(iterations));
   kept.reserve(static_cast<std::size_t>(iterations));
   rebuild.reserve(static_cast<std::size_t>(iterations));
+  plain_cpu.reserve(static_cast<std::size_t>(iterations));
+  kept_cpu.reserve(static_cast<std::size_t>(iterations));
   const std::size_t count0 = mppi::testing::allocation_count();
   for (int i = 0; i < iterations; ++i) {
     const bool fanned_block = (i / every) % 2 == 1, first = i % every == 0;
+    const double c0 = process_cpu_us();
     const auto t0 = std::chrono::steady_clock::now();
     if (fanned_block && first) c.keep_rollouts();
     c.iterate(x0, u.data());
     const auto t1 = std::chrono::steady_clock::now();
+    const double c1 = process_cpu_us();
     if (fanned_block && first) c.fan(top, random, &fan);
     const auto t2 = std::chrono::steady_clock::now();
+    const double c2 = process_cpu_us();
     const double cycle = std::chrono::duration<double, std::micro>(t1 - t0).count();
     const double total = std::chrono::duration<double, std::micro>(t2 - t0).count();
     if (fanned_block) {
       fanned_sum += total;
+      fanned_cpu_sum += c2 - c0;
       ++fanned_n;
       if (first) {
         kept.push_back(cycle);
+        kept_cpu.push_back(c1 - c0);
         rebuild.push_back(std::chrono::duration<double, std::micro>(t2 - t1).count());
       }
     } else {
       plain_sum += total;
+      plain_cpu_sum += c2 - c0;
       ++plain_n;
       plain.push_back(cycle);
+      plain_cpu.push_back(c1 - c0);
     }
   }
   FanCost f;
@@ -131,6 +151,10 @@ FanCost measure_fan(mppi::Controller& c, const float* x0, int iterations, int ev
   f.plain_median_us = median_of(plain);
   f.kept_median_us = median_of(kept);
   f.rebuild_median_us = median_of(rebuild);
+  f.plain_cpu_mean_us = plain_n > 0 ? plain_cpu_sum / plain_n : 0.0;
+  f.fanned_cpu_mean_us = fanned_n > 0 ? fanned_cpu_sum / fanned_n : 0.0;
+  f.plain_cpu_median_us = median_of(plain_cpu);
+  f.kept_cpu_median_us = median_of(kept_cpu);
   return f;
 }
 
@@ -234,6 +258,10 @@ int main(int argc, char** argv) {
             << ",\"fanned_mean_us\":" << f.fanned_mean_us
             << ",\"kept_cycle_growth_pct\":" << 100.0 * (f.kept_median_us / f.plain_median_us - 1.0)
             << ",\"mean_growth_pct\":" << 100.0 * (f.fanned_mean_us / f.plain_mean_us - 1.0)
+            << ",\"plain_cpu_median_us\":" << f.plain_cpu_median_us << ",\"kept_cpu_median_us\":" << f.kept_cpu_median_us
+            << ",\"plain_cpu_mean_us\":" << f.plain_cpu_mean_us << ",\"fanned_cpu_mean_us\":" << f.fanned_cpu_mean_us
+            << ",\"kept_cycle_cpu_growth_pct\":" << 100.0 * (f.kept_cpu_median_us / f.plain_cpu_median_us - 1.0)
+            << ",\"mean_cpu_growth_pct\":" << 100.0 * (f.fanned_cpu_mean_us / f.plain_cpu_mean_us - 1.0)
             << ",\"allocations\":" << f.allocations << "}";
           fan_json = o.str();
         }
