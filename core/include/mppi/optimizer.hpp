@@ -57,7 +57,8 @@ class Mppi {
     kept_ok_ = false;
     if (keep) keep_inputs(x0, *p);
     backend_->update(x0, *p, cycle_++, plan_.data(), &stats_);
-    if (keep) keep_costs();
+    kept_.rollouts = stats_.rollouts;
+    kept_ok_ = keep;
     if (stats_.updated && settings_.smoothing_window > 1) smooth();
     std::copy_n(plan_.data(), kNu, u_out);
     shift();
@@ -65,13 +66,16 @@ class Mppi {
   }
 
   // The next iterate() keeps what a display sample of its rollouts needs (the plan it
-  // starts from, the state, the backend's step-0 costs: copies into buffers sized at
-  // construction); fan() then rebuilds the sample. Off again after that iterate().
+  // starts from, the state, the parameters: copies into buffers sized at construction);
+  // fan() then rebuilds the sample. Off again after that iterate().
   void keep_rollouts() { keep_next_ = true; }
   // The `top` lowest-cost and `random` other rollouts of the last iterate() into fan, if it
-  // kept them and updated the plan; false (fan untouched) otherwise. Allocates nothing.
-  bool fan(int top, int random, RolloutFan* out) const {
+  // kept them and updated the plan; false (fan untouched) otherwise. Reads the backend's
+  // step-0 costs of that update here, after the command is out (on CUDA a device-to-host
+  // copy), so the kept cycle itself pays only the copies above. Allocates nothing.
+  bool fan(int top, int random, RolloutFan* out) {
     if (!kept_ok_ || !stats_.updated) return false;
+    backend_->step0_costs(kept_.costs.data());
     return fill_rollout_fan<Task>(*kept_params_, settings_, kept_, top, random, out);
   }
 
@@ -128,11 +132,6 @@ class Mppi {
     *kept_params_ = p;
     kept_.cycle = cycle_;
   }
-  void keep_costs() {
-    backend_->step0_costs(kept_.costs.data());
-    kept_.rollouts = stats_.rollouts;
-    kept_ok_ = true;
-  }
 
   // Centred moving average over time, the window shrinking at the ends. Each output is a
   // convex combination of in-limit controls, so the limits hold mathematically; in float the
@@ -162,7 +161,7 @@ class Mppi {
   UpdateStats stats_;
   std::uint32_t cycle_ = 0;
   bool keep_next_ = false;
-  KeptRollouts kept_;                     // the last iterate's inputs and costs ...
+  KeptRollouts kept_;                     // the last iterate's inputs (costs: at fan()) ...
   std::unique_ptr<Params> kept_params_ = std::make_unique<Params>();  // ... and parameters
   bool kept_ok_ = false;                  // ... when it kept them
 };

@@ -7,7 +7,7 @@
 // rebuilt on the host from what the cycle started with: the plan before the update, the
 // state, the prepared parameters and the noise key. Only the step-0 costs S~(tau_0,k) come
 // from the backend (RolloutBackend::step0_costs: K floats, a device-to-host copy on CUDA),
-// and only on the cycles asked for (Mppi::keep_rollouts). A rebuilt rollout is the CPU
+// and only on the cycles asked for (Mppi::keep_rollouts), read after the command is out. A rebuilt rollout is the CPU
 // scalar kernel's (cpu_kernel.hpp, rollouts<ScalarLanes>): the same perturb, advance and
 // running cost; its recomputed cost is kept beside the backend's, and the tests hold them
 // equal, so the picture cannot drift from what the optimizer weighed.
@@ -58,7 +58,7 @@ struct RolloutFan {
 struct KeptRollouts {
   std::vector<float> plan;   // horizon x NU, before the update
   std::vector<float> x0;     // NX
-  std::vector<float> costs;  // K: S~(tau_0,k)
+  std::vector<float> costs;  // K: S~(tau_0,k), read at Mppi::fan()
   std::uint32_t cycle = 0;
   int rollouts = 0;          // the update's (UpdateStats::rollouts)
 };
