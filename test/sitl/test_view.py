@@ -186,6 +186,10 @@ def test_flight_with_the_view_flies_and_publishes_rollouts(viewed_flight):
         assert np.all(w >= 0) and w.sum() <= 1.0 + 1e-4
         assert list(m.cost[: m.top]) == sorted(m.cost[: m.top])  # the top ones, lowest first
         assert w[0] == w.max()
+    # The flight's .rrd, converted from the complete log after the flight.
+    rows, _, blueprints = rrd_rows(out / "flight.rrd")
+    assert rows["/timing/compute_ms"] == commands and rows["/world/rollouts/top"] == len(fans)
+    assert blueprints >= 1
 
 
 def test_protocol_client_sees_every_entity(viewed_flight):

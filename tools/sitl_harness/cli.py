@@ -42,8 +42,8 @@ def main(argv=None) -> int:
     r.add_argument("--niceness", type=int, default=None, help=argparse.SUPPRESS)  # Ray: the driver's niceness
     r.add_argument("--no-plots", action="store_true", help="skip path/traces/timing.png")
     r.add_argument("--view", action="store_true",
-                   help="the live 3D view in the browser (tools/view; rollouts on at 5 Hz); prints its URL and "
-                        "writes flight.rrd")
+                   help="the live 3D view in the browser (tools/view; rollouts on at 5 Hz); prints its URL; "
+                        "flight.rrd after the flight")
     r.add_argument("--view-hold", type=float, default=0.0, metavar="SECONDS",
                    help="with --view: keep the view serving this long after the flight")
     r.add_argument("--view-wait", type=float, default=0.0, metavar="SECONDS",

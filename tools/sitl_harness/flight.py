@@ -68,7 +68,7 @@ class FlightSpec:
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
-    view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on
+    view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
     view_hold: float = 0.0           # ... kept serving this long after the flight [s]
     view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]
     view_port: int = 9090            # ... its web viewer's port; its gRPC server's is this + VIEW_GRPC_OFFSET
@@ -120,9 +120,12 @@ class Flight:
         servers, reading the flight's LCM bus from inside the flight's namespace (--netns-pid).
         Its own process group: the flight's killpg must not end it before view_hold."""
         spec = self.spec
-        cmd = [sys.executable, "-m", "mppid_view", "live", "--lcm-url", spec.lcm_url, "--netns-pid",
-               str(self.holder.pid), "--web-port", str(spec.view_port), "--grpc-port",
-               str(spec.view_port + VIEW_GRPC_OFFSET), "--save", str(self.out / "flight.rrd")]
+        # The logger's receive buffer: a lock-step flight bursts faster than a normal-policy
+        # reader drains. What the view still drops shows live only: flight.rrd is converted
+        # from the complete log after the flight (fly()).
+        cmd = [sys.executable, "-m", "mppid_view", "live", "--lcm-url",
+               f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}", "--netns-pid", str(self.holder.pid),
+               "--web-port", str(spec.view_port), "--grpc-port", str(spec.view_port + VIEW_GRPC_OFFSET)]
         log = open(self.out / "view.log", "wb")
         self.logs["view"] = log
         env = dict(os.environ)
@@ -429,7 +432,7 @@ def fly(spec: FlightSpec) -> dict:
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}
         (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
-    if spec.rrd and not spec.view:  # with --view the view wrote flight.rrd live
+    if spec.rrd or spec.view:
         try:
             from mppid_view.convert import convert
             paths.add_lcm_types_to_path()
