@@ -65,6 +65,9 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
+  # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
+  chromium
   # sanitizer and fuzz builds (tools/sanitize.sh, tools/fuzz): clang 14 with its sanitizer and
   # libFuzzer runtimes, its OpenMP (and Archer, which lets TSan see OpenMP), llvm-symbolizer
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14

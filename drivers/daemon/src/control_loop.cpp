@@ -35,6 +35,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       period_ns_(std::llround(1e9 / s_.rate_hz)),
       status_every_(every(s_.rate_hz, s_.status_hz)),
       plan_every_(every(s_.rate_hz, s_.plan_hz)),
+      rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
       schedule_(period_ns_),
       monitor_(period_ns_),
       gate_(controller->settings().u_min, controller->settings().u_max),
@@ -440,6 +441,7 @@ void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64
 
   maybe_status(published != last_status_mode_);
   if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);
+  rollouts_.after_cycle(*c_, *tx_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
 }
 
 void ControlLoop::apply_between_cycles() {

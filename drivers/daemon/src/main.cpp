@@ -174,6 +174,12 @@ int open_transport(const DaemonSettings& ds, const mppi::Controller& c, mppi::rt
     return kExitRuntime;
   }
   spdlog::info("transport self-test passed on {}", ds.lcm_url);
+  if (const mppi::daemon::FanSettings& fan = ds.loop.rollouts; fan.hz > 0.0) {
+    const int n = fan.top + fan.random;
+    (*tx)->reserve_rollouts(n, n * c.vehicles() * (c.horizon() + 1) * 3);
+    spdlog::info("rollouts: {} lowest-cost and {} random at {} Hz on {}", fan.top, fan.random, fan.hz,
+                 ds.channels.rollouts);
+  }
   return 0;
 }
 

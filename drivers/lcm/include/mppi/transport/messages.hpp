@@ -137,4 +137,21 @@ struct PlanView {
   const float* pos = nullptr;  // npos x 3, vehicle-major predicted positions
 };
 
+// A view of a display sample of one cycle's rollouts (core's RolloutFan); the pointed-to
+// data lives in the loop.
+struct RolloutsView {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  std::int64_t state_seq = -1;
+  std::int64_t cycle = 0;
+  std::int32_t total = 0, vehicles = 0, steps = 0;
+  float dt = 0, lambda = 0;
+  std::int32_t count = 0, top = 0;
+  const int* index = nullptr;             // count each
+  const float* cost = nullptr;
+  const float* weight = nullptr;
+  const unsigned char* crashed = nullptr;
+  const float* xyz = nullptr;             // count x vehicles x steps x 3
+};
+
 }  // namespace mppi::transport
