@@ -65,6 +65,8 @@ class FlightSpec:
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
+    autopilot: str = "sim"           # sim: mppid-sim; ardupilot: ArduCopter SITL and the bridge (ardupilot.py)
+    ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
 
 
 class Flight:
@@ -148,7 +150,7 @@ class Flight:
                 signal.signal(sig, h)
 
     def _cleanup(self):
-        for name in ("sim", "controller", "inject"):
+        for name in [n for n in self.procs if n != "logger"]:
             self._terminate(name, 3.0)
         if "logger" in self.procs and self.procs["logger"].poll() is None:
             time.sleep(0.3)  # the logger drains what is still in its socket
@@ -264,6 +266,12 @@ class Flight:
                 self._spawn("inject", inject_cmd)
                 self._wait_ready("inject", INJECT_READY_TIMEOUT_S)
             self._spawn("sim", sim_cmd)
+            if scen.get("mission"):
+                # The operator's side: the mission tool gives mppid its references (the
+                # scenario's own reference is `none`), as on a real vehicle.
+                self._spawn("mission", [str(paths.ROOT / "drivers" / "mission" / "mppid-mission"), "fly",
+                                        str(paths.ROOT / scen["mission"]), "--seed", str(spec.seed), "--out",
+                                        str(self.out), "--lcm-url", spec.lcm_url])
             (self.out / "pids.json").write_text(json.dumps(
                 {"pgid": self.pgid, "holder": self.holder.pid, **{k: p.pid for k, p in self.procs.items()}}))
             killed = False
@@ -356,28 +364,42 @@ def _group_alive(pgid: int) -> bool:
     return False
 
 
+def _flight_for(spec: FlightSpec):
+    """The flight and its scorer: mppid-sim's (score.py, plots.py), or ArduCopter SITL's
+    (ardupilot.py, ap_score.py, ap_plots.py). Raises FlightError (no SITL binary, say)."""
+    if spec.autopilot == "ardupilot":
+        from . import ap_plots, ap_score, ardupilot
+        return ardupilot.ArduPilotFlight(spec, ardupilot.ardupilot_binary(spec.ardupilot_bin)), ap_score, ap_plots
+    from . import plots, score
+    return Flight(spec), score, plots
+
+
 def fly(spec: FlightSpec) -> dict:
     """Runs one flight, scores it and plots it; returns the score (also in score.json)."""
-    from . import plots, score
-
     # SIGTERM from outside is handled like Ctrl-C: clean up, then leave.
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
-    flight = Flight(spec)
-    info = {}
+    out = Path(spec.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        flight, scorer, plotter = _flight_for(spec)
+    except FlightError as e:
+        result = {"success": False, "reason": str(e), "harness_outcome": "error"}
+        (out / "score.json").write_text(json.dumps(result, indent=2))
+        return result
     try:
         info = flight.run()
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}
-        (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
-    result = score.score_flight(flight.out, spec, info)
-    (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+        (out / "harness.json").write_text(json.dumps(info, indent=2))
+    result = scorer.score_flight(out, spec, info)
+    (out / "score.json").write_text(json.dumps(result, indent=2))
     if spec.plots:
         try:
-            plots.plot_flight(flight.out)
+            plotter.plot_flight(out)
         except Exception as e:  # plots must never turn a flight into a crash
             result.setdefault("warnings", []).append(f"plots failed: {e!r}")
-            (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+            (out / "score.json").write_text(json.dumps(result, indent=2))
     return result
 
 
