@@ -47,9 +47,11 @@ class Runner:
             self._sample(step, t0)
 
     def _sample(self, step, t0):
-        now, p = self.link.now_us(), self.link.position()
-        if now is None or p is None:
+        """The newest state against the reference at that state's own time."""
+        sampled = self.link.sampled()
+        if sampled is None:
             return
+        now, p = sampled
         t = (now - t0) * 1e-6
         r = reference.evaluate(step.ref, [t])[0][0]
         e = float(np.linalg.norm(p - r))

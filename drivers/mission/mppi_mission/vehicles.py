@@ -54,21 +54,55 @@ def arm_when_ready(arm, say, timeout=120.0):
             time.sleep(1.0)
 
 
-class MppidLink:
+class StateClock:
+    """The vehicle's newest state, and the clock it sets: (sample time us, position ENU,
+    monotonic receipt), written by the link's receive thread."""
+    what = "a vehicle state"
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.state = None
+
+    def _set_state(self, t_us: int, p):
+        with self.lock:
+            self.state = (t_us, p, time.monotonic())
+
+    def now_us(self) -> int | None:
+        """The state stream's clock: the newest sample time plus the wall time since it came."""
+        with self.lock:
+            if self.state is None:
+                return None
+            t, _, recv = self.state
+        return int(t + (time.monotonic() - recv) * 1e6)
+
+    def sampled(self):
+        """(sample time us, position) of the newest state, or None."""
+        with self.lock:
+            return None if self.state is None else (self.state[0], self.state[1].copy())
+
+    def position(self):
+        s = self.sampled()
+        return None if s is None else s[1]
+
+    def wait_state(self, timeout=120.0):  # a SITL's EKF takes ~30 s to a position
+        _wait(lambda: self.state is not None, timeout, self.what)
+
+
+class MppidLink(StateClock):
     tick_hz = 10.0  # references are paths: mppid evaluates them; 10 Hz keeps them fresh
     clock = "state"  # vehicle_state_t.sample_utime: this host's wall clock (or a simulator's)
 
     def __init__(self, lcm_url: str, bridge_socket: str | None = None, channels=None):
         import lcm
         from mppi_mavlink import lcm_types
+        super().__init__()
         self.t = lcm_types.import_mppi_lcm()
         self.ch = {"state": "MPPI_STATE", "reference": "MPPI_REFERENCE", "obstacles": "MPPI_OBSTACLES",
                    **(channels or {})}
         self.lc = lcm.LCM(lcm_url)
         self.lc.subscribe(self.ch["state"], self._on_state)
         self.socket = bridge_socket
-        self.lock = threading.Lock()
-        self.state = None          # (sample_utime, position ENU, receipt monotonic)
+        self.what = f"a vehicle state on {self.ch['state']}"
         self.seq = 0
         self.stop = threading.Event()
         self.thread = threading.Thread(target=self._loop, name="mission-lcm", daemon=True)
@@ -85,23 +119,7 @@ class MppidLink:
             return
         if m.n < 3 or not all(math.isfinite(c) for c in m.x[:3]):
             return
-        with self.lock:
-            self.state = (m.sample_utime, np.array(m.x[:3], float), time.monotonic())
-
-    def now_us(self) -> int | None:
-        """The state stream's clock: the newest sample time plus the wall time since it came."""
-        with self.lock:
-            if self.state is None:
-                return None
-            t, _, recv = self.state
-        return int(t + (time.monotonic() - recv) * 1e6)
-
-    def position(self):
-        with self.lock:
-            return None if self.state is None else self.state[1].copy()
-
-    def wait_state(self, timeout=120.0):  # a SITL's EKF takes ~30 s to a position
-        _wait(lambda: self.state is not None, timeout, f"a vehicle state on {self.ch['state']}")
+        self._set_state(m.sample_utime, np.array(m.x[:3], float))
 
     # ---- the flight, through the bridge ---------------------------------------------------
     def request(self, line: str, timeout=60.0) -> str:
@@ -170,10 +188,11 @@ class MppidLink:
         self.thread.join(2)
 
 
-class GuidedLink:
+class GuidedLink(StateClock):
     """ArduCopter's GUIDED position controller following the reference (the baseline)."""
     tick_hz = 50.0
     clock = "boot"  # the autopilot's time since boot (LOCAL_POSITION_NED)
+    what = "LOCAL_POSITION_NED"
 
     def __init__(self, url: str, state_hz: float = 50.0):
         from pymavlink import mavutil
@@ -188,9 +207,8 @@ class GuidedLink:
                 if time.monotonic() > deadline:
                     raise
                 time.sleep(0.2)
+        super().__init__()
         self.state_hz = state_hz
-        self.lock = threading.Lock()
-        self.state = None   # (boot us, position ENU, receipt monotonic)
         self.armed = False
         self.landed_state = None
         self.acks = {}
@@ -210,8 +228,7 @@ class GuidedLink:
                 continue
             t = msg.get_type()
             if t == "LOCAL_POSITION_NED":
-                with self.lock:
-                    self.state = (msg.time_boot_ms * 1000, np.array([msg.y, msg.x, -msg.z]), time.monotonic())
+                self._set_state(msg.time_boot_ms * 1000, np.array([msg.y, msg.x, -msg.z]))
             elif t == "HEARTBEAT" and msg.get_srcSystem() == self.target and msg.type != self.mavlink.MAV_TYPE_GCS:
                 self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             elif t == "EXTENDED_SYS_STATE":
@@ -229,20 +246,6 @@ class GuidedLink:
             if self.acks.get(cmd) == self.mavlink.MAV_RESULT_ACCEPTED:
                 return
         raise FlightError(f"MAVLink command {cmd}: {self.acks.get(cmd, 'no COMMAND_ACK')}")
-
-    def now_us(self):
-        with self.lock:
-            if self.state is None:
-                return None
-            t, _, recv = self.state
-        return int(t + (time.monotonic() - recv) * 1e6)
-
-    def position(self):
-        with self.lock:
-            return None if self.state is None else self.state[1].copy()
-
-    def wait_state(self, timeout=120.0):  # a SITL's EKF takes ~30 s to a position
-        _wait(lambda: self.state is not None, timeout, "LOCAL_POSITION_NED")
 
     def _mode(self, mode: int):
         self.command(self.mavlink.MAV_CMD_DO_SET_MODE, [self.mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode])
