@@ -35,10 +35,9 @@ HOME = "-35.363261,149.165230,584,353"
 PARAMS = paths.ROOT / "config" / "ardupilot" / "copter_mppid.parm"
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
 IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
-# mppid through an autopilot: a cycle per state. ArduPilot streams on its own 50 Hz clock; a
-# loop on mppid's 50 Hz clock beats against it at a fixed phase (a hover flown so: state age at
-# the cycle's start median 20.5 ms, p99 40 ms; the sample-to-arrival time itself 4.3 ms).
-AUTOPILOT_SETS = ("daemon.trigger=state",)
+# mppid's settings through ArduCopter, over the task file (argued there), then the mission's
+# own (its `mppid.set`), then --set.
+OVERLAY = paths.ROOT / "config" / "ardupilot" / "mppid_overlay.yaml"
 BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout as ArduPilot's documentation says "
               "(https://ardupilot.org/dev/docs/building-setup-linux.html: `./waf configure --board sitl` then "
               "`./waf copter`), then pass --ardupilot-bin <checkout>/build/sitl/bin/arducopter or set "
@@ -152,7 +151,8 @@ class ArduPilotFlight(Flight):
         cfg = paths.TASKS / f"{task}.yaml"
         ctrl = [str(mppid), "--config", str(cfg), "--lcm-url", spec.lcm_url, "--backend", spec.backend,
                 "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
-        for kv in list(AUTOPILOT_SETS) + list(spec.sets):
+        from .overlay import load_sets
+        for kv in load_sets(OVERLAY) + list((mission.get("mppid") or {}).get("set", [])) + list(spec.sets):
             ctrl += ["--set", str(kv)]
         sock = self.out / "bridge.sock"
         bridge = [str(paths.ROOT / "drivers" / "mavlink" / "mppid-mavlink-bridge"), "run", "--config",

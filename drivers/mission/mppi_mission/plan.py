@@ -4,6 +4,8 @@ or built from the command line. Validated at load; an error names the field.
     name: circle_3ms
     frame: start          # start (default): x, y relative to where the mission starts, z above
                           # home; local: the autopilot's local frame as it is
+    task: quadrotor_rate_forest    # the mppid task file it is meant for, and the settings over it
+    mppid: {set: [cost.w_speed=8]} # that mppid flies it with (the harness passes them)
     takeoff: 2.0          # arm and take off with the autopilot's own take-off (through the bridge)
     land: true            # land at the end (default: when it took off)
     vehicle_radius: 0.2
@@ -45,7 +47,8 @@ LEG_KEYS = {
     "circle": {"center", "radius", "speed", "ramp", "laps"},
     "figure_eight": {"center", "radius", "speed", "ramp", "laps"},
 }
-TOP_KEYS = {"name", "description", "task", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs", "score"}
+TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
+            "score"}
 TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it
 ON_PATH = 0.5        # m: closer than this to a curve's start point needs no transit
 
