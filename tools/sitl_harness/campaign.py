@@ -151,6 +151,9 @@ def summarize(results) -> dict:
             "runs": n, "successes": k, "success_rate": k / n if n else 0.0, "wilson95": wilson(k, n),
             "time_to_goal": _stat([r.get("time_to_goal") for r in ok]),
             "tracking_rmse": _stat([r.get("tracking_rmse") for r in ok]),
+            # Through an autopilot (ap_score.py): the hover error, the largest tilt.
+            "hover_rmse": _stat([r.get("hover_rmse") for r in ok]),
+            "max_tilt_deg": _stat([r.get("max_tilt_deg") for r in rs]),
             "min_clearance": _stat([r.get("min_clearance") for r in rs]),
             "mean_speed": _stat([r.get("mean_speed") for r in ok]),
             # Per flight: p99 over its cycles (timing.py); the column shows the worst flight.

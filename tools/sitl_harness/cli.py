@@ -91,6 +91,10 @@ def main(argv=None) -> int:
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
+    apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter SITL side by side (markdown)")
+    apt.add_argument("folders", type=Path, nargs="+")
+    apt.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
+
     o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
     o.add_argument("file", type=Path)
 
@@ -227,6 +231,10 @@ def main(argv=None) -> int:
         print(table, end="")
         if a.json:
             a.json.write_text(json.dumps(rows, indent=2))
+        return 0
+    if a.cmd == "autopilot-table":
+        from .ap_table import table as ap_table
+        print(ap_table(a.folders, a.labels.split(",") if a.labels else [f.name for f in a.folders]), end="")
         return 0
     if a.cmd == "tune":
         from .tune import main_tune
