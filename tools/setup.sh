@@ -2,11 +2,17 @@
 # Sets up a Debian 12 machine for mppid and builds it. Idempotent: a re-run on a set-up
 # machine touches neither apt nor pip (no network) and only rebuilds what changed.
 #
-#   tools/setup.sh [--no-apt] [--no-venv] [--no-build] [-- <extra cmake configure args>]
+#   tools/setup.sh [--no-apt] [--no-venv] [--no-build] [--flight] [--progress]
+#                  [-- <extra cmake configure args>]
 #
 #   --no-apt     skip the Debian packages (e.g. no root and no sudo; you installed them)
 #   --no-venv    skip the Python venv (.venv) and requirements.txt
 #   --no-build   skip configuring and building (build/)
+#   --flight     only what a SITL flight needs (tools/fly.sh): the venv's flight packages
+#                (requirements-flight.txt) and the targets mppid, mppid-sim and the LCM
+#                types; a later run without it adds the rest
+#   --progress   one progress line instead of the compiler's output (kept in build/build.log;
+#                its end is shown if the build fails)
 #
 # Environment:
 #   CI            when set (CI=true), warnings are errors (-DMPPID_WERROR=ON)
@@ -18,15 +24,17 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-do_apt=1 do_venv=1 do_build=1
+do_apt=1 do_venv=1 do_build=1 flight=0 progress=0
 cmake_extra=()
 while (($#)); do
   case "$1" in
     --no-apt) do_apt=0 ;;
     --no-venv) do_venv=0 ;;
     --no-build) do_build=0 ;;
+    --flight) flight=1 ;;
+    --progress) progress=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,17s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,23s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -57,6 +65,9 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
+  # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
+  chromium
   # sanitizer and fuzz builds (tools/sanitize.sh, tools/fuzz): clang 14 with its sanitizer and
   # libFuzzer runtimes, its OpenMP (and Archer, which lets TSan see OpenMP), llvm-symbolizer
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14
@@ -93,6 +104,24 @@ PY_BASE=/usr/bin/python3
 [[ -x "$PY_BASE" ]] || PY_BASE="$(command -v python3)"
 VENV="$ROOT/.venv"
 STAMP="$VENV/.mppid-requirements.sha256"
+FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
+
+# The stamp of a requirements file: it and the interpreter, so a Python upgrade reinstalls.
+requirements_hash() {
+  { cat "$@"; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
+}
+# pip install -r FILE unless STAMP says it is installed.
+pip_install() {
+  local file="$1" stamp="$2" want
+  want="$(requirements_hash requirements-flight.txt "$file")"
+  if [[ "$want" == "$(cat "$stamp" 2>/dev/null || true)" ]]; then
+    log "venv: $file unchanged"
+    return
+  fi
+  log "pip install -r $file"
+  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r "$file"
+  printf '%s\n' "$want" >"$stamp"
+}
 
 if ((do_venv)); then
   if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
@@ -100,17 +129,44 @@ if ((do_venv)); then
     rm -rf "$VENV"
     "$PY_BASE" -m venv "$VENV"
   fi
-  # The stamp covers the requirements and the interpreter, so a Python upgrade reinstalls.
-  want="$( { cat requirements.txt; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1)"
-  have="$(cat "$STAMP" 2>/dev/null || true)"
-  if [[ "$want" != "$have" ]]; then
-    log "pip install -r requirements.txt"
-    "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r requirements.txt
-    printf '%s\n' "$want" >"$STAMP"
+  # A flight needs a few packages (requirements-flight.txt, ~20 s); the tests the rest
+  # (requirements.txt includes the flight's). The full set installed covers the flight's.
+  if ((flight)) && [[ "$(requirements_hash requirements-flight.txt requirements.txt)" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
+    pip_install requirements-flight.txt "$FLIGHT_STAMP"
+  elif ((!flight)); then
+    pip_install requirements.txt "$STAMP"
   else
     log "venv: requirements unchanged"
   fi
 fi
+
+# cmake --build "$@", its output in $BUILD_DIR/build.log and one line of progress on stderr
+# (ninja's [done/total]); on failure the log's end.
+build_with_progress() {
+  local logf="$BUILD_DIR/build.log" line last=-1 pct rc
+  local tty=0
+  [[ -t 2 ]] && tty=1
+  set +o pipefail
+  cmake --build "$@" 2>&1 | tee "$logf" | while IFS= read -r line; do
+    if [[ "$line" =~ ^\[([0-9]+)/([0-9]+)\] ]]; then
+      pct=$((100 * BASH_REMATCH[1] / BASH_REMATCH[2]))
+      if ((tty)); then
+        printf '\r[setup] building: %s/%s (%d %%)' "${BASH_REMATCH[1]}" "${BASH_REMATCH[2]}" "$pct" >&2
+      elif ((pct / 25 != last)); then  # a log, not a terminal: a line at each quarter
+        last=$((pct / 25))
+        printf '[setup] building: %s/%s (%d %%)\n' "${BASH_REMATCH[1]}" "${BASH_REMATCH[2]}" "$pct" >&2
+      fi
+    fi
+  done
+  rc=${PIPESTATUS[0]}
+  set -o pipefail
+  ((tty)) && printf '\n' >&2
+  if ((rc != 0)); then
+    echo "[setup] build failed; the end of $logf:" >&2
+    tail -n 40 "$logf" >&2
+  fi
+  return "$rc"
+}
 
 # ---- configure and build --------------------------------------------------------------
 if ((do_build)); then
@@ -129,8 +185,21 @@ if ((do_build)); then
     export CCACHE_BASEDIR="$ROOT" CCACHE_NOHASHDIR=true
   fi
   log "cmake ${args[*]} ${cmake_extra[*]}"
-  cmake "${args[@]}" "${cmake_extra[@]}"
-  log "cmake --build $BUILD_DIR -j${MPPID_JOBS:-2}"
-  cmake --build "$BUILD_DIR" -j"${MPPID_JOBS:-2}"
+  if ((progress)); then
+    mkdir -p "$BUILD_DIR"
+    cmake "${args[@]}" "${cmake_extra[@]}" >"$BUILD_DIR/configure.log" 2>&1 ||
+      { echo "[setup] configure failed; the end of $BUILD_DIR/configure.log:" >&2; tail -n 40 "$BUILD_DIR/configure.log" >&2; exit 1; }
+  else
+    cmake "${args[@]}" "${cmake_extra[@]}"
+  fi
+  build_args=("$BUILD_DIR" -j"${MPPID_JOBS:-2}")
+  # The flight's targets: the daemon, the simulator and the LCM types the harness reads.
+  ((flight)) && build_args+=(--target mppid mppid-sim mppi_lcm_python)
+  log "cmake --build ${build_args[*]}"
+  if ((progress)); then
+    build_with_progress "${build_args[@]}"
+  else
+    cmake --build "${build_args[@]}"
+  fi
 fi
 log "done"

@@ -214,6 +214,7 @@ class CudaBackend final : public RolloutBackend<T> {
     d_out_ = DeviceBuffer(out_bytes_, "the per-cycle output");
     h_in_ = PinnedBuffer(in_bytes_, "the per-cycle input staging");
     h_out_ = PinnedBuffer(out_bytes_, "the per-cycle output staging");
+    h_costs_ = PinnedBuffer(static_cast<std::size_t>(k_) * sizeof(float), "the step-0 costs staging (K floats)");
     std::memset(h_in_.as<void>(), 0, in_bytes_);
 
     cudaStream_t stream = nullptr;
@@ -287,7 +288,17 @@ class CudaBackend final : public RolloutBackend<T> {
     return out;
   }
 
-  std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
+  // Row 0 of the cost-to-go through a pinned staging buffer, only when asked (the display
+  // sample of the cycle's rollouts): K floats, one copy on the update's stream.
+  void step0_costs(float* out) const override {
+    const std::size_t bytes = static_cast<std::size_t>(k_) * sizeof(float);
+    cudaError_t e = cudaMemcpyAsync(h_costs_.as<void>(), d_cost_.as<void>(), bytes, cudaMemcpyDeviceToHost, stream_.get());
+    if (e == cudaSuccess) e = cudaStreamSynchronize(stream_.get());
+    if (e != cudaSuccess) fail(e, what("the copy of the step-0 costs"));
+    std::memcpy(out, h_costs_.as<void>(), bytes);
+  }
+
+  std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes() + h_costs_.bytes(); }
   std::size_t device_bytes() const override {
     return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() + d_part_.bytes() +
            d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
@@ -469,7 +480,7 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t chunk_smem_ = 0;
   long long chunk_blocks_ = 0;
   DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
-  PinnedBuffer h_in_, h_out_;
+  PinnedBuffer h_in_, h_out_, h_costs_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;
   std::unique_ptr<CUgraphExec_st, GraphExecDeleter> exec_;

@@ -120,7 +120,8 @@ template <> void ModelPlant<Quadrotor>::position(int v, double* pos) const {
 }
 template <> double ModelPlant<Quadrotor>::speed(int v) const {
   const float* x = x_.data() + v * Quadrotor::kNx;
-  return std::sqrt(double(x[3]) * x[3] + double(x[4]) * x[4] + double(x[5]) * x[5]);
+  const double vx = x[Quadrotor::VX], vy = x[Quadrotor::VY], vz = x[Quadrotor::VZ];
+  return std::sqrt(vx * vx + vy * vy + vz * vz);
 }
 template <> std::vector<float> ModelPlant<Quadrotor>::hover() const {
   return std::vector<float>(static_cast<std::size_t>(4 * vehicles_), Quadrotor::hover_speed(p_));
@@ -161,7 +162,8 @@ template <> void ModelPlant<QuadrotorRate>::position(int v, double* pos) const {
 }
 template <> double ModelPlant<QuadrotorRate>::speed(int v) const {
   const float* x = x_.data() + v * QuadrotorRate::kNx;
-  return std::sqrt(double(x[3]) * x[3] + double(x[4]) * x[4] + double(x[5]) * x[5]);
+  const double vx = x[QuadrotorRate::VX], vy = x[QuadrotorRate::VY], vz = x[QuadrotorRate::VZ];
+  return std::sqrt(vx * vx + vy * vy + vz * vz);
 }
 // An autopilot's failsafe for a 13-state rate quadrotor view x: body rates that turn the
 // thrust axis back to vertical (P on the tilt, yaw rate 0) and the thrust that holds the

@@ -107,6 +107,7 @@ class Simulation {
   void publish_world(double t);
   bool wait_for_command(std::int64_t seq, double t);
   void pump_until(Clock::time_point deadline);
+  int handle_within(std::int64_t us);
   void advance_obstacles(double h);
   void check_collisions(double t);
   bool at_goal() const;
@@ -317,21 +318,27 @@ void Simulation::publish_world(double t) {
 
 // Handles LCM traffic until `deadline` (wall clock).
 void Simulation::pump_until(Clock::time_point deadline) {
-  const int fd = lcm_.getFileno();
   for (;;) {
     const auto left = deadline - Clock::now();
     const auto us = std::max<std::int64_t>(0, std::chrono::duration_cast<std::chrono::microseconds>(left).count());
     if (g_stop) return;
-    fd_set fds;
-    FD_ZERO(&fds);
-    FD_SET(fd, &fds);
-    timeval tv{static_cast<time_t>(us / 1000000), static_cast<suseconds_t>(us % 1000000)};
-    const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
-    if (r > 0) lcm_.handle();
-    if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+    const int r = handle_within(us);
     // Late (the physics lags the wall clock): take what has arrived, then step on.
     if (us == 0 && r <= 0) return;
   }
+}
+
+// Waits up to `us` microseconds for LCM traffic and handles one message; select's result.
+int Simulation::handle_within(std::int64_t us) {
+  const int fd = lcm_.getFileno();
+  fd_set fds;
+  FD_ZERO(&fds);
+  FD_SET(fd, &fds);
+  timeval tv{static_cast<time_t>(us / 1000000), static_cast<suseconds_t>(us % 1000000)};
+  const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
+  if (r > 0) lcm_.handle();
+  if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+  return r;
 }
 
 bool Simulation::wait_for_command(std::int64_t seq, double t) {
@@ -339,7 +346,6 @@ bool Simulation::wait_for_command(std::int64_t seq, double t) {
   answered_ = false;
   const double timeout = seq == 0 ? std::max(s_.startup_timeout, s_.lockstep_timeout) : s_.lockstep_timeout;
   const auto give_up = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout));
-  const int fd = lcm_.getFileno();
   auto republish = Clock::now() + std::chrono::milliseconds(500);
   while (!answered_) {
     if (g_stop) return false;
@@ -353,14 +359,7 @@ bool Simulation::wait_for_command(std::int64_t seq, double t) {
       republish = now + std::chrono::milliseconds(500);
     }
     const auto until = std::min(give_up, republish);
-    const auto us = std::max<std::int64_t>(1, std::chrono::duration_cast<std::chrono::microseconds>(until - now).count());
-    fd_set fds;
-    FD_ZERO(&fds);
-    FD_SET(fd, &fds);
-    timeval tv{static_cast<time_t>(us / 1000000), static_cast<suseconds_t>(us % 1000000)};
-    const int r = select(fd + 1, &fds, nullptr, nullptr, &tv);
-    if (r > 0) lcm_.handle();
-    if (r < 0 && errno != EINTR) throw std::runtime_error("select failed on the LCM socket");
+    handle_within(std::max<std::int64_t>(1, std::chrono::duration_cast<std::chrono::microseconds>(until - now).count()));
   }
   return true;
 }

@@ -1,8 +1,16 @@
-// Settings shared by the core tests: the 16-state quadrotor forest task around hover.
+// Settings and states shared by the core tests: the 16-state quadrotor forest task around
+// hover, the rate quadrotor's state, a team of three.
 #pragma once
 
+#include <initializer_list>
+#include <utility>
+#include <vector>
+
+#include "mppi/costs/forest.hpp"
 #include "mppi/models/quadrotor.hpp"
+#include "mppi/models/quadrotor_rate.hpp"
 #include "mppi/settings.hpp"
+#include "mppi/task.hpp"
 
 namespace mppi::testing {
 
@@ -24,5 +32,45 @@ inline MppiSettings quadrotor_settings(int k, int t, float lambda, float sigma, 
   s.threads = threads;
   return s;
 }
+
+// A model's state: `base` (zero if none) with the named entries set, e.g.
+// state_with<Racecar>({{Racecar::VX, 5.0f}, {Racecar::FX, 30.0f}}).
+template <class Model>
+std::vector<float> state_with(std::initializer_list<std::pair<int, float>> set, std::vector<float> base = {}) {
+  if (base.empty()) base.assign(Model::kNx, 0.0f);
+  for (const auto& [i, v] : set) base[static_cast<std::size_t>(i)] = v;
+  return base;
+}
+
+// A model's state derivative at (x, u).
+template <class Model>
+std::vector<float> derivative_of(const typename Model::Params& p, const std::vector<float>& x,
+                                 const std::vector<float>& u) {
+  std::vector<float> dx(Model::kNx, 0.0f);
+  Model::derivative(p, x.data(), u.data(), dx.data());
+  return dx;
+}
+
+// The 16-state quadrotor at rest 2 m up, its motors at hover speed.
+inline std::vector<float> quad_hover_state(const Quadrotor::Params& p) {
+  std::vector<float> x(Quadrotor::kNx, 0.0f);
+  x[Quadrotor::PZ] = 2.0f;
+  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(p);
+  return x;
+}
+
+// The rate quadrotor at rest 2 m up with attitude quaternion (qw, qx, qy, qz), as given.
+inline std::vector<float> rate_state(float qw = 1, float qx = 0, float qy = 0, float qz = 0) {
+  using QR = QuadrotorRate;
+  std::vector<float> x(QR::kNx, 0.0f);
+  x[QR::PZ] = 2.0f;
+  x[QR::QW] = qw;
+  x[QR::QX] = qx;
+  x[QR::QY] = qy;
+  x[QR::QZ] = qz;
+  return x;
+}
+
+using QuadrotorTeam3 = Task<Quadrotor, ForestCost<Quadrotor>, 3>;
 
 }  // namespace mppi::testing

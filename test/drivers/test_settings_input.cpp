@@ -73,6 +73,22 @@ TEST(SettingsInput, TheTriggerIsClockOrStateAndItsFractionsAreBounded) {
   EXPECT_DOUBLE_EQ(d.loop.state_trigger_grace, 1.0);
 }
 
+// The rollout fan for tools/view: off unless asked; its fields bounded and named.
+TEST(SettingsInput, TheRolloutFanIsOffByDefaultAndBounded) {
+  const app::AppConfig base = app::parse_config(YAML::Load(std::string(kGood)));
+  EXPECT_EQ(daemon::parse_daemon_settings(base.root["daemon"], base.task, 1).loop.rollouts.hz, 0.0);
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: {rollouts: {top: 200, random: 100, hz: 5}}\n"),
+            "daemon.rollouts.random: top + random must be at most 256");
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {rollouts: {hz: -1}}\n").find("daemon.rollouts.hz: must be in"),
+            std::string::npos);
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {rollouts: {every: 3}}\n").find("every"), std::string::npos);
+  const app::AppConfig c = app::parse_config(YAML::Load(std::string(kGood) + "daemon: {rollouts: {hz: 5, top: 8}}\n"));
+  const auto d = daemon::parse_daemon_settings(c.root["daemon"], c.task, 1);
+  EXPECT_DOUBLE_EQ(d.loop.rollouts.hz, 5.0);
+  EXPECT_EQ(d.loop.rollouts.top, 8);
+  EXPECT_EQ(d.loop.rollouts.random, 16);
+}
+
 // A `cuda:` section may carry daemon settings (the GPU's state trigger): merged key by key
 // into the file's daemon section, the rest of which stays.
 TEST(SettingsInput, TheCudaSectionMayCarryDaemonSettings) {

@@ -1,5 +1,5 @@
 """The mission tool's reference (mppi_mission/reference.py) against the closed-form values
-that test/core/test_reference.cpp checks on core's Reference: the two implement one spec."""
+that test/core/costs/test_reference.cpp checks on core's Reference: the two implement one spec."""
 import math
 
 import numpy as np

@@ -52,6 +52,30 @@ def test_resolve_scenarios_names_and_files(tmp_path):
         campaign.resolve_scenarios([str(tmp_path / "missing.yaml")])
 
 
+def test_wilson_interval_holds_the_rate():
+    # 0/11 and 6/6 came out a rounding error outside (the campaign plot refused them).
+    for n in range(1, 200):
+        for k in range(n + 1):
+            lo, hi = campaign.wilson(k, n)
+            assert 0.0 <= lo <= k / n <= hi <= 1.0, (k, n, lo, hi)
+    assert campaign.wilson(0, 11)[0] == 0.0 and campaign.wilson(6, 6)[1] == 1.0
+    lo, hi = campaign.wilson(5, 10)
+    assert 0.2 < lo < 0.25 and 0.75 < hi < 0.8  # 0.237, 0.763
+
+
+def test_campaign_plot_with_no_success(tmp_path):
+    """A scenario that never succeeded (0 of 11) and one that always did (6 of 6) draw."""
+    sys.path.insert(0, str(ROOT / "tools" / "plots"))
+    from sitl_campaign import plot_campaign
+    runs = ([{"scenario": "never", "seed": s, "success": False, "min_clearance": -0.1} for s in range(11)] +
+            [{"scenario": "always", "seed": s, "success": True, "time_to_goal": 5.0, "min_clearance": 1.0}
+             for s in range(6)])
+    summary = campaign.summarize(runs)
+    (tmp_path / "summary.json").write_text(json.dumps({"summary": summary, "runs": runs}))
+    out = plot_campaign(tmp_path)
+    assert out.is_file() and out.stat().st_size > 1000
+
+
 def test_parse_seeds():
     assert campaign.parse_seeds("3", 51) == [51, 52, 53]
     assert campaign.parse_seeds("51-53,60") == [51, 52, 53, 60]

@@ -56,9 +56,11 @@ def test_campaign_ctrl_c(tmp_path):
         from conftest import missing
         missing("mppid-sim not built")
     out = tmp_path / "camp"
+    # Started as a background job of a non-interactive shell starts it (`tools/test.sh &`, a
+    # CI step): with SIGINT ignored. The campaign must stop on it all the same.
     p = subprocess.Popen([str(SITL), "campaign", "--scenarios", "forest_4m", "--seeds", "4", "--out", str(out),
                           "--controller", "standin", "--realtime"], cwd=ROOT, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE)
+                         stderr=subprocess.PIPE, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     pid_files = lambda: list(out.glob("forest_4m/seed_*/pids.json"))
     deadline = time.monotonic() + 30
     while not pid_files() and time.monotonic() < deadline:

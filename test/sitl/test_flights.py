@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from sitl_helpers import sitl
@@ -76,3 +77,10 @@ def test_realtime_forest_flight_reaches_the_goal(mppid_binary, tmp_path):
     assert all(m.lead_us > 0 for m in fresh)
     # The lead covers the state's age and the expected latency, so it exceeds the age.
     assert all(m.lead_us > m.age_us for m in fresh)
+    # timing.png's first panel in real time: state sample -> command out as the daemon measured
+    # it in each fresh cycle (age + compute), the figure score.json reports.
+    shown = json.loads((out / "timing.json").read_text())
+    assert shown["state_to_command_shown"].startswith("daemon")
+    per_cycle = [(m.age_us + m.compute_us) / 1e3 for m in fresh]
+    assert shown["state_to_command_ms_p99"] == score["state_to_command_ms_p99"]
+    assert score["state_to_command_ms_p99"] == pytest.approx(float(np.percentile(per_cycle, 99)))

@@ -27,7 +27,10 @@ def plot_campaign(folder: Path, out: Path | None = None) -> Path:
     hi = np.array([rows[n]["wilson95"][1] for n in names])
     x = np.arange(len(names))
     axes[0].bar(x, 100 * rate, color="tab:green")
-    axes[0].errorbar(x, 100 * rate, yerr=[100 * (rate - lo), 100 * (hi - rate)], fmt="none", c="k", capsize=4)
+    # Clipped: a summary.json written before campaign.wilson() kept the rate inside its
+    # interval may hold an end a rounding error beside it.
+    yerr = np.clip([100 * (rate - lo), 100 * (hi - rate)], 0.0, None)
+    axes[0].errorbar(x, 100 * rate, yerr=yerr, fmt="none", c="k", capsize=4)
     axes[0].set_ylabel("success [%] (Wilson 95 %)")
     for ax, key, label in ((axes[1], "time_to_goal", "time to goal [s]"), (axes[2], "min_clearance", "min clearance [m]")):
         for i, n in enumerate(names):

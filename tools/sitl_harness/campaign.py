@@ -15,14 +15,17 @@ from .engine import FlightJob, Progress, make_engine, run_flights
 
 
 def wilson(k: int, n: int, z: float = 1.96):
-    """Wilson score interval of a success rate (95 % by default)."""
+    """Wilson score interval of a success rate (95 % by default). It always holds k / n: at
+    k = 0 and k = n its end is exactly 0 or 1 (in floating point c - h came out at 3e-17 for
+    0/11, and c + h at 1 - 1e-16 for 6/6, an interval beside the rate that the campaign plot's
+    error bars refused: 'yerr' must not contain negative values)."""
     if n == 0:
         return (0.0, 1.0)
     p = k / n
     d = 1 + z * z / n
     c = (p + z * z / (2 * n)) / d
     h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return (max(0.0, c - h), min(1.0, c + h))
+    return (min(p, max(0.0, c - h)), max(p, min(1.0, c + h)))
 
 
 def parse_seeds(text: str, first_seed: int = 1) -> list[int]:

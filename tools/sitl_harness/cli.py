@@ -44,6 +44,15 @@ def main(argv=None) -> int:
     r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
     r.add_argument("--niceness", type=int, default=None, help=argparse.SUPPRESS)  # Ray: the driver's niceness
     r.add_argument("--no-plots", action="store_true", help="skip path/traces/timing.png")
+    r.add_argument("--view", action="store_true",
+                   help="the live 3D view in the browser (tools/view; rollouts on at 5 Hz); prints its URL; "
+                        "flight.rrd after the flight")
+    r.add_argument("--view-hold", type=float, default=0.0, metavar="SECONDS",
+                   help="with --view: keep the view serving this long after the flight")
+    r.add_argument("--view-wait", type=float, default=0.0, metavar="SECONDS",
+                   help="with --view: serve this long before the flight starts (time to open the page)")
+    r.add_argument("--view-port", type=int, default=9090, help="with --view: the web viewer's port (gRPC: +786)")
+    r.add_argument("--rrd", action="store_true", help="also write flight.rrd (the log in rerun's format, tools/view)")
     r.add_argument("--quiet", action="store_true")
 
     c = sub.add_parser("campaign", help="seeds x scenarios, summary table with Wilson intervals")
@@ -138,7 +147,8 @@ def main(argv=None) -> int:
         spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
                           ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
                           kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
-                          params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin)
+                          params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, view=a.view,
+                          view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
         try:
             from .inject import parse_update
             for u in a.param:
@@ -173,6 +183,8 @@ def main(argv=None) -> int:
         return 0 if score.get("success") else 1
     if a.cmd == "campaign":
         from .campaign import parse_seeds, resolve_scenarios, run_campaign
+        from .flight import interrupt_on_stop_signals
+        interrupt_on_stop_signals()
         names = [s.strip() for s in a.scenarios.split(",") if s.strip()]
         try:
             resolve_scenarios(names)
@@ -237,7 +249,9 @@ def main(argv=None) -> int:
         print(ap_table(a.folders, a.labels.split(",") if a.labels else [f.name for f in a.folders]), end="")
         return 0
     if a.cmd == "tune":
+        from .flight import interrupt_on_stop_signals
         from .tune import main_tune
+        interrupt_on_stop_signals()
         return main_tune(a)
     if a.cmd == "plot":
         from .plots import plot_flight

@@ -43,6 +43,7 @@ def _controller_stats(status, commands=()):
         # per-cycle figures still come from the commands.
         t = timing.flight_timing([], [m for _, m in commands])
         t.pop("compute_samples_ms", None)
+        t.pop("state_to_command_samples_ms", None)
         return t
     last = msgs[-1]
     res = {
@@ -58,6 +59,7 @@ def _controller_stats(status, commands=()):
     }
     t = timing.flight_timing(msgs, [m for _, m in commands])
     t.pop("compute_samples_ms", None)
+    t.pop("state_to_command_samples_ms", None)
     res.update(t)
     return res
 

@@ -3,6 +3,7 @@
 // owns the plan, the warm start and the smoothing.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -82,6 +83,12 @@ class RolloutBackend {
 
   // S~(tau_0,k) of every rollout of the last update (tests and tools; may allocate).
   virtual std::vector<float> rollout_costs() const = 0;
+  // The same K floats into out without allocating (the display sample of a cycle's
+  // rollouts, rollout_fan.hpp, on the cycles that publish one). The default allocates.
+  virtual void step0_costs(float* out) const {
+    const std::vector<float> c = rollout_costs();
+    std::copy(c.begin(), c.end(), out);
+  }
 
   // The anytime cycle: the backend reads *stop between chunks of rollouts; once it is set,
   // update() uses the rollouts finished so far (UpdateStats::rollouts, partial). The caller

@@ -12,6 +12,8 @@
 #include <vector>
 
 #include "mppi/backend.hpp"
+#include "mppi/held_plan.hpp"
+#include "mppi/rollout_fan.hpp"
 #include "mppi/settings.hpp"
 
 namespace mppi {
@@ -27,14 +29,16 @@ class Mppi {
   Mppi(const MppiSettings& s, std::unique_ptr<RolloutBackend<Task>> backend)
       : settings_(s),
         backend_(std::move(backend)),
-        plan_(static_cast<std::size_t>(s.horizon) * kNu),
+        plan_(s.horizon, s.u_init),
         scratch_(plan_.size()),
         path_(static_cast<std::size_t>(s.horizon + 1) * Task::kVehicles * 2),
         work_(std::make_unique<Params>()) {
+    kept_.plan.assign(plan_.size(), 0.0f);
+    kept_.x0.assign(kNx, 0.0f);
+    kept_.costs.assign(static_cast<std::size_t>(s.rollouts), 0.0f);
     const std::string err = validate(s, kNu);
     if (!err.empty()) throw std::invalid_argument(err);
     if (!backend_) throw std::invalid_argument("backend: none given");
-    reset();
   }
 
   // One control cycle from state x0: update the plan, smooth it, write u_0 to u_out and
@@ -48,11 +52,31 @@ class Mppi {
       Task::prepare(*work_, x0, plan_.data(), settings_.horizon, settings_.dt, settings_.substeps, path_.data());
       p = work_.get();
     }
+    const bool keep = keep_next_;
+    keep_next_ = false;
+    kept_ok_ = false;
+    if (keep) keep_inputs(x0, *p);
     backend_->update(x0, *p, cycle_++, plan_.data(), &stats_);
+    kept_.rollouts = stats_.rollouts;
+    kept_ok_ = keep;
     if (stats_.updated && settings_.smoothing_window > 1) smooth();
     std::copy_n(plan_.data(), kNu, u_out);
-    shift();
+    plan_.shift();
     return stats_;
+  }
+
+  // The next iterate() keeps what a display sample of its rollouts needs (the plan it
+  // starts from, the state, the parameters: copies into buffers sized at construction);
+  // fan() then rebuilds the sample. Off again after that iterate().
+  void keep_rollouts() { keep_next_ = true; }
+  // The `top` lowest-cost and `random` other rollouts of the last iterate() into fan, if it
+  // kept them and updated the plan; false (fan untouched) otherwise. Reads the backend's
+  // step-0 costs of that update here, after the command is out (on CUDA a device-to-host
+  // copy), so the kept cycle itself pays only the copies above. Allocates nothing.
+  bool fan(int top, int random, RolloutFan* out) {
+    if (!kept_ok_ || !stats_.updated) return false;
+    backend_->step0_costs(kept_.costs.data());
+    return fill_rollout_fan<Task>(*kept_params_, settings_, kept_, top, random, out);
   }
 
   // The anytime cycle (RolloutBackend::set_stop_flag).
@@ -65,33 +89,26 @@ class Mppi {
   // The fallback after a missed deadline or a bad update: the previous plan, shifted.
   void fallback(float* u_out) {
     std::copy_n(plan_.data(), kNu, u_out);
-    shift();
+    plan_.shift();
   }
 
   // Drop the first `steps` controls and append u_init as often (warm start; one step per
   // cycle, more when time moved on further: skipped cycles, an older state).
-  void shift(int steps = 1) {
-    const int t = settings_.horizon;
-    steps = std::clamp(steps, 0, t);
-    if (steps == 0) return;
-    std::copy(plan_.begin() + static_cast<std::ptrdiff_t>(steps) * kNu, plan_.end(), plan_.begin());
-    for (int i = t - steps; i < t; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
-  }
+  void shift(int steps = 1) { plan_.shift(steps); }
 
-  void reset() {
-    for (int i = 0; i < settings_.horizon; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
-  }
+  void reset() { plan_.reset(); }
 
   // Replace the plan (tests; a restored plan). Values are clamped into the limits.
   void set_plan(const std::vector<float>& plan) { set_plan(plan.data()); }
   void set_plan(const float* plan) {
+    float* out = plan_.data();
     for (std::size_t n = 0; n < plan_.size(); ++n) {
       const int j = static_cast<int>(n % kNu);
-      plan_[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);
+      out[n] = std::clamp(plan[n], settings_.u_min[j], settings_.u_max[j]);
     }
   }
 
-  const std::vector<float>& plan() const { return plan_; }
+  const std::vector<float>& plan() const { return plan_.values(); }
   const UpdateStats& stats() const { return stats_; }
   const MppiSettings& settings() const { return settings_; }
   RolloutBackend<Task>& backend() { return *backend_; }
@@ -102,6 +119,13 @@ class Mppi {
   void set_cycle(std::uint32_t c) { cycle_ = c; }
 
  private:
+  void keep_inputs(const float* x0, const Params& p) {
+    std::copy(plan_.values().begin(), plan_.values().end(), kept_.plan.begin());
+    std::copy_n(x0, kNx, kept_.x0.begin());
+    *kept_params_ = p;
+    kept_.cycle = cycle_;
+  }
+
   // Centred moving average over time, the window shrinking at the ends. Each output is a
   // convex combination of in-limit controls, so the limits hold mathematically; in float the
   // average of equal values can round one ulp outside ((2.2f * 3) * (1.0f / 3) > 2.2f), so
@@ -114,7 +138,7 @@ class Mppi {
       const float inv = 1.0f / static_cast<float>(hi - lo + 1);
       for (int j = 0; j < kNu; ++j) {
         float acc = 0.0f;
-        for (int m = lo; m <= hi; ++m) acc += plan_[m * kNu + j];
+        for (int m = lo; m <= hi; ++m) acc += plan_.data()[m * kNu + j];
         scratch_[i * kNu + j] = std::clamp(acc * inv, settings_.u_min[j], settings_.u_max[j]);
       }
     }
@@ -123,12 +147,16 @@ class Mppi {
 
   MppiSettings settings_;
   std::unique_ptr<RolloutBackend<Task>> backend_;
-  std::vector<float> plan_;
+  HeldPlan plan_;  // the warm start
   std::vector<float> scratch_;
   std::vector<float> path_;       // the plan's noise-free path, xy per step and vehicle
   std::unique_ptr<Params> work_;  // the parameters as prepared for this cycle
   UpdateStats stats_;
   std::uint32_t cycle_ = 0;
+  bool keep_next_ = false;
+  KeptRollouts kept_;                     // the last iterate's inputs (costs: at fan()) ...
+  std::unique_ptr<Params> kept_params_ = std::make_unique<Params>();  // ... and parameters
+  bool kept_ok_ = false;                  // ... when it kept them
 };
 
 }  // namespace mppi

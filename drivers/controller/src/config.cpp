@@ -216,6 +216,76 @@ YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section) {
   return out;
 }
 
+AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant);
+
+// The task's per-channel lists spread over a team, its model and cost parameters checked,
+// the optimizer and DDP settings validated against its control size.
+void check_against_task(AppConfig& c) {
+  int nu = -1;
+  std::string param_error;
+  const bool known = visit_task(c.task, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    nu = T::kNu;
+    // A team's per-channel lists may be given for one vehicle: every vehicle gets them.
+    for (auto* v : {&c.mppi.sigma, &c.mppi.u_min, &c.mppi.u_max, &c.mppi.u_init, &c.mppi.u_nominal}) {
+      if (T::kVehicles > 1 && static_cast<int>(v->size()) == T::kVehicleNu) {
+        const std::vector<float> one = *v;
+        for (int j = 1; j < T::kVehicles; ++j) v->insert(v->end(), one.begin(), one.end());
+      }
+    }
+    typename T::Params p{};
+    for (const auto& [key, value] : c.params) {
+      const std::string err = set_task_param<T>(p, key, value);
+      if (!err.empty() && param_error.empty()) param_error = err;
+    }
+  });
+  if (!known) fail("task", "unknown task '" + c.task + "'");
+  if (!param_error.empty()) throw ConfigError(param_error);
+  const std::string err = validate(c.mppi, nu);
+  if (!err.empty()) throw ConfigError("mppi." + err);
+  if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
+}
+
+// The variants (`cuda:`, each entry of `cpu_targets:`): the file with that section (after the
+// overrides: --set cuda.x=... works) merged in, then the other overrides again (so a
+// command-line --set wins over the section). Parsed, and so validated, now, whatever the
+// machine; after the file itself, so an error of the file (or of an override both share) is
+// reported as the file's.
+void parse_variants(const YAML::Node& root, const YAML::Node& file, const std::vector<std::string>& overrides,
+                    AppConfig* c) {
+  std::vector<std::string> rest;
+  for (const auto& o : overrides)
+    if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
+  // Errors name the variant: "cuda.sim: unknown section" (its own keys), "cuda: mppi.rollouts:
+  // must be >= 1" (the merged settings).
+  const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
+    if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
+    YAML::Node merged;
+    try {
+      merged = merged_with(file, section);
+    } catch (const ConfigError& e) {
+      throw ConfigError(name + "." + e.what());
+    }
+    try {
+      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true));
+    } catch (const ConfigError& e) {
+      throw ConfigError(name + ": " + e.what());
+    }
+  };
+  if (const YAML::Node section = root["cuda"]; section) c->cuda = parse_variant(section, "cuda");
+  const YAML::Node targets = root["cpu_targets"];
+  if (!targets || targets.IsNull()) return;
+  if (!targets.IsMap()) fail("cpu_targets", "expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
+  for (const auto& kv : targets) {
+    const std::string target = key_name(kv.first, "cpu_targets");
+    simd::Target t{};
+    if (target == "off" || target == "auto" || !simd::parse_setting(target, &t))
+      fail("cpu_targets." + target, "not a SIMD target (scalar, " + simd::target_names() + ")");
+    if (c->cpu_targets.count(simd::name(t))) fail("cpu_targets." + target, "given twice");
+    c->cpu_targets[simd::name(t)] = parse_variant(kv.second, "cpu_targets." + target);
+  }
+}
+
 AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant) {
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
   const YAML::Node file = YAML::Clone(root);
@@ -241,67 +311,8 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   }
   read_params(root, "model", c);
   read_params(root, "cost", c);
-
-  int nu = -1;
-  std::string param_error;
-  const bool known = visit_task(c.task, [&](auto tag) {
-    using T = typename decltype(tag)::type;
-    nu = T::kNu;
-    // A team's per-channel lists may be given for one vehicle: every vehicle gets them.
-    for (auto* v : {&c.mppi.sigma, &c.mppi.u_min, &c.mppi.u_max, &c.mppi.u_init, &c.mppi.u_nominal}) {
-      if (T::kVehicles > 1 && static_cast<int>(v->size()) == T::kVehicleNu) {
-        const std::vector<float> one = *v;
-        for (int j = 1; j < T::kVehicles; ++j) v->insert(v->end(), one.begin(), one.end());
-      }
-    }
-    typename T::Params p{};
-    for (const auto& [key, value] : c.params) {
-      const std::string err = set_task_param<T>(p, key, value);
-      if (!err.empty() && param_error.empty()) param_error = err;
-    }
-  });
-  if (!known) fail("task", "unknown task '" + c.task + "'");
-  if (!param_error.empty()) throw ConfigError(param_error);
-  const std::string err = validate(c.mppi, nu);
-  if (!err.empty()) throw ConfigError("mppi." + err);
-  if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
-  // The variants (`cuda:`, each entry of `cpu_targets:`): the file with that section (after the
-  // overrides: --set cuda.x=... works) merged in, then the other overrides again (so a
-  // command-line --set wins over the section). Parsed, and so validated, now, whatever the
-  // machine; after the file itself, so an error of the file (or of an override both share) is
-  // reported as the file's.
-  if (variant) return c;
-  std::vector<std::string> rest;
-  for (const auto& o : overrides)
-    if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
-  // Errors name the variant: "cuda.sim: unknown section" (its own keys), "cuda: mppi.rollouts:
-  // must be >= 1" (the merged settings).
-  const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
-    if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
-    YAML::Node merged;
-    try {
-      merged = merged_with(file, section);
-    } catch (const ConfigError& e) {
-      throw ConfigError(name + "." + e.what());
-    }
-    try {
-      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true));
-    } catch (const ConfigError& e) {
-      throw ConfigError(name + ": " + e.what());
-    }
-  };
-  if (const YAML::Node section = root["cuda"]; section) c.cuda = parse_variant(section, "cuda");
-  if (const YAML::Node targets = root["cpu_targets"]; targets && !targets.IsNull()) {
-    if (!targets.IsMap()) fail("cpu_targets", "expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
-    for (const auto& kv : targets) {
-      const std::string target = key_name(kv.first, "cpu_targets");
-      simd::Target t{};
-      if (target == "off" || target == "auto" || !simd::parse_setting(target, &t))
-        fail("cpu_targets." + target, "not a SIMD target (scalar, " + simd::target_names() + ")");
-      if (c.cpu_targets.count(simd::name(t))) fail("cpu_targets." + target, "given twice");
-      c.cpu_targets[simd::name(t)] = parse_variant(kv.second, "cpu_targets." + target);
-    }
-  }
+  check_against_task(c);
+  if (!variant) parse_variants(root, file, overrides, &c);
   return c;
 }
 

@@ -35,12 +35,13 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       period_ns_(std::llround(1e9 / s_.rate_hz)),
       status_every_(every(s_.rate_hz, s_.status_hz)),
       plan_every_(every(s_.rate_hz, s_.plan_hz)),
+      rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
       schedule_(period_ns_),
       monitor_(period_ns_),
       gate_(controller->settings().u_min, controller->settings().u_max),
       obstacle_order_(transport::kMaxObstaclesIn),
       distances_(transport::kMaxObstaclesIn),
-      held_(controller->plan()),
+      held_(controller->horizon(), controller->settings().u_init),
       u_(static_cast<std::size_t>(nu_)),
       u_init_(controller->settings().u_init),
       latency_(s_.latency.estimator),
@@ -48,6 +49,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
       x_pred_(static_cast<std::size_t>(controller->nx())),
       observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles()) {
+  held_.assign(c_->plan());
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
@@ -188,9 +190,7 @@ void ControlLoop::align_plan(std::int64_t t_act_ns) {
     const auto n = static_cast<int>(std::min<double>(std::floor(steps + 0.5), horizon_));
     if (n > 0) {
       c_->shift(n);
-      const std::size_t used = static_cast<std::size_t>(n) * static_cast<std::size_t>(nu_);
-      std::copy(held_.begin() + static_cast<std::ptrdiff_t>(used), held_.end(), held_.begin());
-      for (std::size_t i = held_.size() - used; i < held_.size(); ++i) held_[i] = u_init_[i % nu_];
+      held_.shift(n);
       counters_.plan_skips.fetch_add(n, std::memory_order_relaxed);
     }
   }
@@ -202,176 +202,231 @@ void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
+// One control cycle, as it runs: check the state; optimise from a fresh one; publish what
+// came of it; then the bookkeeping (timing, health, status, plan).
 void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
   const std::int64_t t0 = lockstep ? clock_->now_ns() : start_ns;
-  apply_between_cycles(now_state_ns);
+  apply_between_cycles();
+  const CycleState s = read_state(now_state_ns, lockstep);
 
-  const bool have_state = in_->state.writes() > 0;
-  const transport::StateSample& x = in_->state.front();
+  Outcome outcome = Outcome::kFailsafe;
+  switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
+    case StateCheck::kFailsafe: outcome = enter_failsafe(); break;
+    case StateCheck::kHold: outcome = hold_stale(s); break;
+    case StateCheck::kFresh: outcome = optimize(s, deadline_ns, lockstep); break;
+  }
+
+  Mode published = Mode::kHoldPlan;
+  switch (outcome) {
+    case Outcome::kFailsafe:
+      published = send_failsafe(s, t0);
+      break;
+    case Outcome::kStale:
+      published = send_held(s, t0);
+      c_->fallback(u_.data());  // keep the warm start aligned with time
+      plan_t0_ns_ += dt_ns_;
+      break;
+    case Outcome::kGuardCovered:
+      break;  // the guard published the held plan, one step per period
+    case Outcome::kBadUpdate:
+    case Outcome::kAnytimeHold:
+      // The optimizer's plan may hold NaN (or is not updated): it restarts from the held
+      // plan, the last good one shifted in step with what went out.
+      published = send_held(s, t0);
+      c_->set_plan(held_.data());
+      break;
+    case Outcome::kLate:
+      published = send_held(s, t0);
+      held_.assign(c_->plan());  // the late update is the plan to fall back on
+      break;
+    case Outcome::kFresh:
+      published = send_fresh(s, t0, lockstep);
+      break;
+  }
+  account(s, start_ns, t0, published, lockstep);
+}
+
+ControlLoop::CycleState ControlLoop::read_state(std::int64_t now_state_ns, bool lockstep) const {
+  CycleState s;
+  s.x = &in_->state.front();
+  s.have = in_->state.writes() > 0;
+  s.now_ns = now_state_ns;
   // Staleness from the state's sample time (see state_time_ns): a state older than the
   // timeouts, or stamped in the future, is not predicted from.
-  bool future = false;
-  const std::int64_t t_state = have_state ? state_time_ns(x, lockstep, &future) : 0;
-  const std::int64_t age = !have_state ? INT64_MAX : std::max<std::int64_t>(0, now_state_ns - t_state);
-  const std::int64_t state_seq = have_state ? x.seq : -1;
-  const LatencySettings& ls = s_.latency;
+  s.t_state_ns = s.have ? state_time_ns(*s.x, lockstep, &s.future) : 0;
+  s.age_ns = s.have ? std::max<std::int64_t>(0, now_state_ns - s.t_state_ns) : INT64_MAX;
+  s.seq = s.have ? s.x->seq : -1;
+  s.new_sample = s.seq != last_state_seq_used_;
   // Expected latency of this cycle (start -> command out), then when its command acts. In
   // whole microseconds: command_t's lead_us then gives t_act exactly (replay).
+  const LatencySettings& ls = s_.latency;
   const std::int64_t expected =
       (expected_override_ns_ >= 0 ? expected_override_ns_ : latency_.estimate_ns()) / rt::kNsPerUs * rt::kNsPerUs;
-  const std::int64_t t_act = now_state_ns + expected + ls.transport_ns + ls.actuation_delay_ns;
+  s.t_act_ns = now_state_ns + expected + ls.transport_ns + ls.actuation_delay_ns;
+  s.lead_ns = ls.compensate ? s.t_act_ns - s.t_state_ns : 0;
+  return s;
+}
 
-  Mode published = Mode::kFailsafe;
-  bool missed_deadline = false;
-  if (!have_state || age > s_.failsafe_timeout_ns) {
-    if (mode_.load(std::memory_order_relaxed) != Mode::kFailsafe) {
-      // The plan is too old to mean anything when the state comes back: start over.
-      c_->reset();
-      held_ = c_->plan();
-      history_.reset();
-      plan_timed_ = false;
-      if (observe_) {
-        observer_.reset();
-        c_->set_external_accel(observer_.estimate());
-      }
-    }
-    stamp_timing(have_state ? age : 0, clock_->now_ns() - t0, 0);
-    if (publish_failsafe(state_seq)) remember(sent_ns(now_state_ns, t0), failsafe_.data());
-    published = Mode::kFailsafe;
-  } else if (future || age > s_.state_timeout_ns) {
-    counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
-    if (future) counters_.future_states.fetch_add(1, std::memory_order_relaxed);
-    if (ls.compensate) align_plan(t_act);
-    stamp_timing(age, clock_->now_ns() - t0, 0);
-    published = publish_held(state_seq);
-    remember(sent_ns(now_state_ns, t0), u_.data());
-    c_->fallback(u_.data());  // keep the warm start aligned with time
-    plan_t0_ns_ += dt_ns_;
-  } else {
-    // Latency compensation: optimise from the state as it will be when this command acts.
-    const float* x0 = x.x;
-    std::int64_t lead = 0;
-    // A new state: the disturbance observer compares it with the last one predicted.
-    if (observe_ && state_seq != last_state_seq_used_ && observer_.update(*c_, history_, x.x, t_state))
-      c_->set_external_accel(observer_.estimate());
-    if (ls.compensate) {
-      align_plan(t_act);
-      std::copy_n(x.x, x_pred_.size(), x_pred_.data());
-      history_.predict(*c_, x_pred_.data(), t_state, t_act);
-      x0 = x_pred_.data();
-      lead = t_act - t_state;
-      monitor_.record_lead(lead);
-      // A moving reference is compared with the predicted state at the predicted state's time:
-      // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
-      if (have_reference_ && inputs_.reference.kind != Reference::kHold) {
-        inputs_.reference_time = static_cast<float>(static_cast<double>(x.sample_utime - reference_t0_utime_) * 1e-6 +
-                                                    static_cast<double>(lead) * 1e-9);
-        c_->set_inputs(inputs_);
-      }
-    } else {
-      plan_timed_ = false;
-    }
-    monitor_.record_age(age);
-    bool good = false;
-    const bool guarded = guard_thread_.joinable() && !lockstep;
-    if (anytime_) {
-      // This cycle's stop flag (guard_arm makes it cycle guard_id_ + 1), clear; none unguarded.
-      std::atomic<bool>* stop = guarded ? &anytime_stop_[(guard_id_ + 1) & 1u] : nullptr;
-      if (stop != nullptr) stop->store(false, std::memory_order_relaxed);
-      c_->set_stop_flag(stop);
-    }
-    if (guarded) guard_arm(deadline_ns, state_seq);
-    const std::int64_t optimize_start = clock_->now_ns();
-    try {
-      last_stats_ = c_->iterate(x0, u_.data());
-      if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
-      if (!last_stats_.finite) {
-        counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
-      } else if (!gate_.pass(u_.data(), nu_)) {
-        counters_.gate_rejects.fetch_add(1, std::memory_order_relaxed);
-      } else {
-        good = true;
-      }
-    } catch (const std::exception& e) {
-      counters_.optimizer_errors.fetch_add(1, std::memory_order_relaxed);
-      spdlog::error("optimizer error: {}", e.what());
-    }
-    const std::int64_t done = clock_->now_ns();
-    monitor_.record_optimize(done - optimize_start);
-    missed_deadline = !lockstep && done > deadline_ns;
-    const int guard_steps = guarded ? guard_disarm() : 0;
-    if (guard_steps > 0) {
-      // The guard covered the stall with the held plan, one step per period; this late
-      // result is not published. Keep the held plan in step with what went out.
-      counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
-      const std::size_t used = std::min<std::size_t>(static_cast<std::size_t>(guard_steps) * nu_, held_.size());
-      for (int i = 0; i < guard_steps; ++i) {
-        const std::size_t k = static_cast<std::size_t>(i) * nu_;
-        remember(deadline_ns + i * period_ns_, k < held_.size() ? held_.data() + k : u_init_.data());
-      }
-      std::copy(held_.begin() + static_cast<std::ptrdiff_t>(used), held_.end(), held_.begin());
-      for (std::size_t i = held_.size() - used; i < held_.size(); ++i) held_[i] = u_init_[i % nu_];
-      if (good) {
-        consecutive_bad_updates_ = 0;
-        held_ = c_->plan();
-      } else {
-        c_->reset();
-        ++consecutive_bad_updates_;
-      }
-      plan_timed_ = false;  // the next fresh cycle starts the plan's timeline again
-      published = Mode::kHoldPlan;
-    } else if (!good) {
-      // The optimizer's plan may hold NaN: fly the held plan and warm-start the optimizer
-      // from it (the last good plan, shifted in step with what went out).
-      ++consecutive_bad_updates_;
-      stamp_timing(age, clock_->now_ns() - t0, 0);
-      published = publish_held(state_seq);
-      remember(sent_ns(now_state_ns, t0), u_.data());
-      c_->set_plan(held_.data());
-    } else if (!last_stats_.updated) {
-      // Anytime: stopped below mppi.min_rollouts, no update (not a bad one): the held plan.
-      counters_.anytime_holds.fetch_add(1, std::memory_order_relaxed);
-      consecutive_bad_updates_ = 0;
-      stamp_timing(age, clock_->now_ns() - t0, 0);
-      published = publish_held(state_seq);
-      remember(sent_ns(now_state_ns, t0), u_.data());
-      c_->set_plan(held_.data());
-    } else if (missed_deadline) {
-      counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
-      consecutive_bad_updates_ = 0;
-      stamp_timing(age, clock_->now_ns() - t0, 0);
-      published = publish_held(state_seq);
-      remember(sent_ns(now_state_ns, t0), u_.data());
-      held_ = c_->plan();  // same size: copies, no allocation
-    } else {
-      consecutive_bad_updates_ = 0;
-      const std::int64_t compute = clock_->now_ns() - t0;
-      stamp_timing(age, compute, lead);
-      published = publish(Mode::kNormal, u_.data(), state_seq) ? Mode::kNormal : Mode::kFailsafe;
-      const std::int64_t sent = sent_ns(now_state_ns, t0);
-      // In lock-step the plant's clock stands still while the controller computes, and the
-      // simulator charges its latency: the command acts when the controller expected it
-      // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
-      // the run repeats bit for bit). In real time it acts after the measured latency.
-      remember(lockstep ? t_act - ls.transport_ns - ls.actuation_delay_ns : sent, u_.data());
-      held_ = c_->plan();
-      // What the estimator learns: this cycle's start to its command out.
-      if (!latency_.add(sent - now_state_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
-      latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
-      if (state_seq != last_state_seq_used_) monitor_.record_latency(sent - t_state);
-    }
-    if (plan_timed_) plan_t0_ns_ += dt_ns_;
-    last_state_seq_used_ = state_seq;
+// No state, or one past the failsafe timeout. On entry the plan is too old to mean anything
+// when the state comes back: start over.
+Outcome ControlLoop::enter_failsafe() {
+  if (mode_.load(std::memory_order_relaxed) == Mode::kFailsafe) return Outcome::kFailsafe;
+  c_->reset();
+  held_.assign(c_->plan());
+  history_.reset();
+  plan_timed_ = false;
+  if (observe_) {
+    observer_.reset();
+    c_->set_external_accel(observer_.estimate());
   }
-  set_mode(published);
+  return Outcome::kFailsafe;
+}
 
+Outcome ControlLoop::hold_stale(const CycleState& s) {
+  counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
+  if (s.future) counters_.future_states.fetch_add(1, std::memory_order_relaxed);
+  if (s_.latency.compensate) align_plan(s.t_act_ns);
+  return Outcome::kStale;
+}
+
+// A fresh state: predict it to when the command acts, run one update (under the deadline
+// guard in real time) and say what came of it.
+Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep) {
+  const float* x0 = predict_to_act(s);
+  monitor_.record_age(s.age_ns);
+  const bool guarded = guard_thread_.joinable() && !lockstep;
+  if (anytime_) clear_anytime_stop(guarded);
+  if (guarded) guard_arm(deadline_ns, s.seq);
+  const std::int64_t optimize_start = clock_->now_ns();
+  const bool good = run_optimizer(x0);
+  const std::int64_t done = clock_->now_ns();
+  monitor_.record_optimize(done - optimize_start);
+  const int guard_steps = guarded ? guard_disarm() : 0;
+  const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, !lockstep && done > deadline_ns);
+  if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
+  else consecutive_bad_updates_ = o == Outcome::kBadUpdate ? consecutive_bad_updates_ + 1 : 0;
+  if (o == Outcome::kGuardCovered || o == Outcome::kLate) counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
+  if (o == Outcome::kAnytimeHold) counters_.anytime_holds.fetch_add(1, std::memory_order_relaxed);
+  if (plan_timed_) plan_t0_ns_ += dt_ns_;
+  last_state_seq_used_ = s.seq;
+  return o;
+}
+
+// The state to optimise from. A new sample first tells the disturbance observer how the
+// last prediction did. Latency compensation: the state as it will be when this command
+// acts, predicted through the commands already sent.
+const float* ControlLoop::predict_to_act(const CycleState& s) {
+  if (observe_ && s.new_sample && observer_.update(*c_, history_, s.x->x, s.t_state_ns))
+    c_->set_external_accel(observer_.estimate());
+  if (!s_.latency.compensate) {
+    plan_timed_ = false;
+    return s.x->x;
+  }
+  align_plan(s.t_act_ns);
+  std::copy_n(s.x->x, x_pred_.size(), x_pred_.data());
+  history_.predict(*c_, x_pred_.data(), s.t_state_ns, s.t_act_ns);
+  monitor_.record_lead(s.lead_ns);
+  // A moving reference is compared with the predicted state at the predicted state's time:
+  // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
+  if (have_reference_ && inputs_.reference.kind != Reference::kHold) {
+    inputs_.reference_time = static_cast<float>(static_cast<double>(s.x->sample_utime - reference_t0_utime_) * 1e-6 +
+                                                static_cast<double>(s.lead_ns) * 1e-9);
+    c_->set_inputs(inputs_);
+  }
+  return x_pred_.data();
+}
+
+// Anytime: this cycle's stop flag (guard_arm makes it cycle guard_id_ + 1), clear; none
+// unguarded.
+void ControlLoop::clear_anytime_stop(bool guarded) {
+  std::atomic<bool>* stop = guarded ? &anytime_stop_[(guard_id_ + 1) & 1u] : nullptr;
+  if (stop != nullptr) stop->store(false, std::memory_order_relaxed);
+  c_->set_stop_flag(stop);
+}
+
+// One update into u_; true when it is finite and inside the limits (the command gate).
+bool ControlLoop::run_optimizer(const float* x0) {
+  try {
+    last_stats_ = c_->iterate(x0, u_.data());
+    if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
+    if (!last_stats_.finite) {
+      counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
+    if (!gate_.pass(u_.data(), nu_)) {
+      counters_.gate_rejects.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
+    return true;
+  } catch (const std::exception& e) {
+    counters_.optimizer_errors.fetch_add(1, std::memory_order_relaxed);
+    spdlog::error("optimizer error: {}", e.what());
+    return false;
+  }
+}
+
+// The guard covered the stall with the held plan, one step per period from the deadline;
+// this late result is not published. The command history and the held plan follow what
+// went out; a good update still becomes the plan to fall back on.
+void ControlLoop::take_back_from_guard(int steps, bool good, std::int64_t deadline_ns) {
+  for (int i = 0; i < steps; ++i) remember(deadline_ns + i * period_ns_, held_.step(i));
+  if (good) {
+    consecutive_bad_updates_ = 0;
+    held_.assign(c_->plan());
+  } else {
+    held_.shift(steps);
+    c_->reset();
+    ++consecutive_bad_updates_;
+  }
+  plan_timed_ = false;  // the next fresh cycle starts the plan's timeline again
+}
+
+Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
+  stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
+  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  return Mode::kFailsafe;
+}
+
+// The held plan's next step, then the held plan shifted (u_init appended). Returns the mode
+// actually published: the failsafe if the held step fails the gate.
+Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
+  stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
+  std::copy_n(held_.step(0), nu_, u_.data());
+  held_.shift();
+  Mode m = Mode::kHoldPlan;
+  if (!publish(Mode::kHoldPlan, u_.data(), s.seq)) {
+    publish_failsafe(s.seq);
+    m = Mode::kFailsafe;
+  }
+  remember(sent_ns(s.now_ns, t0), u_.data());
+  return m;
+}
+
+Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep) {
+  stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
+  const Mode m = publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
+  const std::int64_t sent = sent_ns(s.now_ns, t0);
+  // In lock-step the plant's clock stands still while the controller computes, and the
+  // simulator charges its latency: the command acts when the controller expected it
+  // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
+  // the run repeats bit for bit). In real time it acts after the measured latency.
+  const LatencySettings& ls = s_.latency;
+  remember(lockstep ? s.t_act_ns - ls.transport_ns - ls.actuation_delay_ns : sent, u_.data());
+  held_.assign(c_->plan());
+  // What the estimator learns: this cycle's start to its command out.
+  if (!latency_.add(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
+  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
+  if (s.new_sample) monitor_.record_latency(sent - s.t_state_ns);
+  return m;
+}
+
+void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published, bool lockstep) {
+  set_mode(published);
   const std::int64_t end = clock_->now_ns();
-  bool missed;
   if (lockstep) {
-    missed = false;
     monitor_.record(start_ns, start_ns + (end - t0), false);
   } else {
-    missed = schedule_.finish(end);
+    const bool missed = schedule_.finish(end);
     monitor_.record(start_ns, end, missed);
   }
   ++cycle_index_;
@@ -384,12 +439,12 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
   snap_consecutive_.store(monitor_.consecutive_misses(), std::memory_order_relaxed);
   heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
 
-  maybe_status(published != last_status_mode_, lockstep ? start_ns : end);
-  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(state_seq, x.x);
+  maybe_status(published != last_status_mode_);
+  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);
+  rollouts_.after_cycle(*c_, *tx_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
 }
 
-void ControlLoop::apply_between_cycles(std::int64_t now_state_ns) {
-  (void)now_state_ns;
+void ControlLoop::apply_between_cycles() {
   transport::ParamUpdate p;
   while (in_->params.pop(&p)) {
     if (forward_live_param(p)) continue;  // the builder answers
@@ -521,8 +576,6 @@ bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
   return true;
 }
 
-// Fills `msg` (the loop's or the guard's own buffer: they run on different threads), sends
-// it and counts it by mode. The caller has passed u through the gate.
 void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns) {
   auto us = [](std::int64_t ns) {
     return static_cast<std::int32_t>(std::clamp<std::int64_t>(ns / rt::kNsPerUs, 0, INT32_MAX));
@@ -532,6 +585,8 @@ void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std
   cmd_.lead_us = us(lead_ns);
 }
 
+// Fills `msg` (the loop's or the guard's own buffer: they run on different threads), sends
+// it and counts it by mode. The caller has passed u through the gate.
 void ControlLoop::send_command(transport::Command* msg, Mode mode, const float* u, std::int64_t state_seq) {
   msg->utime = rt::wall_utime();
   msg->seq = cmd_seq_.fetch_add(1, std::memory_order_relaxed) + 1;
@@ -546,17 +601,6 @@ void ControlLoop::send_command(transport::Command* msg, Mode mode, const float* 
     case Mode::kHoldPlan: counters_.commands_hold.fetch_add(1, std::memory_order_relaxed); break;
     case Mode::kFailsafe: counters_.commands_failsafe.fetch_add(1, std::memory_order_relaxed); break;
   }
-}
-
-// The held plan's next step, then the held plan shifted (u_init appended). Returns the
-// mode actually published: the failsafe if the held step fails the gate.
-Mode ControlLoop::publish_held(std::int64_t state_seq) {
-  std::copy_n(held_.data(), nu_, u_.data());
-  std::copy(held_.begin() + nu_, held_.end(), held_.begin());
-  std::copy_n(u_init_.data(), nu_, held_.end() - nu_);
-  if (publish(Mode::kHoldPlan, u_.data(), state_seq)) return Mode::kHoldPlan;
-  publish_failsafe(state_seq);
-  return Mode::kFailsafe;
 }
 
 bool ControlLoop::publish_failsafe(std::int64_t state_seq) {
@@ -578,8 +622,7 @@ void ControlLoop::set_mode(Mode m) {
   }
 }
 
-void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
-  (void)now_ns;
+void ControlLoop::maybe_status(bool force) {
   if (!force && (status_every_ == 0 || cycle_index_ % status_every_ != 0)) return;
   const rt::TimingSummary w = monitor_.window();
   auto f = [](double v) { return static_cast<float>(v); };
@@ -628,7 +671,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
 
 void ControlLoop::publish_final_status() {
   loop_healthy_.store(false, std::memory_order_relaxed);
-  maybe_status(true, clock_->now_ns());
+  maybe_status(true);
   // The forced status above reports the mode; mark the final one unhealthy explicitly.
 }
 
@@ -650,7 +693,7 @@ void ControlLoop::maybe_plan(std::int64_t state_seq, const float* x0) {
 // ---- deadline guard ------------------------------------------------------------------
 
 void ControlLoop::guard_arm(std::int64_t deadline_ns, std::int64_t state_seq) {
-  std::copy(held_.begin(), held_.end(), guard_plan_.begin());
+  std::copy_n(held_.data(), held_.size(), guard_plan_.begin());
   guard_state_seq_ = state_seq;
   guard_steps_.store(0, std::memory_order_relaxed);
   guard_deadline_.store(deadline_ns, std::memory_order_relaxed);

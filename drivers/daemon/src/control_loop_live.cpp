@@ -10,17 +10,7 @@
 namespace mppi::daemon {
 
 void ControlLoop::answer_param(const transport::ParamUpdate& p, bool applied, const std::string& why) {
-  transport::ParamResult r;
-  r.update_seq = p.seq;
-  std::memcpy(r.key, p.key, sizeof(r.key));
-  r.key[sizeof(r.key) - 1] = '\0';
-  r.value = p.value;
-  r.applied = applied;
-  r.cycle = cycle_index_;
-  const std::size_t n = std::min(why.size(), sizeof(r.reason) - 1);
-  std::memcpy(r.reason, why.data(), n);
-  r.reason[n] = '\0';
-  tx_->publish_param_result(r);
+  tx_->publish_param_result(transport::answer_to(p, applied, why, cycle_index_));
 }
 
 bool ControlLoop::forward_live_param(const transport::ParamUpdate& p) {

@@ -61,7 +61,136 @@ void check_known(const YAML::Node& map, const std::string& prefix, const std::se
     if (!known.count(name)) fail(prefix + name, "unknown field");
   }
 }
+
+// A sub-section: absent (a null node), or a map of known fields.
+YAML::Node subsection(const YAML::Node& parent, const std::string& name, const std::set<std::string>& known) {
+  const YAML::Node n = parent[name];
+  if (!n) return n;
+  if (!n.IsMap()) fail(name, "expected a map");
+  check_known(n, name + ".", known);
+  return n;
+}
+
+bool flag(const YAML::Node& parent, const std::string& field, bool def, const std::string& prefix = "") {
+  return parent[field] ? scalar<bool>(parent[field], prefix + field) : def;
+}
+
+// Rate, timeouts, status and plan rates, the watchdog's limits, the deadline guard.
+void parse_timing(const YAML::Node& section, LoopSettings* l) {
+  l->rate_hz = number(section, "rate_hz", l->rate_hz, 0.1, 2000.0);
+  const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
+  const double failsafe_ms = number(section, "failsafe_timeout_ms", std::max(500.0, 2.0 * state_ms), 1.0, 60000.0);
+  if (failsafe_ms <= state_ms) fail("failsafe_timeout_ms", "must be greater than daemon.state_timeout_ms");
+  l->state_timeout_ns = std::llround(state_ms * 1e6);
+  l->failsafe_timeout_ns = std::llround(failsafe_ms * 1e6);
+  l->status_hz = number(section, "status_hz", l->status_hz, 1.0, l->rate_hz);
+  l->plan_hz = number(section, "plan_hz", l->plan_hz, 0.0, l->rate_hz);
+  l->watchdog_max_consecutive_misses =
+      static_cast<int>(number(section, "watchdog_max_consecutive_misses", l->watchdog_max_consecutive_misses, 1, 1e6));
+  l->watchdog_max_optimizer_errors =
+      static_cast<int>(number(section, "watchdog_max_optimizer_errors", l->watchdog_max_optimizer_errors, 1, 1e6));
+  l->lockstep = flag(section, "lockstep", l->lockstep);
+  l->deadline_guard = flag(section, "deadline_guard", l->deadline_guard);
+  l->anytime_margin_ns = std::llround(
+      number(section, "anytime_margin_ms", static_cast<double>(l->anytime_margin_ns) / 1e6, 0.0, 1000.0 / l->rate_hz) *
+      1e6);
+}
+
+// What starts a cycle, in real time and in lock-step.
+void parse_triggers(const YAML::Node& section, DaemonSettings* d) {
+  LoopSettings& l = d->loop;
+  const std::string trigger = text(section, "trigger", "clock");
+  if (trigger != "clock" && trigger != "state") fail("trigger", "must be clock or state");
+  l.trigger = trigger == "state" ? Trigger::kState : Trigger::kClock;
+  if (const YAML::Node st = subsection(section, "state_trigger", {"min_gap", "grace"})) {
+    l.state_trigger_min_gap = number(st, "min_gap", l.state_trigger_min_gap, 0.05, 1.0, "state_trigger.");
+    l.state_trigger_grace = number(st, "grace", l.state_trigger_grace, 0.0, 10.0, "state_trigger.");
+  }
+  d->lockstep_trigger = text(section, "lockstep_trigger", d->lockstep_trigger);
+  if (d->lockstep_trigger != "clock" && d->lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
+}
+
+void parse_failsafe_u(const YAML::Node& f, int nu, std::vector<float>* out) {
+  if (!f.IsSequence() || static_cast<int>(f.size()) != nu)
+    fail("failsafe_u", "expected a list of " + std::to_string(nu) + " numbers");
+  for (std::size_t i = 0; i < f.size(); ++i) {
+    const auto v = scalar<float>(f[i], "failsafe_u[" + std::to_string(i) + "]");
+    if (!std::isfinite(v)) fail("failsafe_u[" + std::to_string(i) + "]", "must be finite");
+    out->push_back(v);
+  }
+}
+
+void parse_channels(const YAML::Node& c, transport::LcmChannels* ch) {
+  const std::string p = "channels.";
+  ch->state = text(c, "state", ch->state, p);
+  ch->command = text(c, "command", ch->command, p);
+  ch->status = text(c, "status", ch->status, p);
+  ch->plan = text(c, "plan", ch->plan, p);
+  ch->reference = text(c, "reference", ch->reference, p);
+  ch->obstacles = text(c, "obstacles", ch->obstacles, p);
+  ch->params = text(c, "params", ch->params, p);
+  ch->param_result = text(c, "param_result", ch->param_result, p);
+  ch->clock = text(c, "clock", ch->clock, p);
+  ch->rollouts = text(c, "rollouts", ch->rollouts, p);
+}
+
+// The rollout fan on the wire (RolloutPublisher): off unless hz > 0.
+void parse_rollouts(const YAML::Node& n, double rate_hz, FanSettings* f) {
+  f->hz = number(n, "hz", f->hz, 0.0, rate_hz, "rollouts.");
+  f->top = static_cast<int>(number(n, "top", f->top, 0, FanSettings::kMaxRollouts, "rollouts."));
+  f->random = static_cast<int>(number(n, "random", f->random, 0, FanSettings::kMaxRollouts, "rollouts."));
+  if (f->top + f->random > FanSettings::kMaxRollouts)
+    fail("rollouts.random", "top + random must be at most " + std::to_string(FanSettings::kMaxRollouts));
+}
+
+void parse_latency(const YAML::Node& n, double rate_hz, LatencySettings* lat) {
+  const std::string p = "latency.";
+  lat->compensate = flag(n, "compensate", lat->compensate, p);
+  lat->estimator.quantile = number(n, "quantile", lat->estimator.quantile, 0.01, 1.0, p);
+  lat->estimator.window = static_cast<int>(number(n, "window", lat->estimator.window, 1, 10000, p));
+  const double floor_ms = number(n, "floor_ms", 1.0, 0.0, 1000.0, p);
+  const double ceiling_ms = number(n, "ceiling_ms", 1000.0 / rate_hz, 0.0, 1000.0, p);
+  if (ceiling_ms < floor_ms) fail("latency.ceiling_ms", "must be >= daemon.latency.floor_ms");
+  lat->estimator.floor_ns = std::llround(floor_ms * 1e6);
+  lat->estimator.ceiling_ns = std::llround(ceiling_ms * 1e6);
+  lat->transport_ns = std::llround(number(n, "transport_ms", 0.2, 0.0, 1000.0, p) * 1e6);
+  lat->actuation_delay_ns = std::llround(number(n, "actuation_delay_ms", 0.0, 0.0, 1000.0, p) * 1e6);
+  lat->future_tolerance_ns = std::llround(number(n, "future_tolerance_ms", 2.0, 0.0, 60000.0, p) * 1e6);
+  const std::string st = text(n, "state_time", "sample", p);
+  if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
+  lat->use_sample_time = st == "sample";
+}
+
+void parse_disturbance(const YAML::Node& n, DisturbanceSettings* ds) {
+  ds->estimate = flag(n, "estimate", ds->estimate, "disturbance.");
+  ds->time_constant_s = number(n, "time_constant_s", ds->time_constant_s, 0.02, 100.0, "disturbance.");
+  ds->limit = static_cast<float>(number(n, "limit", ds->limit, 0.0, 50.0, "disturbance."));
+}
+
+void parse_live(const YAML::Node& n, LiveSettings* lv) {
+  lv->enabled = flag(n, "enabled", lv->enabled, "live.");
+  lv->max_horizon = static_cast<int>(number(n, "max_horizon", lv->max_horizon, 2, 100000, "live."));
+  lv->max_rollouts = static_cast<int>(number(n, "max_rollouts", lv->max_rollouts, 1, 1 << 26, "live."));
+  lv->max_threads = static_cast<int>(number(n, "max_threads", lv->max_threads, 0, 1024, "live."));
+}
+
+void parse_realtime(const YAML::Node& r, rt::RealtimeRequest* rq) {
+  rq->fifo_priority = static_cast<int>(number(r, "priority", rq->fifo_priority, 0, 99, "realtime."));
+  rq->cpu = static_cast<int>(number(r, "cpu", rq->cpu, -1, 1023, "realtime."));
+  rq->lock_memory = flag(r, "lock_memory", rq->lock_memory, "realtime.");
+}
 }  // namespace
+
+transport::Inbox::Expect inbox_expects(const DaemonSettings& ds, const Controller& controller) {
+  transport::Inbox::Expect e;
+  e.vehicles = controller.vehicles();
+  e.nx = controller.nx() / controller.vehicles();
+  e.model = ds.expect_model;
+  e.restart_after_ns = ds.loop.state_timeout_ns;
+  e.tick_on_state = ds.loop.lockstep && ds.lockstep_trigger == "state";
+  e.wake_on_state = !ds.loop.lockstep && ds.loop.trigger == Trigger::kState;
+  return e;
+}
 
 std::int8_t command_kind_for(const std::string& task) {
   if (task.rfind("quadrotor_rate", 0) == 0) return 2;                               // KIND_THRUST_RATES
@@ -89,112 +218,31 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
-  LoopSettings& l = d.loop;
-  l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
-  const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
-  const double failsafe_ms = number(section, "failsafe_timeout_ms", std::max(500.0, 2.0 * state_ms), 1.0, 60000.0);
-  if (failsafe_ms <= state_ms) fail("failsafe_timeout_ms", "must be greater than daemon.state_timeout_ms");
-  l.state_timeout_ns = std::llround(state_ms * 1e6);
-  l.failsafe_timeout_ns = std::llround(failsafe_ms * 1e6);
-  l.status_hz = number(section, "status_hz", l.status_hz, 1.0, l.rate_hz);
-  l.plan_hz = number(section, "plan_hz", l.plan_hz, 0.0, l.rate_hz);
-  l.watchdog_max_consecutive_misses =
-      static_cast<int>(number(section, "watchdog_max_consecutive_misses", l.watchdog_max_consecutive_misses, 1, 1e6));
-  l.watchdog_max_optimizer_errors =
-      static_cast<int>(number(section, "watchdog_max_optimizer_errors", l.watchdog_max_optimizer_errors, 1, 1e6));
-  if (section["lockstep"]) l.lockstep = scalar<bool>(section["lockstep"], "lockstep");
-  if (section["deadline_guard"]) l.deadline_guard = scalar<bool>(section["deadline_guard"], "deadline_guard");
-  l.anytime_margin_ns =
-      std::llround(number(section, "anytime_margin_ms", static_cast<double>(l.anytime_margin_ns) / 1e6, 0.0,
-                          1000.0 / l.rate_hz) * 1e6);
-  const std::string trigger = text(section, "trigger", "clock");
-  if (trigger != "clock" && trigger != "state") fail("trigger", "must be clock or state");
-  l.trigger = trigger == "state" ? Trigger::kState : Trigger::kClock;
-  if (const YAML::Node st = section["state_trigger"]) {
-    if (!st.IsMap()) fail("state_trigger", "expected a map");
-    check_known(st, "state_trigger.", {"min_gap", "grace"});
-    l.state_trigger_min_gap = number(st, "min_gap", l.state_trigger_min_gap, 0.05, 1.0, "state_trigger.");
-    l.state_trigger_grace = number(st, "grace", l.state_trigger_grace, 0.0, 10.0, "state_trigger.");
-  }
-  d.lockstep_trigger = text(section, "lockstep_trigger", d.lockstep_trigger);
-  if (d.lockstep_trigger != "clock" && d.lockstep_trigger != "state") fail("lockstep_trigger", "must be clock or state");
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts"});
+  parse_timing(section, &d.loop);
+  parse_triggers(section, &d);
   d.lcm_url = text(section, "lcm_url", d.lcm_url);
   d.receive_timeout_ms = static_cast<int>(number(section, "receive_timeout_ms", d.receive_timeout_ms, 1, 50));
   d.warmup_iterations = static_cast<int>(number(section, "warmup_iterations", d.warmup_iterations, 0, 1000));
-  if (const YAML::Node f = section["failsafe_u"]) {
-    if (!f.IsSequence() || static_cast<int>(f.size()) != nu)
-      fail("failsafe_u", "expected a list of " + std::to_string(nu) + " numbers");
-    for (std::size_t i = 0; i < f.size(); ++i) {
-      const auto v = scalar<float>(f[i], "failsafe_u[" + std::to_string(i) + "]");
-      if (!std::isfinite(v)) fail("failsafe_u[" + std::to_string(i) + "]", "must be finite");
-      l.failsafe_u.push_back(v);
-    }
-  }
-  if (const YAML::Node c = section["channels"]) {
-    if (!c.IsMap()) fail("channels", "expected a map");
-    check_known(c, "channels.",
-                {"state", "command", "status", "plan", "reference", "obstacles", "params", "param_result", "clock"});
-    auto& ch = d.channels;
-    ch.state = text(c, "state", ch.state, "channels.");
-    ch.command = text(c, "command", ch.command, "channels.");
-    ch.status = text(c, "status", ch.status, "channels.");
-    ch.plan = text(c, "plan", ch.plan, "channels.");
-    ch.reference = text(c, "reference", ch.reference, "channels.");
-    ch.obstacles = text(c, "obstacles", ch.obstacles, "channels.");
-    ch.params = text(c, "params", ch.params, "channels.");
-    ch.param_result = text(c, "param_result", ch.param_result, "channels.");
-    ch.clock = text(c, "clock", ch.clock, "channels.");
-  }
+  if (const YAML::Node f = section["failsafe_u"]) parse_failsafe_u(f, nu, &d.loop.failsafe_u);
+  if (const YAML::Node c = subsection(section, "channels", {"state", "command", "status", "plan", "reference",
+                                                            "obstacles", "params", "param_result", "clock", "rollouts"}))
+    parse_channels(c, &d.channels);
   // The default ceiling of the expected latency is one period: a cycle that needs longer
   // misses its deadline anyway (and the deadline guard covers it).
-  LatencySettings& lat = l.latency;
-  lat.estimator.ceiling_ns = std::llround(1e9 / l.rate_hz);
-  if (const YAML::Node n = section["latency"]) {
-    if (!n.IsMap()) fail("latency", "expected a map");
-    check_known(n, "latency.",
-                {"compensate", "quantile", "window", "floor_ms", "ceiling_ms", "transport_ms", "actuation_delay_ms",
-                 "state_time", "future_tolerance_ms"});
-    const std::string p = "latency.";
-    if (n["compensate"]) lat.compensate = scalar<bool>(n["compensate"], p + "compensate");
-    lat.estimator.quantile = number(n, "quantile", lat.estimator.quantile, 0.01, 1.0, p);
-    lat.estimator.window = static_cast<int>(number(n, "window", lat.estimator.window, 1, 10000, p));
-    const double floor_ms = number(n, "floor_ms", 1.0, 0.0, 1000.0, p);
-    const double ceiling_ms = number(n, "ceiling_ms", 1000.0 / l.rate_hz, 0.0, 1000.0, p);
-    if (ceiling_ms < floor_ms) fail("latency.ceiling_ms", "must be >= daemon.latency.floor_ms");
-    lat.estimator.floor_ns = std::llround(floor_ms * 1e6);
-    lat.estimator.ceiling_ns = std::llround(ceiling_ms * 1e6);
-    lat.transport_ns = std::llround(number(n, "transport_ms", 0.2, 0.0, 1000.0, p) * 1e6);
-    lat.actuation_delay_ns = std::llround(number(n, "actuation_delay_ms", 0.0, 0.0, 1000.0, p) * 1e6);
-    lat.future_tolerance_ns = std::llround(number(n, "future_tolerance_ms", 2.0, 0.0, 60000.0, p) * 1e6);
-    const std::string st = text(n, "state_time", "sample", p);
-    if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
-    lat.use_sample_time = st == "sample";
-  }
-  if (const YAML::Node n = section["disturbance"]) {
-    if (!n.IsMap()) fail("disturbance", "expected a map");
-    check_known(n, "disturbance.", {"estimate", "time_constant_s", "limit"});
-    DisturbanceSettings& ds = l.disturbance;
-    if (n["estimate"]) ds.estimate = scalar<bool>(n["estimate"], "disturbance.estimate");
-    ds.time_constant_s = number(n, "time_constant_s", ds.time_constant_s, 0.02, 100.0, "disturbance.");
-    ds.limit = static_cast<float>(number(n, "limit", ds.limit, 0.0, 50.0, "disturbance."));
-  }
-  if (const YAML::Node n = section["live"]) {
-    if (!n.IsMap()) fail("live", "expected a map");
-    check_known(n, "live.", {"enabled", "max_horizon", "max_rollouts", "max_threads"});
-    LiveSettings& lv = d.live;
-    if (n["enabled"]) lv.enabled = scalar<bool>(n["enabled"], "live.enabled");
-    lv.max_horizon = static_cast<int>(number(n, "max_horizon", lv.max_horizon, 2, 100000, "live."));
-    lv.max_rollouts = static_cast<int>(number(n, "max_rollouts", lv.max_rollouts, 1, 1 << 26, "live."));
-    lv.max_threads = static_cast<int>(number(n, "max_threads", lv.max_threads, 0, 1024, "live."));
-  }
-  if (const YAML::Node r = section["realtime"]) {
-    if (!r.IsMap()) fail("realtime", "expected a map");
-    check_known(r, "realtime.", {"priority", "cpu", "lock_memory"});
-    d.realtime.fifo_priority = static_cast<int>(number(r, "priority", d.realtime.fifo_priority, 0, 99, "realtime."));
-    d.realtime.cpu = static_cast<int>(number(r, "cpu", d.realtime.cpu, -1, 1023, "realtime."));
-    if (r["lock_memory"]) d.realtime.lock_memory = scalar<bool>(r["lock_memory"], "realtime.lock_memory");
-  }
+  d.loop.latency.estimator.ceiling_ns = std::llround(1e9 / d.loop.rate_hz);
+  if (const YAML::Node n = subsection(section, "latency", {"compensate", "quantile", "window", "floor_ms", "ceiling_ms",
+                                                           "transport_ms", "actuation_delay_ms", "state_time",
+                                                           "future_tolerance_ms"}))
+    parse_latency(n, d.loop.rate_hz, &d.loop.latency);
+  if (const YAML::Node n = subsection(section, "disturbance", {"estimate", "time_constant_s", "limit"}))
+    parse_disturbance(n, &d.loop.disturbance);
+  if (const YAML::Node n = subsection(section, "live", {"enabled", "max_horizon", "max_rollouts", "max_threads"}))
+    parse_live(n, &d.live);
+  if (const YAML::Node n = subsection(section, "rollouts", {"hz", "top", "random"}))
+    parse_rollouts(n, d.loop.rate_hz, &d.loop.rollouts);
+  if (const YAML::Node r = subsection(section, "realtime", {"priority", "cpu", "lock_memory"}))
+    parse_realtime(r, &d.realtime);
   return d;
 }
 

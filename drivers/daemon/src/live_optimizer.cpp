@@ -196,16 +196,7 @@ void LiveOptimizer::wait_idle() const {
 void LiveOptimizer::collect_retired() { delete retired_.exchange(nullptr, std::memory_order_acq_rel); }
 
 void LiveOptimizer::refuse(const transport::ParamUpdate& p, const std::string& why) {
-  transport::ParamResult r;
-  r.update_seq = p.seq;
-  std::memcpy(r.key, p.key, sizeof(r.key));
-  r.key[sizeof(r.key) - 1] = '\0';
-  r.value = p.value;
-  r.applied = false;
-  const std::size_t n = std::min(why.size(), sizeof(r.reason) - 1);
-  std::memcpy(r.reason, why.data(), n);
-  r.reason[n] = '\0';
-  if (!refusals_.push(r)) refusals_dropped_.fetch_add(1, std::memory_order_relaxed);
+  if (!refusals_.push(transport::answer_to(p, false, why))) refusals_dropped_.fetch_add(1, std::memory_order_relaxed);
 }
 
 OptimizerBundle* LiveOptimizer::build(std::vector<transport::ParamUpdate>* pending) {

@@ -41,7 +41,7 @@ struct Listener {
   std::vector<float> u;  // last command
   std::int64_t last_answered_state = -1;
 
-  void on_command(const lcm::ReceiveBuffer* rb, const std::string&, const mppi_lcm::command_t* m) {
+  void on_command(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::command_t* m) {
     const std::int64_t now = mppi::rt::monotonic_ns();
     std::lock_guard<std::mutex> lock(mu);
     ++commands;
@@ -59,7 +59,6 @@ struct Listener {
       ++answered;
       last_answered_state = m->state_seq;
     }
-    (void)rb;
   }
   void on_status(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::controller_status_t* m) {
     std::lock_guard<std::mutex> lock(mu);
@@ -77,137 +76,136 @@ struct Listener {
   }
 };
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"mppid-peer: state publisher and command listener for mppid"};
+struct Options {
   std::string url = "udpm://239.255.76.67:7667?ttl=0", state_ch = "MPPI_STATE", command_ch = "MPPI_COMMAND",
               status_ch = "MPPI_STATUS";
-  double rate = 100.0, duration = 10.0, wait_s = 0.0, nan_at = -1, garbage_at = -1, pause_at = -1, pause_for = 0;
+  double rate = 100.0, duration = 10.0, nan_at = -1, garbage_at = -1, pause_at = -1, pause_for = 0;
   bool simulate = false;
   int forest = 0;
   float z0 = 1.0f;
-  app.add_option("--lcm-url", url);
-  app.add_option("--state-channel", state_ch);
-  app.add_option("--command-channel", command_ch);
-  app.add_option("--status-channel", status_ch);
-  app.add_option("--rate", rate, "state messages per second");
-  app.add_option("--duration", duration, "seconds of publishing");
-  app.add_option("--wait", wait_s, "seconds to wait for the first command before publishing starts counting");
-  app.add_option("--nan-at", nan_at, "publish one state with a NaN at this time [s]");
-  app.add_option("--garbage-at", garbage_at, "publish garbage bytes on the state channel at this time [s]");
-  app.add_option("--pause-at", pause_at, "stop publishing states at this time [s] ...");
-  app.add_option("--pause-for", pause_for, "... for this long [s]");
-  app.add_flag("--simulate", simulate, "integrate the quadrotor model with the received commands");
-  app.add_option("--z0", z0, "start height [m]");
-  app.add_option("--forest", forest, "publish this many cylinders (4 m grid ahead) and a goal at (30, 0, z0), 1 Hz");
-  CLI11_PARSE(app, argc, argv);
+};
 
-  lcm::LCM lcm(url);
-  if (!lcm.good()) {
-    std::fprintf(stderr, "mppid-peer: cannot open %s\n", url.c_str());
-    return 1;
+// The world: a grid of cylinders ahead of the vehicle and a goal beyond it, sent at 1 Hz.
+struct World {
+  World(int cylinders, float z0) {
+    for (int i = 0; i < cylinders; ++i) {
+      mppi_lcm::cylinder_t c{};
+      c.x = 4.0f + 4.0f * static_cast<float>(i / 7);
+      c.y = -12.0f + 4.0f * static_cast<float>(i % 7) + (i / 7 % 2 ? 2.0f : 0.0f);
+      c.radius = 0.3f;
+      obstacles.cylinders.push_back(c);
+    }
+    obstacles.n = static_cast<std::int32_t>(obstacles.cylinders.size());
+    goal.kind = mppi_lcm::reference_t::KIND_WAYPOINT;
+    goal.center[0] = 30.0f;
+    goal.center[2] = z0;
+    goal.vehicle_count = 1;
+    goal.goals = {{30.0f, 0.0f, z0}};
   }
-  Listener l;
-  lcm.subscribe(command_ch, &Listener::on_command, &l);
-  lcm.subscribe(status_ch, &Listener::on_status, &l);
-  std::atomic<bool> stop{false};
-  std::thread rx([&] {
-    while (!stop) lcm.handleTimeout(20);
-  });
-
-  mppi::Quadrotor::Params qp;
-  const float hover = mppi::Quadrotor::hover_speed(qp);
-  std::vector<float> x(16, 0.0f);
-  x[2] = z0;
-  for (int i = 12; i < 16; ++i) x[i] = hover;
-  std::vector<float> u(4, hover);
-
-  mppi_lcm::vehicle_state_t msg;
-  msg.model = mppi_lcm::vehicle_state_t::MODEL_QUADROTOR;
-  msg.vehicle_count = 1;
-  msg.nx = 16;
-  msg.n = 16;
-  std::vector<std::uint8_t> buf(4096);
-
-  // The world: a grid of cylinders ahead of the vehicle and a goal beyond it.
-  mppi_lcm::obstacles_t world{};
-  for (int i = 0; i < forest; ++i) {
-    mppi_lcm::cylinder_t c{};
-    c.x = 4.0f + 4.0f * static_cast<float>(i / 7);
-    c.y = -12.0f + 4.0f * static_cast<float>(i % 7) + (i / 7 % 2 ? 2.0f : 0.0f);
-    c.radius = 0.3f;
-    world.cylinders.push_back(c);
+  void publish(lcm::LCM& lcm) {
+    obstacles.utime = goal.utime = mppi::rt::wall_utime();
+    obstacles.seq = goal.seq = ++seq;
+    lcm.publish("MPPI_OBSTACLES", &obstacles);
+    lcm.publish("MPPI_REFERENCE", &goal);
   }
-  world.n = static_cast<std::int32_t>(world.cylinders.size());
+  mppi_lcm::obstacles_t obstacles{};
   mppi_lcm::reference_t goal{};
-  goal.kind = mppi_lcm::reference_t::KIND_WAYPOINT;
-  goal.center[0] = 30.0f;
-  goal.center[2] = z0;
-  goal.vehicle_count = 1;
-  goal.goals = {{30.0f, 0.0f, z0}};
-  std::int64_t world_seq = 0, last_world = -1;
+  std::int64_t seq = 0;
+};
 
-  const std::int64_t period = std::llround(1e9 / rate);
-  const std::int64_t t0 = mppi::rt::monotonic_ns();
-  std::int64_t next = t0, seq = 0, published = 0, max_late = 0;
-  bool nan_done = false, garbage_done = false;
-  mppi::rt::MonotonicClock clock;
-  while (true) {
-    clock.sleep_until(next);
-    const std::int64_t now = mppi::rt::monotonic_ns();
-    max_late = std::max(max_late, now - next);
-    const double t = static_cast<double>(now - t0) * 1e-9;
-    if (t >= duration) break;
-    next += period;
-    if (next < now) next = now + period;  // skip, don't catch up
-    if (simulate) {
-      {
-        std::lock_guard<std::mutex> lock(l.mu);
-        if (l.u.size() == 4) u = l.u;
-      }
-      const float dt = static_cast<float>(period) * 1e-9f;
-      for (int s = 0; s < 10; ++s) mppi::Quadrotor::step(qp, x.data(), u.data(), dt / 10.0f);
-      if (x[2] < 0.0f) x[2] = 0.0f;
-    }
-    if (forest > 0 && static_cast<std::int64_t>(t) != last_world) {
-      last_world = static_cast<std::int64_t>(t);
-      world.utime = goal.utime = mppi::rt::wall_utime();
-      world.seq = goal.seq = ++world_seq;
-      lcm.publish("MPPI_OBSTACLES", &world);
-      lcm.publish("MPPI_REFERENCE", &goal);
-    }
-    if (pause_at >= 0 && t >= pause_at && t < pause_at + pause_for) continue;
-    if (garbage_at >= 0 && !garbage_done && t >= garbage_at) {
-      const char junk[] = "\x01\x02garbage-not-an-lcm-message";
-      lcm.publish(state_ch, junk, sizeof(junk));
-      garbage_done = true;
-    }
-    msg.utime = mppi::rt::wall_utime();
-    msg.seq = ++seq;
-    msg.sample_utime = msg.utime;
-    msg.x = x;
-    if (nan_at >= 0 && !nan_done && t >= nan_at) {
-      msg.x[3] = std::nanf("");
-      nan_done = true;
-    }
-    const int size = msg.getEncodedSize();
-    msg.encode(buf.data(), 0, size);
-    {
-      std::lock_guard<std::mutex> lock(l.mu);
-      const std::size_t slot = static_cast<std::size_t>(seq % kSeqRing);
-      l.sent_seq[slot] = seq;
-      l.sent_ns[slot] = mppi::rt::monotonic_ns();
-    }
-    lcm.publish(state_ch, buf.data(), static_cast<unsigned>(size));
-    ++published;
+// The publishing side: the vehicle (hovering, or flown through the quadrotor model with
+// the commands received), its states at a fixed rate, the world, and the faults asked for.
+class Publisher {
+ public:
+  Publisher(const Options& o, lcm::LCM* lcm, Listener* l)
+      : o_(o), lcm_(lcm), l_(l), world_(o.forest, o.z0), hover_(mppi::Quadrotor::hover_speed(qp_)), u_(4, hover_) {
+    x_[2] = o.z0;
+    for (int i = 12; i < 16; ++i) x_[i] = hover_;
+    msg_.model = mppi_lcm::vehicle_state_t::MODEL_QUADROTOR;
+    msg_.vehicle_count = 1;
+    msg_.nx = 16;
+    msg_.n = 16;
   }
-  // Let the last commands and a status arrive.
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
-  stop = true;
-  rx.join();
 
-  std::lock_guard<std::mutex> lock(l.mu);
+  // Absolute-time sleeps, one state a period; a late period is skipped, not caught up.
+  void run() {
+    const std::int64_t period = std::llround(1e9 / o_.rate);
+    const std::int64_t t0 = mppi::rt::monotonic_ns();
+    std::int64_t next = t0, last_world = -1;
+    mppi::rt::MonotonicClock clock;
+    while (true) {
+      clock.sleep_until(next);
+      const std::int64_t now = mppi::rt::monotonic_ns();
+      max_late_ = std::max(max_late_, now - next);
+      const double t = static_cast<double>(now - t0) * 1e-9;
+      if (t >= o_.duration) break;
+      next += period;
+      if (next < now) next = now + period;
+      if (o_.simulate) fly(static_cast<float>(period) * 1e-9f);
+      if (o_.forest > 0 && static_cast<std::int64_t>(t) != last_world) {
+        last_world = static_cast<std::int64_t>(t);
+        world_.publish(*lcm_);
+      }
+      if (o_.pause_at >= 0 && t >= o_.pause_at && t < o_.pause_at + o_.pause_for) continue;
+      if (o_.garbage_at >= 0 && !garbage_done_ && t >= o_.garbage_at) {
+        const char junk[] = "\x01\x02garbage-not-an-lcm-message";
+        lcm_->publish(o_.state_ch, junk, sizeof(junk));
+        garbage_done_ = true;
+      }
+      publish_state(t);
+    }
+  }
+
+  std::int64_t published() const { return published_; }
+  std::int64_t max_late_ns() const { return max_late_; }
+  float z() const { return x_[2]; }
+
+ private:
+  void fly(float dt) {
+    {
+      std::lock_guard<std::mutex> lock(l_->mu);
+      if (l_->u.size() == 4) u_ = l_->u;
+    }
+    for (int s = 0; s < 10; ++s) mppi::Quadrotor::step(qp_, x_.data(), u_.data(), dt / 10.0f);
+    if (x_[2] < 0.0f) x_[2] = 0.0f;
+  }
+
+  void publish_state(double t) {
+    msg_.utime = mppi::rt::wall_utime();
+    msg_.seq = ++seq_;
+    msg_.sample_utime = msg_.utime;
+    msg_.x = x_;
+    if (o_.nan_at >= 0 && !nan_done_ && t >= o_.nan_at) {
+      msg_.x[3] = std::nanf("");
+      nan_done_ = true;
+    }
+    const int size = msg_.getEncodedSize();
+    msg_.encode(buf_.data(), 0, size);
+    {
+      std::lock_guard<std::mutex> lock(l_->mu);
+      const std::size_t slot = static_cast<std::size_t>(seq_ % kSeqRing);
+      l_->sent_seq[slot] = seq_;
+      l_->sent_ns[slot] = mppi::rt::monotonic_ns();
+    }
+    lcm_->publish(o_.state_ch, buf_.data(), static_cast<unsigned>(size));
+    ++published_;
+  }
+
+  const Options& o_;
+  lcm::LCM* lcm_;
+  Listener* l_;
+  World world_;
+  mppi::Quadrotor::Params qp_;
+  float hover_;
+  std::vector<float> x_ = std::vector<float>(16, 0.0f);
+  std::vector<float> u_;
+  mppi_lcm::vehicle_state_t msg_;
+  std::vector<std::uint8_t> buf_ = std::vector<std::uint8_t>(4096);
+  std::int64_t seq_ = 0, published_ = 0, max_late_ = 0;
+  bool nan_done_ = false, garbage_done_ = false;
+};
+
+void print_report(const Listener& l, const Publisher& p) {
   const auto lat = l.latency.summary();
   std::printf(
       "mppid-peer {\"states\":%lld,\"commands\":%lld,\"answered\":%lld,\"nonfinite_commands\":%lld,"
@@ -217,16 +215,56 @@ int main(int argc, char** argv) {
       "\"rejected_nan\":%lld,\"rejected_out_of_order\":%lld,\"rejected_undecodable\":%lld,"
       "\"rejected_params\":%lld,\"healthy\":%lld,\"jitter_ms_p99\":%.4f,\"compute_ms_p99\":%.4f},"
       "\"final_z\":%.3f}\n",
-      static_cast<long long>(published), static_cast<long long>(l.commands), static_cast<long long>(l.answered),
+      static_cast<long long>(p.published()), static_cast<long long>(l.commands), static_cast<long long>(l.answered),
       static_cast<long long>(l.nonfinite), static_cast<long long>(l.by_mode[0]), static_cast<long long>(l.by_mode[1]),
       static_cast<long long>(l.by_mode[2]), static_cast<long long>(l.command_seq_gaps),
       static_cast<long long>(l.status), static_cast<long long>(l.status_failsafe), static_cast<long long>(lat.count),
-      lat.min_ms, lat.mean_ms, lat.p99_ms, lat.max_ms, static_cast<double>(max_late) * 1e-6,
+      lat.min_ms, lat.mean_ms, lat.p99_ms, lat.max_ms, static_cast<double>(p.max_late_ns()) * 1e-6,
       static_cast<long long>(l.last_status_cycles), static_cast<long long>(l.last_status_misses),
       static_cast<long long>(l.last_rejected_nan), static_cast<long long>(l.last_rejected_ooo),
       static_cast<long long>(l.last_rejected_undecodable), static_cast<long long>(l.last_rejected_params),
       static_cast<long long>(l.last_status_healthy), static_cast<double>(l.last_p99_jitter),
-      static_cast<double>(l.last_compute_p99), static_cast<double>(x[2]));
-  (void)wait_s;
+      static_cast<double>(l.last_compute_p99), static_cast<double>(p.z()));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mppid-peer: state publisher and command listener for mppid"};
+  Options o;
+  app.add_option("--lcm-url", o.url);
+  app.add_option("--state-channel", o.state_ch);
+  app.add_option("--command-channel", o.command_ch);
+  app.add_option("--status-channel", o.status_ch);
+  app.add_option("--rate", o.rate, "state messages per second");
+  app.add_option("--duration", o.duration, "seconds of publishing");
+  app.add_option("--nan-at", o.nan_at, "publish one state with a NaN at this time [s]");
+  app.add_option("--garbage-at", o.garbage_at, "publish garbage bytes on the state channel at this time [s]");
+  app.add_option("--pause-at", o.pause_at, "stop publishing states at this time [s] ...");
+  app.add_option("--pause-for", o.pause_for, "... for this long [s]");
+  app.add_flag("--simulate", o.simulate, "integrate the quadrotor model with the received commands");
+  app.add_option("--z0", o.z0, "start height [m]");
+  app.add_option("--forest", o.forest, "publish this many cylinders (4 m grid ahead) and a goal at (30, 0, z0), 1 Hz");
+  CLI11_PARSE(app, argc, argv);
+
+  lcm::LCM lcm(o.url);
+  if (!lcm.good()) {
+    std::fprintf(stderr, "mppid-peer: cannot open %s\n", o.url.c_str());
+    return 1;
+  }
+  Listener l;
+  lcm.subscribe(o.command_ch, &Listener::on_command, &l);
+  lcm.subscribe(o.status_ch, &Listener::on_status, &l);
+  std::atomic<bool> stop{false};
+  std::thread rx([&] {
+    while (!stop) lcm.handleTimeout(20);
+  });
+  Publisher pub(o, &lcm, &l);
+  pub.run();
+  // Let the last commands and a status arrive.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  stop = true;
+  rx.join();
+  print_report(l, pub);
   return 0;
 }

@@ -104,57 +104,37 @@ std::string compare(const mppi_lcm::command_t& log, const Command& run) {
   return {};
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"mppid-replay: rerun the controller on a recorded lock-step flight, compare every command bit for bit"};
+struct Options {
   std::string log_path, config_path, backend;
   std::vector<std::string> sets;
   std::int64_t max_cycles = -1;
   bool verbose = false;
-  app.add_option("log", log_path, "LCM log of the flight (flight.lcmlog)")->required()->check(CLI::ExistingFile);
-  app.add_option("--config", config_path, "the daemon's settings file")->required();
-  app.add_option("--set", sets, "the daemon's overrides, key.path=value (repeatable), in its order");
-  app.add_option("--backend", backend, "cpu (the replay runs the CPU backend)");
-  app.add_option("--max-cycles", max_cycles, "stop after this many cycles (default: all)");
-  app.add_flag("--verbose", verbose, "log the daemon's messages");
-  CLI11_PARSE(app, argc, argv);
-  spdlog::set_level(verbose ? spdlog::level::info : spdlog::level::err);
+};
 
-  // ---- the log -------------------------------------------------------------------------
+std::vector<Event> read_log(const std::string& path, bool* ok) {
   std::vector<Event> events;
-  {
-    lcm::LogFile log(log_path, "r");
-    if (!log.good()) {
-      std::fprintf(stderr, "replay: cannot read %s\n", log_path.c_str());
-      return 2;
-    }
-    while (const lcm::LogEvent* e = log.readNextEvent()) {
-      const auto* p = static_cast<const std::uint8_t*>(e->data);
-      events.push_back({e->channel, std::vector<std::uint8_t>(p, p + e->datalen)});
-    }
+  lcm::LogFile log(path, "r");
+  *ok = log.good();
+  if (!*ok) return events;
+  while (const lcm::LogEvent* e = log.readNextEvent()) {
+    const auto* p = static_cast<const std::uint8_t*>(e->data);
+    events.push_back({e->channel, std::vector<std::uint8_t>(p, p + e->datalen)});
   }
+  return events;
+}
 
-  // ---- the daemon's settings -------------------------------------------------------------
-  std::vector<std::string> overrides = sets;
-  if (!backend.empty()) overrides.push_back("backend=" + backend);
-  mppi::app::AppConfig cfg;
-  mppi::daemon::DaemonSettings ds;
-  try {
-    cfg = mppi::app::load_config(config_path, overrides);
-    ds = mppi::daemon::parse_daemon_settings(cfg.root["daemon"], cfg.task, static_cast<int>(cfg.mppi.u_init.size()));
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "replay: invalid settings: %s\n", e.what());
-    return 2;
-  }
-  const auto& ch = ds.channels;
-
-  // What came out of the daemon: its commands by seq, its status (backend), its answers.
-  std::map<std::int64_t, mppi_lcm::command_t> logged;
+// What came out of the daemon: its commands by seq, its status (backend), its answers; and
+// what the replay needs of its inputs (parameter updates by seq, sample times by state seq).
+struct Recorded {
+  std::map<std::int64_t, mppi_lcm::command_t> commands;
   std::map<std::int64_t, std::vector<std::int64_t>> params_at;  // cycle -> param_update seqs
   std::map<std::int64_t, const Event*> updates;                  // param_update seq -> event
   std::map<std::int64_t, std::int64_t> sample_utime;             // state seq -> sample time
-  std::string recorded_backend;
+  std::string backend;
+};
+
+Recorded index_log(const std::vector<Event>& events, const mppi::transport::LcmChannels& ch) {
+  Recorded r;
   std::int64_t last_cmd_seq = 0;
   for (const Event& e : events) {
     if (e.channel == ch.command) {
@@ -166,166 +146,248 @@ int main(int argc, char** argv) {
         break;
       }
       last_cmd_seq = c.seq;
-      logged.emplace(c.seq, c);
-    } else if (e.channel == ch.status && recorded_backend.empty()) {
+      r.commands.emplace(c.seq, c);
+    } else if (e.channel == ch.status && r.backend.empty()) {
       mppi_lcm::controller_status_t s;
-      if (decode(e, &s)) recorded_backend = s.backend;
+      if (decode(e, &s)) r.backend = s.backend;
     } else if (e.channel == ch.param_result) {
-      mppi_lcm::param_result_t r;
-      if (decode(e, &r)) params_at[r.cycle].push_back(r.update_seq);
+      mppi_lcm::param_result_t p;
+      if (decode(e, &p)) r.params_at[p.cycle].push_back(p.update_seq);
     } else if (e.channel == ch.params) {
       mppi_lcm::param_update_t p;
-      if (decode(e, &p)) updates[p.seq] = &e;
+      if (decode(e, &p)) r.updates[p.seq] = &e;
     } else if (e.channel == ch.state) {
       mppi_lcm::vehicle_state_t s;
-      if (decode(e, &s)) sample_utime[s.seq] = s.sample_utime;
+      if (decode(e, &s)) r.sample_utime[s.seq] = s.sample_utime;
     }
   }
-  if (logged.empty()) {
-    std::fprintf(stderr, "replay: no commands on %s in %s\n", ch.command.c_str(), log_path.c_str());
-    return 2;
-  }
-  // The same kernels: the SIMD target the flight ran (targets differ in the last ulp).
-  if (recorded_backend.rfind("cuda", 0) == 0) {
-    std::fprintf(stderr, "replay: the flight ran on %s; the replay runs the CPU backend, whose numbers differ\n",
-                 recorded_backend.c_str());
-    return 2;
-  }
-  if (recorded_backend.rfind("cpu-", 0) == 0 || recorded_backend == "cpu") {
-    overrides.push_back(recorded_backend == "cpu" ? "mppi.simd=off" : "mppi.simd=" + recorded_backend.substr(4));
-    overrides.push_back("backend=cpu");
-    try {
-      cfg = mppi::app::load_config(config_path, overrides);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "replay: the flight's backend %s: %s\n", recorded_backend.c_str(), e.what());
-      return 2;
-    }
-  }
-  ds.loop.lockstep = true;
-  ds.loop.deadline_guard = false;
+  return r;
+}
 
-  // ---- the controller, as the daemon built and warmed it up ---------------------------------
-  std::unique_ptr<mppi::Controller> first;
+std::vector<std::string> overrides(const Options& o) {
+  std::vector<std::string> v = o.sets;
+  if (!o.backend.empty()) v.push_back("backend=" + o.backend);
+  return v;
+}
+
+// The daemon's settings, for a lock-step run without the deadline guard. An error, or "".
+std::string load_settings(const Options& o, mppi::app::AppConfig* cfg, mppi::daemon::DaemonSettings* ds) {
   try {
-    first = mppi::app::make_controller(cfg);
+    *cfg = mppi::app::load_config(o.config_path, overrides(o));
+    *ds = mppi::daemon::parse_daemon_settings(cfg->root["daemon"], cfg->task, static_cast<int>(cfg->mppi.u_init.size()));
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "replay: cannot build the controller: %s\n", e.what());
-    return 2;
+    return std::string("invalid settings: ") + e.what();
   }
-  {
-    std::vector<float> x0(static_cast<std::size_t>(first->nx()), 0.0f), u(static_cast<std::size_t>(first->nu()));
-    for (int i = 0; i < ds.warmup_iterations; ++i) first->iterate(x0.data(), u.data());
-    first->reset();
+  ds->loop.lockstep = true;
+  ds->loop.deadline_guard = false;
+  return {};
+}
+
+// The same kernels as the flight: the SIMD target it ran (targets differ in the last ulp).
+// An error, or "".
+std::string pin_backend(const Options& o, const std::string& recorded, mppi::app::AppConfig* cfg) {
+  if (recorded.rfind("cuda", 0) == 0)
+    return "the flight ran on " + recorded + "; the replay runs the CPU backend, whose numbers differ";
+  if (recorded.rfind("cpu-", 0) != 0 && recorded != "cpu") return {};
+  std::vector<std::string> v = overrides(o);
+  v.push_back(recorded == "cpu" ? "mppi.simd=off" : "mppi.simd=" + recorded.substr(4));
+  v.push_back("backend=cpu");
+  try {
+    *cfg = mppi::app::load_config(o.config_path, v);
+  } catch (const std::exception& e) {
+    return "the flight's backend " + recorded + ": " + e.what();
   }
-  mppi::Controller* initial = first.get();
-  mppi::daemon::LiveOptimizer live(
-      std::move(first),
-      [cfg](const mppi::MppiSettings& s) {
-        return mppi::app::make_controller(cfg.with_mppi(s));
-      },
-      ds.live, mppi::daemon::LiveOptimizer::Mode::kSynchronous);
+  return {};
+}
 
-  mppi::rt::MonotonicClock clock;
-  mppi::transport::LcmTransport lcm_in("memq://", ch, &clock, 4096, 5);
-  // A marker on a channel of our own: once it is handled, everything published before it has
-  // reached the inbox (memq:// is one FIFO, handled by one thread).
-  std::atomic<std::int64_t> marks{0};
-  struct Marker {
-    std::atomic<std::int64_t>* n;
-    void on(const lcm::ReceiveBuffer*, const std::string&) { n->fetch_add(1); }
-  } marker{&marks};
-  lcm_in.lcm().subscribe("MPPID_REPLAY_MARK", &Marker::on, &marker);
-  ReplayTransport tx(&lcm_in);
-  mppi::transport::Inbox::Expect expect;
-  expect.vehicles = initial->vehicles();
-  expect.nx = initial->nx() / initial->vehicles();
-  expect.model = ds.expect_model;
-  expect.restart_after_ns = ds.loop.state_timeout_ns;
-  expect.tick_on_state = ds.lockstep_trigger == "state";
-  mppi::transport::Inbox inbox(expect);
-  mppi::daemon::ControlLoop loop(initial, &clock, &tx, &inbox, ds.loop);
-  loop.set_live_optimizer(&live);
-  tx.start(&inbox);
-  auto flush = [&] {
-    const std::int64_t want = marks.load() + 1;
-    lcm_in.lcm().publish("MPPID_REPLAY_MARK", "m", 1);
-    while (marks.load() < want) std::this_thread::sleep_for(std::chrono::microseconds(50));
-  };
+// The controller, as the daemon built and warmed it up.
+std::unique_ptr<mppi::Controller> warmed_controller(const mppi::app::AppConfig& cfg, int warmup_iterations) {
+  std::unique_ptr<mppi::Controller> c = mppi::app::make_controller(cfg);
+  std::vector<float> x0(static_cast<std::size_t>(c->nx()), 0.0f), u(static_cast<std::size_t>(c->nu()));
+  for (int i = 0; i < warmup_iterations; ++i) c->iterate(x0.data(), u.data());
+  c->reset();
+  return c;
+}
 
-  // ---- replay ------------------------------------------------------------------------------
-  const auto& ls = ds.loop.latency;
-  std::atomic<bool> stop{false};
-  std::int64_t cycles = 0, compared = 0, last_tick_us = 0;
-  std::size_t checked = 0;  // tx.out entries compared so far
-  int rc = 0;
-  auto publish = [&](const Event& e) { lcm_in.lcm().publish(e.channel, e.data.data(), static_cast<unsigned>(e.data.size())); };
-  for (const Event& e : events) {
-    const bool tick = e.channel == ch.clock || (expect.tick_on_state && e.channel == ch.state);
-    if (e.channel != ch.state && e.channel != ch.reference && e.channel != ch.obstacles && !tick) continue;
+// The daemon's ControlLoop fed the log's inputs through the daemon's own LCM decoder on
+// memq://, one lock-step tick at a time, its commands compared with the logged ones.
+class Replay {
+ public:
+  Replay(const mppi::app::AppConfig& cfg, const mppi::daemon::DaemonSettings& ds, const Recorded& rec)
+      : ds_(ds),
+        rec_(rec),
+        first_(warmed_controller(cfg, ds.warmup_iterations)),
+        initial_(first_.get()),
+        live_(std::move(first_), [cfg](const mppi::MppiSettings& s) { return mppi::app::make_controller(cfg.with_mppi(s)); },
+              ds.live, mppi::daemon::LiveOptimizer::Mode::kSynchronous),
+        lcm_in_("memq://", ds.channels, &clock_, 4096, 5),
+        tx_(&lcm_in_),
+        inbox_(mppi::daemon::inbox_expects(ds, *initial_)),
+        loop_(initial_, &clock_, &tx_, &inbox_, ds.loop) {
+    marker_.n = &marks_;
+    lcm_in_.lcm().subscribe("MPPID_REPLAY_MARK", &Marker::on, &marker_);
+    loop_.set_live_optimizer(&live_);
+    tx_.start(&inbox_);
+  }
+  ~Replay() { lcm_in_.stop(); }
+
+  // Feeds one logged event; a tick runs a cycle and compares what it published. False at
+  // the first divergence (printed).
+  bool feed(const Event& e) {
+    const auto& ch = ds_.channels;
+    const bool tick = e.channel == ch.clock || (inbox_.expect().tick_on_state && e.channel == ch.state);
+    if (e.channel != ch.state && e.channel != ch.reference && e.channel != ch.obstacles && !tick) return true;
     if (!tick) {
       publish(e);
-      continue;
+      return true;
     }
-    if (max_cycles >= 0 && cycles >= max_cycles) break;
-    const std::int64_t cycle = loop.cycle_index();
+    const std::int64_t cycle = loop_.cycle_index();
     // Parameter updates that took effect (or were refused) at this cycle.
-    if (auto it = params_at.find(cycle); it != params_at.end()) {
+    if (auto it = rec_.params_at.find(cycle); it != rec_.params_at.end()) {
       for (std::int64_t seq : it->second)
-        if (auto u = updates.find(seq); u != updates.end()) publish(*u->second);
+        if (auto u = rec_.updates.find(seq); u != rec_.updates.end()) publish(*u->second);
     }
-    // The expected latency this cycle used, from its command's lead.
-    if (auto c = logged.find(cycle + 1); c != logged.end() && c->second.lead_us > 0) {
-      std::int64_t now_us = 0;
-      if (e.channel == ch.clock) {
-        mppi_lcm::sim_clock_t t;
-        if (decode(e, &t)) now_us = t.sim_utime;
-      } else {
-        mppi_lcm::vehicle_state_t s;
-        if (decode(e, &s)) now_us = s.sample_utime;
-      }
-      if (auto s = sample_utime.find(c->second.state_seq); s != sample_utime.end() && now_us > 0) {
-        const std::int64_t t_act = (s->second + c->second.lead_us) * mppi::rt::kNsPerUs;
-        loop.set_expected_latency(t_act - now_us * mppi::rt::kNsPerUs - ls.transport_ns - ls.actuation_delay_ns);
-      }
-      last_tick_us = now_us;
-    }
+    pin_expected_latency(e, cycle);
     publish(e);
     flush();
-    if (inbox.ticks.empty()) continue;  // a state the inbox refused: no tick, no cycle
-    if (loop.step_lockstep(stop)) ++cycles;
-    // Compare what this step published (a cycle's command, or a repeated tick's resend).
-    for (; checked < tx.out.size(); ++checked) {
-      const Command& run = tx.out[checked];
-      auto c = logged.find(run.seq);
-      if (c == logged.end()) {
+    if (inbox_.ticks.empty()) return true;  // a state the inbox refused: no tick, no cycle
+    if (loop_.step_lockstep(stop_)) ++cycles_;
+    return compare_published(cycle);
+  }
+
+  std::int64_t cycles() const { return cycles_; }
+  std::int64_t compared() const { return compared_; }
+  const char* backend() const { return loop_.controller().backend(); }
+
+ private:
+  struct Marker {
+    std::atomic<std::int64_t>* n = nullptr;
+    void on(const lcm::ReceiveBuffer*, const std::string&) { n->fetch_add(1); }
+  };
+
+  void publish(const Event& e) {
+    lcm_in_.lcm().publish(e.channel, e.data.data(), static_cast<unsigned>(e.data.size()));
+  }
+  // A marker on a channel of our own: once it is handled, everything published before it
+  // has reached the inbox (memq:// is one FIFO, handled by one thread).
+  void flush() {
+    const std::int64_t want = marks_.load() + 1;
+    lcm_in_.lcm().publish("MPPID_REPLAY_MARK", "m", 1);
+    while (marks_.load() < want) std::this_thread::sleep_for(std::chrono::microseconds(50));
+  }
+
+  // The expected latency this cycle used, from its command's lead.
+  void pin_expected_latency(const Event& tick, std::int64_t cycle) {
+    const auto c = rec_.commands.find(cycle + 1);
+    if (c == rec_.commands.end() || c->second.lead_us <= 0) return;
+    std::int64_t now_us = 0;
+    if (tick.channel == ds_.channels.clock) {
+      mppi_lcm::sim_clock_t t;
+      if (decode(tick, &t)) now_us = t.sim_utime;
+    } else {
+      mppi_lcm::vehicle_state_t s;
+      if (decode(tick, &s)) now_us = s.sample_utime;
+    }
+    const auto s = rec_.sample_utime.find(c->second.state_seq);
+    if (s == rec_.sample_utime.end() || now_us <= 0) return;
+    const auto& ls = ds_.loop.latency;
+    const std::int64_t t_act = (s->second + c->second.lead_us) * mppi::rt::kNsPerUs;
+    loop_.set_expected_latency(t_act - now_us * mppi::rt::kNsPerUs - ls.transport_ns - ls.actuation_delay_ns);
+  }
+
+  // What this step published (a cycle's command, or a repeated tick's resend).
+  bool compare_published(std::int64_t cycle) {
+    for (; checked_ < tx_.out.size(); ++checked_) {
+      const Command& run = tx_.out[checked_];
+      auto c = rec_.commands.find(run.seq);
+      if (c == rec_.commands.end()) {
         std::printf("replay: cycle %" PRId64 " published command seq %" PRId64 ", which the log does not hold\n",
                     cycle, run.seq);
-        rc = 1;
-        break;
+        return false;
       }
       const std::string diff = compare(c->second, run);
       if (!diff.empty()) {
         std::printf("replay: first divergence at cycle %" PRId64 " (command seq %" PRId64 ", state seq %" PRId64
                     "): %s\n", cycle, run.seq, c->second.state_seq, diff.c_str());
-        rc = 1;
-        break;
+        return false;
       }
-      ++compared;
+      ++compared_;
     }
-    if (rc != 0) break;
+    return true;
   }
-  (void)last_tick_us;
-  lcm_in.stop();
-  if (rc == 0) {
-    std::int64_t unreplayed = 0;
-    for (const auto& [seq, c] : logged)
-      if (seq > cycles) ++unreplayed;
-    std::printf("replay: %" PRId64 " cycles, %" PRId64 " commands identical bit for bit (state_seq, mode, kind, u, "
-                "age_us, lead_us) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
-                cycles, compared, loop.controller().backend(), unreplayed,
-                max_cycles >= 0 ? " (--max-cycles)" : "");
-    std::fflush(stdout);
-    if (compared == 0) rc = 1;
+
+  const mppi::daemon::DaemonSettings& ds_;
+  const Recorded& rec_;
+  std::unique_ptr<mppi::Controller> first_;
+  mppi::Controller* initial_;
+  mppi::daemon::LiveOptimizer live_;
+  mppi::rt::MonotonicClock clock_;
+  mppi::transport::LcmTransport lcm_in_;
+  ReplayTransport tx_;
+  mppi::transport::Inbox inbox_;
+  mppi::daemon::ControlLoop loop_;
+  std::atomic<std::int64_t> marks_{0};
+  Marker marker_;
+  std::atomic<bool> stop_{false};
+  std::int64_t cycles_ = 0, compared_ = 0;
+  std::size_t checked_ = 0;  // tx_.out entries compared so far
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"mppid-replay: rerun the controller on a recorded lock-step flight, compare every command bit for bit"};
+  Options o;
+  app.add_option("log", o.log_path, "LCM log of the flight (flight.lcmlog)")->required()->check(CLI::ExistingFile);
+  app.add_option("--config", o.config_path, "the daemon's settings file")->required();
+  app.add_option("--set", o.sets, "the daemon's overrides, key.path=value (repeatable), in its order");
+  app.add_option("--backend", o.backend, "cpu (the replay runs the CPU backend)");
+  app.add_option("--max-cycles", o.max_cycles, "stop after this many cycles (default: all)");
+  app.add_flag("--verbose", o.verbose, "log the daemon's messages");
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(o.verbose ? spdlog::level::info : spdlog::level::err);
+
+  bool readable = false;
+  const std::vector<Event> events = read_log(o.log_path, &readable);
+  if (!readable) {
+    std::fprintf(stderr, "replay: cannot read %s\n", o.log_path.c_str());
+    return 2;
   }
-  return rc;
+  mppi::app::AppConfig cfg;
+  mppi::daemon::DaemonSettings ds;
+  if (const std::string err = load_settings(o, &cfg, &ds); !err.empty()) {
+    std::fprintf(stderr, "replay: %s\n", err.c_str());
+    return 2;
+  }
+  const Recorded rec = index_log(events, ds.channels);
+  if (rec.commands.empty()) {
+    std::fprintf(stderr, "replay: no commands on %s in %s\n", ds.channels.command.c_str(), o.log_path.c_str());
+    return 2;
+  }
+  if (const std::string err = pin_backend(o, rec.backend, &cfg); !err.empty()) {
+    std::fprintf(stderr, "replay: %s\n", err.c_str());
+    return 2;
+  }
+  std::unique_ptr<Replay> replay;
+  try {
+    replay = std::make_unique<Replay>(cfg, ds, rec);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "replay: cannot build the controller: %s\n", e.what());
+    return 2;
+  }
+  bool same = true;
+  for (const Event& e : events) {
+    if (o.max_cycles >= 0 && replay->cycles() >= o.max_cycles) break;
+    if (!(same = replay->feed(e))) break;
+  }
+  if (!same) return 1;
+  std::int64_t unreplayed = 0;
+  for (const auto& [seq, c] : rec.commands)
+    if (seq > replay->cycles()) ++unreplayed;
+  std::printf("replay: %" PRId64 " cycles, %" PRId64 " commands identical bit for bit (state_seq, mode, kind, u, "
+              "age_us, lead_us) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
+              replay->cycles(), replay->compared(), replay->backend(), unreplayed,
+              o.max_cycles >= 0 ? " (--max-cycles)" : "");
+  std::fflush(stdout);
+  return replay->compared() == 0 ? 1 : 0;
 }

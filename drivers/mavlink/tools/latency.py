@@ -113,6 +113,17 @@ def main():
                 p.wait(5)
             except subprocess.TimeoutExpired:
                 p.kill()
+    res = measure(out, t0, t1)
+    res.update({"seconds": a.seconds, "rollouts": a.rollouts, "task": a.task, "realtime": not a.no_rt,
+                "machine": {"cpus": os.cpu_count(), "cpu": _cpu_model(), "kernel": platform.release(),
+                            "load_avg": os.getloadavg()},
+                "logs": str(out)})
+    print(json.dumps(res, indent=2))
+
+
+def measure(out, t0, t1):
+    """Each state the autopilot sent (wire.jsonl) matched with the bridge's answer to it
+    (bridge_trace.jsonl), between t0 and t1 (monotonic us)."""
     sent = {}
     for line in open(out / "wire.jsonl"):
         r = json.loads(line)
@@ -129,17 +140,12 @@ def main():
             continue
         lat.append((r["mono_us"] - s) / 1000.0)
     states = sum(1 for t in sent.values() if t0 <= t <= t1)
-    res = {
+    return {
         "what": "ODOMETRY sent by the autopilot -> SET_ATTITUDE_TARGET answering it sent by the bridge [ms]",
         "samples": len(lat), "states_on_wire": states, "unmatched": lost,
         "p50_ms": percentile(lat, 50), "p90_ms": percentile(lat, 90), "p99_ms": percentile(lat, 99),
         "max_ms": max(lat) if lat else None, "min_ms": min(lat) if lat else None,
-        "seconds": a.seconds, "rollouts": a.rollouts, "task": a.task, "realtime": not a.no_rt,
-        "machine": {"cpus": os.cpu_count(), "cpu": _cpu_model(), "kernel": platform.release(),
-                    "load_avg": os.getloadavg()},
-        "logs": str(out),
     }
-    print(json.dumps(res, indent=2))
 
 
 def _cpu_model():

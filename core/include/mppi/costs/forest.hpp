@@ -76,10 +76,10 @@ struct ForestCost {
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
     V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
-          p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[3]) + fsq(x[4]) + fsq(x[5]));
+          p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[Vehicle::VX]) + fsq(x[Vehicle::VY]) + fsq(x[Vehicle::VZ]));
     if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     if (p.w_floor > 0.0f) {
-      const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[5], V(0.0f));
+      const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[Vehicle::VZ], V(0.0f));
       const V below = fmax_(V(p.floor_z) - z_ahead, V(0.0f));
       q += p.w_floor * below * below;
     }

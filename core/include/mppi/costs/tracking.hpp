@@ -29,7 +29,7 @@ struct TrackingCost {
     p.reference.eval(p.time0 + t, ref_p, ref_v);
     const V dyaw = Vehicle::yaw(x) - p.reference.yaw;
     const V q = p.w_pos * (fsq(pos[0] - ref_p[0]) + fsq(pos[1] - ref_p[1]) + fsq(pos[2] - ref_p[2])) +
-                p.w_vel * (fsq(x[3] - ref_v[0]) + fsq(x[4] - ref_v[1]) + fsq(x[5] - ref_v[2])) +
+                p.w_vel * (fsq(x[Vehicle::VX] - ref_v[0]) + fsq(x[Vehicle::VY] - ref_v[1]) + fsq(x[Vehicle::VZ] - ref_v[2])) +
                 p.w_yaw * dyaw * dyaw;
     const mask_t<V> below = pos[2] < p.ground_z;
     *crash = mask_or(*crash, below);

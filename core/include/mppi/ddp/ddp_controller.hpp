@@ -78,7 +78,9 @@ struct TaskProblem {
       }
     }
     if (ddp->speed_weight > 0.0) {
-      const double speed = std::sqrt(x[3] * x[3] + x[4] * x[4] + x[5] * x[5]);  // ForestCost's velocity: x[3..5]
+      using Vehicle = typename T::Vehicle;
+      const double speed = std::sqrt(x[Vehicle::VX] * x[Vehicle::VX] + x[Vehicle::VY] * x[Vehicle::VY] +
+                                     x[Vehicle::VZ] * x[Vehicle::VZ]);
       const double over = std::max(0.0, speed - ddp->speed_limit);
       q += ddp->speed_weight * over * over;
     }

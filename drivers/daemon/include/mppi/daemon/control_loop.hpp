@@ -17,9 +17,12 @@
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/cycle_outcome.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
+#include "mppi/held_plan.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/command_gate.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
@@ -85,6 +88,8 @@ struct LoopSettings {
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
   // out on time. 0: off.
   std::int64_t anytime_margin_ns = 0;
+  // A display sample of the rollouts on their own channel (tools/view); off by default.
+  FanSettings rollouts;
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -180,9 +185,37 @@ class ControlLoop {
   void set_expected_latency(std::int64_t ns) { expected_override_ns_ = ns; }
 
  private:
-  enum class Outcome { kFresh, kHeld, kFailsafe };
+  // What a cycle knows of the newest state, on the loop's timeline (now_state_ns's).
+  struct CycleState {
+    const transport::StateSample* x = nullptr;
+    bool have = false;           // a state has arrived
+    bool future = false;         // stamped further ahead than the tolerance
+    bool new_sample = false;     // not the one the last fresh cycle optimised from
+    std::int64_t seq = -1;
+    std::int64_t now_ns = 0;      // the cycle's start
+    std::int64_t t_state_ns = 0;  // the sample time
+    std::int64_t age_ns = 0;
+    std::int64_t t_act_ns = 0;    // when this cycle's command acts
+    std::int64_t lead_ns = 0;     // t_act - sample time, with latency compensation; else 0
+  };
   bool step_state_triggered(const std::atomic<bool>& stop);
   void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
+  CycleState read_state(std::int64_t now_state_ns, bool lockstep) const;
+  // The state check's paths: the failsafe (starting over on entry), the stale state's hold,
+  // and the fresh state's update, each saying what the cycle publishes.
+  Outcome enter_failsafe();
+  Outcome hold_stale(const CycleState& s);
+  Outcome optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep);
+  const float* predict_to_act(const CycleState& s);
+  void clear_anytime_stop(bool guarded);
+  bool run_optimizer(const float* x0);
+  void take_back_from_guard(int steps, bool good, std::int64_t deadline_ns);
+  // Publishing: stamp the timing, publish, remember what went out (the command history).
+  transport::Mode send_failsafe(const CycleState& s, std::int64_t t0);
+  transport::Mode send_held(const CycleState& s, std::int64_t t0);
+  transport::Mode send_fresh(const CycleState& s, std::int64_t t0, bool lockstep);
+  // After the command: timing, health, status, plan.
+  void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published, bool lockstep);
   // The state's sample time on the loop's timeline (now_state_ns's), and whether it lies
   // further in the future than the tolerance.
   std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
@@ -192,7 +225,7 @@ class ControlLoop {
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void remember(std::int64_t sent_ns, const float* u);
-  void apply_between_cycles(std::int64_t now_state_ns);
+  void apply_between_cycles();
   std::string apply_param(const transport::ParamUpdate& p);
   // Live updates (control_loop_live.cpp): the answer to one update on the reply channel;
   // forward an mppi.* update to the builder (true when taken); answer the builder's
@@ -208,9 +241,8 @@ class ControlLoop {
   void send_command(transport::Command* msg, transport::Mode mode, const float* u, std::int64_t state_seq);
   // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
   void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
-  transport::Mode publish_held(std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
-  void maybe_status(bool force, std::int64_t now_ns);
+  void maybe_status(bool force);
   void maybe_plan(std::int64_t state_seq, const float* x0);
   void set_mode(transport::Mode m);
   void guard_arm(std::int64_t deadline_ns, std::int64_t state_seq);
@@ -228,6 +260,7 @@ class ControlLoop {
   std::int64_t period_ns_;
   std::int64_t status_every_;
   std::int64_t plan_every_;
+  RolloutPublisher rollouts_;
 
   rt::PeriodicSchedule schedule_;
   rt::DeadlineMonitor monitor_;
@@ -243,7 +276,7 @@ class ControlLoop {
   bool holding_ = false;  // goals set from the first state (no goal or reference yet)
   bool have_obstacles_ = false;
 
-  std::vector<float> held_;     // the plan to fall back on: T x nu, step 0 = next command
+  HeldPlan held_;               // the plan to fall back on: T x nu, step 0 = next command
   std::vector<float> u_;        // this cycle's command
   std::vector<float> failsafe_;
   std::vector<float> u_init_;
@@ -254,7 +287,6 @@ class ControlLoop {
   std::int64_t cycle_index_ = 0;
   std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
-  std::int64_t prev_tick_sim_ns_ = -1;
   std::int64_t last_tick_seq_ = -1;
   std::int64_t trigger_recv_ns_ = INT64_MIN;  // recv_ns of the state that started the last cycle
   bool grace_started_ = false;                // trigger state: the last cycle started without a state

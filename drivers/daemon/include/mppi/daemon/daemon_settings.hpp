@@ -29,6 +29,10 @@ struct DaemonSettings {
 // `task`. Throws mppi::app::ConfigError naming the field.
 DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::string& task, int nu);
 
+// What the inbox accepts and when it posts a tick or a wake-up, for `controller` flown with
+// these settings (mppid, mppid-replay).
+transport::Inbox::Expect inbox_expects(const DaemonSettings& ds, const Controller& controller);
+
 // command_t::KIND_* and vehicle_state_t::MODEL_* for a task name.
 std::int8_t command_kind_for(const std::string& task);
 std::int8_t state_model_for(const std::string& task);

@@ -21,6 +21,7 @@
 #include "mppi_lcm/param_update_t.hpp"
 #include "mppi_lcm/plan_t.hpp"
 #include "mppi_lcm/reference_t.hpp"
+#include "mppi_lcm/rollouts_t.hpp"
 #include "mppi_lcm/sim_clock_t.hpp"
 #include "mppi_lcm/vehicle_state_t.hpp"
 
@@ -36,6 +37,7 @@ struct LcmChannels {
   std::string params = "MPPI_PARAMS";
   std::string param_result = "MPPI_PARAM_RESULT";
   std::string clock = "MPPI_SIM_CLOCK";
+  std::string rollouts = "MPPI_ROLLOUTS";
 };
 
 class LcmTransport final : public Transport {
@@ -57,6 +59,10 @@ class LcmTransport final : public Transport {
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
   bool publish_plan(const PlanView& p) override;
+  // Before the loop runs: room for rollouts_t messages of up to `rollouts` rollouts with
+  // `floats` position floats (publish_rollouts refuses larger ones; it never grows).
+  void reserve_rollouts(int rollouts, int floats);
+  bool publish_rollouts(const RolloutsView& r) override;
   bool publish_param_result(const ParamResult& r) override;
 
   lcm::LCM& lcm() { return lcm_; }
@@ -86,6 +92,7 @@ class LcmTransport final : public Transport {
   mppi_lcm::command_t command_out_;
   mppi_lcm::controller_status_t status_out_;
   mppi_lcm::plan_t plan_out_;
+  mppi_lcm::rollouts_t rollouts_out_{};
   mppi_lcm::param_result_t param_result_out_{};
   std::vector<std::uint8_t> buf_;
 };

@@ -3,7 +3,10 @@
 // them. Fixed capacities keep the hot path free of allocation.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <string>
 
 #include "mppi/costs/obstacles.hpp"
 
@@ -79,6 +82,21 @@ struct ParamResult {
   char reason[192] = {};   // "" when applied; "field: reason"
 };
 
+// The answer to update p: its key and value, applied or refused with `why` (cut to fit).
+inline ParamResult answer_to(const ParamUpdate& p, bool applied, const std::string& why, std::int64_t cycle = 0) {
+  ParamResult r;
+  r.update_seq = p.seq;
+  std::memcpy(r.key, p.key, sizeof(r.key));
+  r.key[sizeof(r.key) - 1] = '\0';
+  r.value = p.value;
+  r.applied = applied;
+  r.cycle = cycle;
+  const std::size_t n = std::min(why.size(), sizeof(r.reason) - 1);
+  std::memcpy(r.reason, why.data(), n);
+  r.reason[n] = '\0';
+  return r;
+}
+
 struct ClockTick {
   std::int64_t seq = 0;
   std::int64_t sim_utime = 0;
@@ -118,6 +136,23 @@ struct PlanView {
   const float* u = nullptr;  // horizon * nu, step-major
   std::int32_t npos = 0;
   const float* pos = nullptr;  // npos x 3, vehicle-major predicted positions
+};
+
+// A view of a display sample of one cycle's rollouts (core's RolloutFan); the pointed-to
+// data lives in the loop.
+struct RolloutsView {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  std::int64_t state_seq = -1;
+  std::int64_t cycle = 0;
+  std::int32_t total = 0, vehicles = 0, steps = 0;
+  float dt = 0, lambda = 0;
+  std::int32_t count = 0, top = 0;
+  const int* index = nullptr;             // count each
+  const float* cost = nullptr;
+  const float* weight = nullptr;
+  const unsigned char* crashed = nullptr;
+  const float* xyz = nullptr;             // count x vehicles x steps x 3
 };
 
 }  // namespace mppi::transport
