@@ -97,12 +97,11 @@ class ArduPilotFlight(Flight):
             raise
         finally:
             self.cleanup()
-            info = {"harness_outcome": outcome, "wall_s": time.monotonic() - t0, "autopilot": "ardupilot",
-                    "ardupilot_bin": str(self.binary), "returncodes": {k: p.returncode for k, p in self.procs.items()},
-                    "events": self.events, "commands": cmds, "mission": str(mission_path),
-                    "spec": {"scenario": spec.scenario, "seed": spec.seed, "controller": spec.controller,
-                             "realtime": True, "lcm_url": spec.lcm_url}}
-            (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+            info = self._record(t0, outcome, {
+                "autopilot": "ardupilot", "ardupilot_bin": str(self.binary), "commands": cmds,
+                "mission": str(mission_path), "spec": {"scenario": spec.scenario, "seed": spec.seed,
+                                                       "controller": spec.controller, "realtime": True,
+                                                       "lcm_url": spec.lcm_url}})
         return info
 
     def _wait(self, t0, wall_timeout):

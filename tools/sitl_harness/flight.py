@@ -360,20 +360,21 @@ class Flight:
             raise
         finally:
             self.cleanup()
-            info = {
-                "harness_outcome": outcome,
-                "wall_s": time.monotonic() - t0,
-                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
-                "returncodes": {k: p.returncode for k, p in self.procs.items()},
-                "events": self.events,
+            info = self._record(t0, outcome, {
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd,
                              **({"inject": inject_cmd} if spec.params else {})},
                 "controller_config": str(cfg) if spec.controller in ("mppid", "ddp") else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
-                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params},
-            }
-            (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params}})
+        return info
+
+    def _record(self, t0: float, outcome, extra: dict) -> dict:
+        """harness.json: how the flight ended, its processes' exit codes and events, and `extra`."""
+        info = {"harness_outcome": outcome, "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
+                "returncodes": {k: p.returncode for k, p in self.procs.items()}, "events": self.events, **extra}
+        (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
 
 

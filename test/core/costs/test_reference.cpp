@@ -6,11 +6,26 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <initializer_list>
 
 #include "mppi/costs/reference.hpp"
 
 namespace mppi {
 namespace {
+
+// eval's velocity against the central difference of its positions at the times ts.
+void expect_velocity_is_the_derivative(const Reference& r, std::initializer_list<float> ts, double tol) {
+  for (float t : ts) {
+    const float h = 1e-3f;
+    float p1[3], p2[3], p0[3], v[3], unused[3];
+    r.eval(t - h, p1, unused);
+    r.eval(t + h, p2, unused);
+    r.eval(t, p0, v);
+    for (int d = 0; d < 3; ++d)
+      EXPECT_NEAR(v[d], (static_cast<double>(p2[d]) - p1[d]) / (2.0 * h), tol)
+          << "kind " << r.kind << " t " << t << " axis " << d;
+  }
+}
 
 TEST(Reference, VelocityIsTheDerivativeOfPosition) {
   for (int kind : {Reference::kCircle, Reference::kFigureEight}) {
@@ -21,18 +36,8 @@ TEST(Reference, VelocityIsTheDerivativeOfPosition) {
     r.center[2] = 2.0f;
     r.radius = 2.0f;
     r.speed = 1.5f;
-    for (float t : {0.0f, 0.37f, 1.2f, 3.3f, 7.9f}) {
-      const float h = 1e-3f;
-      float p1[3], p2[3], p0[3], v[3], v_unused[3];
-      r.eval(t - h, p1, v_unused);
-      r.eval(t + h, p2, v_unused);
-      r.eval(t, p0, v);
-      for (int d = 0; d < 3; ++d) {
-        const double fd = (static_cast<double>(p2[d]) - p1[d]) / (2.0 * h);
-        // Central difference: truncation ~h^2 |x'''| / 6 ~ 1e-6; rounding ~ulp(2) / h ~ 2.4e-4.
-        EXPECT_NEAR(v[d], fd, 1e-3) << "kind " << kind << " t " << t << " axis " << d;
-      }
-    }
+    // Central difference: truncation ~h^2 |x'''| / 6 ~ 1e-6; rounding ~ulp(2) / h ~ 2.4e-4.
+    expect_velocity_is_the_derivative(r, {0.0f, 0.37f, 1.2f, 3.3f, 7.9f}, 1e-3);
     // The circle runs at the given speed.
     if (kind == Reference::kCircle) {
       float p[3], v[3];
@@ -164,15 +169,7 @@ TEST(ReferenceRamp, VelocityIsTheDerivativeOfPositionOnEveryKindWithARamp) {
     r.end[0] = 6.0f;
     r.end[1] = 3.0f;
     r.end_s = 6.0f;
-    for (float t : {0.4f, 1.2f, 3.3f, 5.1f, 5.9f}) {
-      const float h = 1e-3f;
-      float p1[3], p2[3], p0[3], v[3], unused[3];
-      r.eval(t - h, p1, unused);
-      r.eval(t + h, p2, unused);
-      r.eval(t, p0, v);
-      for (int d = 0; d < 3; ++d)
-        EXPECT_NEAR(v[d], (static_cast<double>(p2[d]) - p1[d]) / (2.0 * h), 2e-3) << kind << " " << t << " " << d;
-    }
+    expect_velocity_is_the_derivative(r, {0.4f, 1.2f, 3.3f, 5.1f, 5.9f}, 2e-3);
   }
 }
 
