@@ -68,6 +68,8 @@ class FlightSpec:
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
+    autopilot: str = "sim"           # sim: mppid-sim; ardupilot: ArduCopter SITL and the bridge (ardupilot.py)
+    ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
     view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
     view_hold: float = 0.0           # ... kept serving this long after the flight [s]
     view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]
@@ -217,7 +219,7 @@ class Flight:
         return not _group_alive(self.pgid)
 
     def _cleanup(self):
-        for name in ("sim", "controller", "inject"):
+        for name in [n for n in self.procs if n != "logger"]:
             self._terminate(name, 3.0)
         if "logger" in self.procs and self.procs["logger"].poll() is None:
             time.sleep(0.3)  # the logger drains what is still in its socket
@@ -324,6 +326,12 @@ class Flight:
                 self._spawn("inject", inject_cmd)
                 self._wait_ready("inject", INJECT_READY_TIMEOUT_S)
             self._spawn("sim", sim_cmd)
+            if scen.get("mission"):
+                # The operator's side: the mission tool gives mppid its references (the
+                # scenario's own reference is `none`), as on a real vehicle.
+                self._spawn("mission", [str(paths.ROOT / "drivers" / "mission" / "mppid-mission"), "fly",
+                                        str(paths.ROOT / scen["mission"]), "--seed", str(spec.seed), "--out",
+                                        str(self.out), "--lcm-url", spec.lcm_url])
             (self.out / "pids.json").write_text(json.dumps(
                 {"pgid": self.pgid, "holder": self.holder.pid, **{k: p.pid for k, p in self.procs.items()}}))
             killed = False
@@ -352,20 +360,21 @@ class Flight:
             raise
         finally:
             self.cleanup()
-            info = {
-                "harness_outcome": outcome,
-                "wall_s": time.monotonic() - t0,
-                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
-                "returncodes": {k: p.returncode for k, p in self.procs.items()},
-                "events": self.events,
+            info = self._record(t0, outcome, {
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd,
                              **({"inject": inject_cmd} if spec.params else {})},
                 "controller_config": str(cfg) if spec.controller in ("mppid", "ddp") else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
-                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params},
-            }
-            (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params}})
+        return info
+
+    def _record(self, t0: float, outcome, extra: dict) -> dict:
+        """harness.json: how the flight ended, its processes' exit codes and events, and `extra`."""
+        info = {"harness_outcome": outcome, "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
+                "returncodes": {k: p.returncode for k, p in self.procs.items()}, "events": self.events, **extra}
+        (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
 
 
@@ -416,33 +425,48 @@ def _group_alive(pgid: int) -> bool:
     return False
 
 
+def _flight_for(spec: FlightSpec):
+    """The flight and its scorer: mppid-sim's (score.py, plots.py), or ArduCopter SITL's
+    (ardupilot.py, ap_score.py, ap_plots.py). Raises FlightError (no SITL binary, say)."""
+    if spec.autopilot == "ardupilot":
+        from . import ap_plots, ap_score, ardupilot
+        return ardupilot.ArduPilotFlight(spec, ardupilot.ardupilot_binary(spec.ardupilot_bin)), ap_score, ap_plots
+    from . import plots, score
+    return Flight(spec), score, plots
+
+
 def fly(spec: FlightSpec) -> dict:
     """Runs one flight, scores it and plots it; returns the score (also in score.json)."""
-    from . import plots, score
-
     interrupt_on_stop_signals()
-    flight = Flight(spec)
+    out = Path(spec.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        flight, scorer, plotter = _flight_for(spec)
+    except FlightError as e:
+        result = {"success": False, "reason": str(e), "harness_outcome": "error"}
+        (out / "score.json").write_text(json.dumps(result, indent=2))
+        return result
     info = {}
     try:
         info = flight.run()
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}
-        (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
+        (out / "harness.json").write_text(json.dumps(info, indent=2))
     if spec.rrd or spec.view:
         try:
             from mppid_view.convert import convert
             paths.add_lcm_types_to_path()
-            convert(flight.out / "flight.lcmlog", flight.out / "flight.rrd")
+            convert(out / "flight.lcmlog", out / "flight.rrd")
         except Exception as e:  # the rrd must never turn a flight into a crash
             info.setdefault("events", []).append(f"flight.rrd failed: {e!r}")
-    result = score.score_flight(flight.out, spec, info)
-    (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+    result = scorer.score_flight(out, spec, info)
+    (out / "score.json").write_text(json.dumps(result, indent=2))
     if spec.plots:
         try:
-            plots.plot_flight(flight.out)
+            plotter.plot_flight(out)
         except Exception as e:  # plots must never turn a flight into a crash
             result.setdefault("warnings", []).append(f"plots failed: {e!r}")
-            (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+            (out / "score.json").write_text(json.dumps(result, indent=2))
     return result
 
 

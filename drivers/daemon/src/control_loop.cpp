@@ -493,11 +493,18 @@ void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_
   if (reference_changed) {
     const transport::ReferenceInput& r = in_->reference.front();
     Reference& ref = inputs_.reference;
-    ref.kind = (r.kind == 1) ? Reference::kCircle : (r.kind == 2) ? Reference::kFigureEight : Reference::kHold;
+    ref.kind = (r.kind == 1)   ? Reference::kCircle
+               : (r.kind == 2) ? Reference::kFigureEight
+               : (r.kind == 4 && r.vehicle_count > 0) ? Reference::kLine  // to goals[0]
+                                                      : Reference::kHold;
     std::copy_n(r.center, 3, ref.center);
+    std::copy_n(r.vehicle_count > 0 ? r.goals[0] : r.center, 3, ref.end);
     ref.radius = r.radius;
     ref.speed = r.speed;
     ref.yaw = r.yaw;
+    ref.ramp = r.ramp_s;
+    ref.phase = r.phase;
+    ref.end_s = r.end_s;
     reference_t0_utime_ = r.t0_utime;
     have_reference_ = true;
     const int n = std::min<int>(r.vehicle_count, inputs_.vehicle_count);

@@ -53,6 +53,7 @@ struct ReferenceInput {
   std::int8_t kind = 0;  // reference_t::KIND_*
   float center[3] = {0.0f, 0.0f, 1.0f};
   float radius = 0.0f, speed = 0.0f, yaw = 0.0f;
+  float ramp_s = 0.0f, phase = 0.0f, end_s = 0.0f;
   std::int64_t t0_utime = 0;
   std::int16_t vehicle_count = 0;
   float goals[kMaxVehicles][3] = {};
