@@ -641,13 +641,17 @@ TEST(ControlLoop, AnytimeStopsTheOptimizerBeforeTheDeadline) {
     return false;
   };
   ASSERT_NO_FATAL_FAILURE(r.cycles(7, 1.0f));
-  for (int n = 1; n <= 7; ++n) EXPECT_EQ(stopped[n], n == 3 || n == 5) << "iteration " << n;
-  EXPECT_EQ(r.loop.counters().partial_updates.load(), 2);
-  EXPECT_EQ(r.loop.counters().anytime_holds.load(), 1);
   EXPECT_EQ(r.loop.counters().optimizer_errors.load() + r.loop.counters().optimizer_nonfinite.load(), 0);
-  // Unless a loaded machine preempted the loop past a deadline anyway, every cycle's own
-  // command went out: iteration 3's update, and for 5 the held plan (cycle 4's, shifted).
-  if (r.loop.counters().guard_takeovers.load() == 0) {
+  EXPECT_LE(r.loop.counters().partial_updates.load(), 2);
+  EXPECT_LE(r.loop.counters().anytime_holds.load(), 1);
+  // Unless a loaded machine preempted the loop or the guard past a deadline anyway (then other
+  // cycles run late, are stopped or taken over: the invariants above hold, not the sequence),
+  // iterations 3 and 5 alone were stopped and every cycle's own command went out: iteration
+  // 3's update, and for 5 the held plan (cycle 4's, shifted).
+  if (r.loop.timing_total().misses == 0 && r.loop.counters().guard_takeovers.load() == 0) {
+    for (int n = 1; n <= 7; ++n) EXPECT_EQ(stopped[n], n == 3 || n == 5) << "iteration " << n;
+    EXPECT_EQ(r.loop.counters().partial_updates.load(), 2);
+    EXPECT_EQ(r.loop.counters().anytime_holds.load(), 1);
     ASSERT_EQ(r.tx.commands.size(), 7u);
     EXPECT_EQ(r.tx.commands[2].mode, Mode::kNormal);
     EXPECT_FLOAT_EQ(r.tx.commands[2].u[0], 1030.0f);
