@@ -22,7 +22,8 @@ def test_list_names_every_scenario():
     for n in ("forest_3m", "forest_4m", "forest_5m", "cartpole_swingup", "racecar_ellipse", "team3_moving",
               "track_circle", "track_figure_eight"):
         assert n in names
-    assert names == sorted(paths.scenario_names())
+    assert names == paths.scenario_names() + paths.mission_names()
+    assert "circle_5ms" in paths.mission_names()
 
 
 def test_every_scenario_loads_and_steps(sim_binary, tmp_path):
