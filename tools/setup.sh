@@ -137,6 +137,11 @@ if ((do_venv)); then
   fi
 fi
 
+# An NVIDIA GPU this machine could fly the CUDA backend on.
+gpu_present() {
+  [[ -e /dev/nvidia0 ]] || nvidia-smi -L >/dev/null 2>&1
+}
+
 # cmake --build "$@", its output in $BUILD_DIR/build.log and one line of progress on stderr
 # (ninja's [done/total]); on failure the log's end.
 build_with_progress() {
@@ -145,7 +150,7 @@ build_with_progress() {
   [[ -t 2 ]] && tty=1
   set +o pipefail
   cmake --build "$@" 2>&1 | tee "$logf" | while IFS= read -r line; do
-    if [[ "$line" =~ ^\[([0-9]+)/([0-9]+)\] ]]; then
+    if [[ "$line" =~ ^\[([0-9]+)/([0-9]+)\]\ (Building|Linking|Generating) ]]; then
       pct=$((100 * BASH_REMATCH[1] / BASH_REMATCH[2]))
       if ((tty)); then
         printf '\r[setup] building: %s/%s (%d %%)' "${BASH_REMATCH[1]}" "${BASH_REMATCH[2]}" "$pct" >&2
@@ -176,6 +181,20 @@ if ((do_build)); then
   # it (override with: -- -DMPPID_LCM=OFF).
   if [[ -x "$VENV/bin/python" ]]; then args+=(-DMPPID_LCM=ON); fi
   [[ -n "${MPPID_CUDA:-}" ]] && args+=("-DMPPID_CUDA=$MPPID_CUDA")
+  # The first flight flies the CPU backend. On a machine with no GPU, a new build folder made
+  # for it (--flight) leaves the CUDA backend to the rest (its kernels are half the flight's
+  # compile time where nvcc is installed); the next set-up without --flight turns it back to
+  # the default and builds it.
+  no_cuda_mark="$BUILD_DIR/.mppid-flight-without-cuda"
+  if [[ -z "${MPPID_CUDA:-}" ]]; then
+    if ((flight)) && [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]] && ! gpu_present; then
+      args+=(-DMPPID_CUDA=OFF)
+      mkdir -p "$BUILD_DIR" && touch "$no_cuda_mark"
+    elif ((!flight)) && [[ -f "$no_cuda_mark" ]]; then
+      args+=(-DMPPID_CUDA=AUTO)
+      rm -f "$no_cuda_mark"
+    fi
+  fi
   if command -v ccache >/dev/null; then
     args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_CUDA_COMPILER_LAUNCHER=ccache)
     # Paths under the checkout hash as relative ones: another clone of the same tree hits.
