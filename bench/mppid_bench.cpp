@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <fstream>
 #include <iostream>
@@ -62,17 +63,86 @@ std::vector<int> parse_list(const std::string& text) {
   return out;
 }
 
-// The scenario's forest, widened (same 4 m spacing, same seed) until it holds `at_least`
-// cylinders: a scene with more obstacles than the controller is told about.
-void grow_forest(mppi::offline::Scenario* s, int at_least, int vehicles) {
-  if (s->forest.empty() || static_cast<int>(s->forest.size()) >= at_least) return;
-  std::vector<std::array<float, 2>> clear;
-  for (int j = 0; j < vehicles; ++j) {
-    clear.push_back({s->x0[0], s->inputs.goals[j][1]});
-    clear.push_back({s->inputs.goals[j][0], s->inputs.goals[j][1]});
+// The rollout fan's cost (daemon.rollouts, tools/view), measured beside the plain cycle in
+// one run: blocks of `every` cycles alternate between plain and fanned (the first cycle of a
+// fanned block keeps its rollouts, then a fan of top + random is rebuilt), so both see the
+// same machine. JSON fields: the cycle that keeps (its compute: the command's path), the
+// rebuild (after the command, off its path), and the mean per cycle of each kind of block,
+// in wall time and in the CPU time of the whole process (all its threads: with
+// OMP_WAIT_POLICY=PASSIVE, as the daemon runs, that is the work done, which other load on the
+// machine does not change the way it changes wall time).
+struct FanCost {
+  double plain_mean_us = 0, fanned_mean_us = 0, plain_median_us = 0, kept_median_us = 0, rebuild_median_us = 0;
+  double plain_cpu_mean_us = 0, fanned_cpu_mean_us = 0, kept_cpu_median_us = 0, plain_cpu_median_us = 0;
+  std::size_t allocations = 0;  // heap allocations over the timed cycles
+};
+
+double process_cpu_us() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e6 + static_cast<double>(ts.tv_nsec) * 1e-3;
+}
+
+double median_of(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+FanCost measure_fan(mppi::Controller& c, const float* x0, int iterations, int every, int top, int random) {
+  mppi::RolloutFan fan;
+  fan.reserve(top + random, c.vehicles(), c.horizon());
+  std::vector<float> u(static_cast<std::size_t>(c.nu()));
+  std::vector<double> plain, kept, rebuild, plain_cpu, kept_cpu;
+  double plain_sum = 0, fanned_sum = 0, plain_cpu_sum = 0, fanned_cpu_sum = 0;
+  int plain_n = 0, fanned_n = 0;
+  plain.reserve(static_cast<std::size_t>(iterations));
+  kept.reserve(static_cast<std::size_t>(iterations));
+  rebuild.reserve(static_cast<std::size_t>(iterations));
+  plain_cpu.reserve(static_cast<std::size_t>(iterations));
+  kept_cpu.reserve(static_cast<std::size_t>(iterations));
+  const std::size_t count0 = mppi::testing::allocation_count();
+  for (int i = 0; i < iterations; ++i) {
+    const bool fanned_block = (i / every) % 2 == 1, first = i % every == 0;
+    const double c0 = process_cpu_us();
+    const auto t0 = std::chrono::steady_clock::now();
+    if (fanned_block && first) c.keep_rollouts();
+    c.iterate(x0, u.data());
+    const auto t1 = std::chrono::steady_clock::now();
+    const double c1 = process_cpu_us();
+    if (fanned_block && first) c.fan(top, random, &fan);
+    const auto t2 = std::chrono::steady_clock::now();
+    const double c2 = process_cpu_us();
+    const double cycle = std::chrono::duration<double, std::micro>(t1 - t0).count();
+    const double total = std::chrono::duration<double, std::micro>(t2 - t0).count();
+    if (fanned_block) {
+      fanned_sum += total;
+      fanned_cpu_sum += c2 - c0;
+      ++fanned_n;
+      if (first) {
+        kept.push_back(cycle);
+        kept_cpu.push_back(c1 - c0);
+        rebuild.push_back(std::chrono::duration<double, std::micro>(t2 - t1).count());
+      }
+    } else {
+      plain_sum += total;
+      plain_cpu_sum += c2 - c0;
+      ++plain_n;
+      plain.push_back(cycle);
+      plain_cpu.push_back(c1 - c0);
+    }
   }
-  for (float e = 4.0f; static_cast<int>(s->forest.size()) < at_least; e += 4.0f)
-    s->forest = mppi::offline::make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, clear);
+  FanCost f;
+  f.allocations = mppi::testing::allocation_count() - count0;
+  f.plain_mean_us = plain_n > 0 ? plain_sum / plain_n : 0.0;
+  f.fanned_mean_us = fanned_n > 0 ? fanned_sum / fanned_n : 0.0;
+  f.plain_median_us = median_of(plain);
+  f.kept_median_us = median_of(kept);
+  f.rebuild_median_us = median_of(rebuild);
+  f.plain_cpu_mean_us = plain_n > 0 ? plain_cpu_sum / plain_n : 0.0;
+  f.fanned_cpu_mean_us = fanned_n > 0 ? fanned_cpu_sum / fanned_n : 0.0;
+  f.plain_cpu_median_us = median_of(plain_cpu);
+  f.kept_cpu_median_us = median_of(kept_cpu);
+  return f;
 }
 
 std::string escape(const std::string& s) {
@@ -90,7 +160,7 @@ int main(int argc, char** argv) {
   CLI::App app{"Time one full MPPI iteration (median, p99) for each configuration; prints JSON"};
   std::string model = "quadrotor", backend = "cpu", rollouts = "1024", threads = "2", config, simd = "auto",
               obstacles = "32";
-  int horizon = 100, iterations = 1000, warmup = 20;
+  int horizon = 100, iterations = 1000, warmup = 20, fan_every = 0, fan_top = 16, fan_random = 16;
   bool json = false;
   app.add_option("--model", model, "quadrotor | quadrotor_rate | cartpole | racecar | team3 | team9 | a task name");
   app.add_option("--backend", backend, "cpu | cuda")->check(CLI::IsMember({"cpu", "cuda"}));
@@ -106,6 +176,11 @@ int main(int argc, char** argv) {
                  "CPU backend's SIMD target: auto | off (one sample at a time) | sse4 | avx2 | avx3 | neon, or a "
                  "comma list (targets this CPU lacks are skipped with a note)");
   app.add_option("--config", config, "settings file (default: the task's)");
+  app.add_option("--fan-every", fan_every,
+                 "also time the rollout fan (tools/view): plain and fanned blocks of this many cycles alternate; "
+                 "10 = the daemon's 5 Hz at 50 Hz (0: off)");
+  app.add_option("--fan-top", fan_top, "the fan's lowest-cost rollouts");
+  app.add_option("--fan-random", fan_random, "the fan's random others");
   app.add_flag("--json", json, "one JSON object per line (the default output; kept for scripts)");
   CLI11_PARSE(app, argc, argv);
 
@@ -138,17 +213,7 @@ int main(int argc, char** argv) {
           std::cerr << "mppid-bench: skipping simd=" << target << ": " << e.what() << std::endl;
           continue;
         }
-        auto scenario = mppi::offline::default_scenario(*c, 4.0f, 1);
-        grow_forest(&scenario, scene_obstacles, c->vehicles());
-        scenario.inputs.obstacles.count = std::min<int>({obstacle_count, static_cast<int>(scenario.forest.size()),
-                                                         mppi::ObstacleSet::kCapacity});
-        // The nearest ones first, as the daemon sends them.
-        auto forest = scenario.forest;
-        const float x0 = scenario.x0[0], y0 = scenario.x0[1];
-        std::sort(forest.begin(), forest.end(), [&](const mppi::Cylinder& a, const mppi::Cylinder& b) {
-          return std::hypot(a.x - x0, a.y - y0) - a.radius < std::hypot(b.x - x0, b.y - y0) - b.radius;
-        });
-        for (int i = 0; i < scenario.inputs.obstacles.count; ++i) scenario.inputs.obstacles.items[i] = forest[i];
+        const auto scenario = mppi::offline::bench_scenario(*c, obstacle_count, scene_obstacles);
         c->set_inputs(scenario.inputs);
         std::vector<float> u(static_cast<std::size_t>(c->nu()));
         std::vector<double> us(static_cast<std::size_t>(iterations));
@@ -161,6 +226,23 @@ int main(int argc, char** argv) {
           us[i] = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
         }
         const double allocs = static_cast<double>(mppi::testing::allocation_count() - count0) / iterations;
+        std::string fan_json;
+        if (fan_every > 0) {
+          const FanCost f = measure_fan(*c, scenario.x0.data(), iterations, fan_every, fan_top, fan_random);
+          std::ostringstream o;
+          o << ",\"fan\":{\"every\":" << fan_every << ",\"top\":" << fan_top << ",\"random\":" << fan_random
+            << ",\"plain_median_us\":" << f.plain_median_us << ",\"kept_median_us\":" << f.kept_median_us
+            << ",\"rebuild_median_us\":" << f.rebuild_median_us << ",\"plain_mean_us\":" << f.plain_mean_us
+            << ",\"fanned_mean_us\":" << f.fanned_mean_us
+            << ",\"kept_cycle_growth_pct\":" << 100.0 * (f.kept_median_us / f.plain_median_us - 1.0)
+            << ",\"mean_growth_pct\":" << 100.0 * (f.fanned_mean_us / f.plain_mean_us - 1.0)
+            << ",\"plain_cpu_median_us\":" << f.plain_cpu_median_us << ",\"kept_cpu_median_us\":" << f.kept_cpu_median_us
+            << ",\"plain_cpu_mean_us\":" << f.plain_cpu_mean_us << ",\"fanned_cpu_mean_us\":" << f.fanned_cpu_mean_us
+            << ",\"kept_cycle_cpu_growth_pct\":" << 100.0 * (f.kept_cpu_median_us / f.plain_cpu_median_us - 1.0)
+            << ",\"mean_cpu_growth_pct\":" << 100.0 * (f.fanned_cpu_mean_us / f.plain_cpu_mean_us - 1.0)
+            << ",\"allocations\":" << f.allocations << "}";
+          fan_json = o.str();
+        }
         std::sort(us.begin(), us.end());
         const double median = us[us.size() / 2];
         const double p99 = us[std::min(us.size() - 1, static_cast<std::size_t>(0.99 * static_cast<double>(us.size())))];
@@ -170,7 +252,7 @@ int main(int argc, char** argv) {
                   << ",\"startup_host_bytes\":" << startup_bytes << ",\"device_bytes\":" << c->device_bytes()
                   << ",\"allocations_per_iteration\":" << allocs << ",\"obstacles\":" << scenario.inputs.obstacles.count
                   << ",\"weighting\":\"" << mppi::to_string(cfg.mppi.weighting) << "\""
-                  << ",\"simd\":\"" << target << "\",\"forest_size\":" << scenario.forest.size()
+                  << ",\"simd\":\"" << target << "\",\"forest_size\":" << scenario.forest.size() << fan_json
                   << ",\"machine\":{\"cpu\":\"" << escape(cpu_name()) << "\",\"cores\":" << std::thread::hardware_concurrency()
                   << ",\"gpu\":\"" << escape(gpu) << "\",\"load_average\":" << load_average() << "}}" << std::endl;
         ++measured;

@@ -16,7 +16,8 @@ if(NOT MPPID_CUDA STREQUAL "OFF")
   check_language(CUDA)
   if(CMAKE_CUDA_COMPILER)
     if(NOT DEFINED CMAKE_CUDA_ARCHITECTURES)
-      # Ampere and Hopper SASS plus PTX for anything newer.
+      # Ampere and Hopper SASS plus PTX for anything newer; gpu/CMakeLists.txt adds the Jetson
+      # Orin's (MPPID_CUDA_ORIN).
       set(CMAKE_CUDA_ARCHITECTURES 80-real 90-real 90-virtual)
     endif()
     enable_language(CUDA)

@@ -10,7 +10,7 @@ import mppi_lcm  # noqa: E402
 
 EXPECTED = {
     "command_t", "controller_status_t", "cylinder_t", "obstacles_t", "param_result_t",
-    "param_update_t", "plan_t", "reference_t", "sim_clock_t", "vehicle_state_t",
+    "param_update_t", "plan_t", "reference_t", "rollouts_t", "sim_clock_t", "vehicle_state_t",
 }
 
 

@@ -110,6 +110,9 @@ TEST(LcmTypes, Reference) {
   r.radius = 2.5f;
   r.speed = 1.25f;
   r.yaw = -0.5f;
+  r.ramp_s = 2.0f;
+  r.phase = 1.25f;
+  r.end_s = 12.5f;
   r.t0_utime = 1'000'000;
   r.vehicle_count = 3;
   r.goals.resize(3);
@@ -126,6 +129,9 @@ TEST(LcmTypes, Reference) {
   EXPECT_EQ(d.radius, r.radius);
   EXPECT_EQ(d.speed, r.speed);
   EXPECT_EQ(d.yaw, r.yaw);
+  EXPECT_EQ(d.ramp_s, r.ramp_s);
+  EXPECT_EQ(d.phase, r.phase);
+  EXPECT_EQ(d.end_s, r.end_s);
   EXPECT_EQ(d.t0_utime, r.t0_utime);
   EXPECT_EQ(d.vehicle_count, 3);
   ASSERT_EQ(d.goals.size(), 3u);

@@ -11,6 +11,7 @@
 #   --flight     only what a SITL flight needs (tools/fly.sh): the venv's flight packages
 #                (requirements-flight.txt) and the targets mppid, mppid-sim and the LCM
 #                types; a later run without it adds the rest
+#   --view       with --flight: also the live view's packages (requirements-view.txt)
 #   --progress   one progress line instead of the compiler's output (kept in build/build.log;
 #                its end is shown if the build fails)
 #
@@ -24,7 +25,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-do_apt=1 do_venv=1 do_build=1 flight=0 progress=0
+do_apt=1 do_venv=1 do_build=1 flight=0 view=0 progress=0
 cmake_extra=()
 while (($#)); do
   case "$1" in
@@ -32,9 +33,10 @@ while (($#)); do
     --no-venv) do_venv=0 ;;
     --no-build) do_build=0 ;;
     --flight) flight=1 ;;
+    --view) view=1 ;;
     --progress) progress=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,23s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,24s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -65,6 +67,9 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
+  # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
+  chromium
   # sanitizer and fuzz builds (tools/sanitize.sh, tools/fuzz): clang 14 with its sanitizer and
   # libFuzzer runtimes, its OpenMP (and Archer, which lets TSan see OpenMP), llvm-symbolizer
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14
@@ -102,15 +107,19 @@ PY_BASE=/usr/bin/python3
 VENV="$ROOT/.venv"
 STAMP="$VENV/.mppid-requirements.sha256"
 FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
+VIEW_STAMP="$VENV/.mppid-view-requirements.sha256"
+# requirements.txt includes both of these; its stamp covers all three.
+ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt)
 
 # The stamp of a requirements file: it and the interpreter, so a Python upgrade reinstalls.
 requirements_hash() {
   { cat "$@"; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
 }
-# pip install -r FILE unless STAMP says it is installed.
+# pip install -r FILE unless STAMP says it is installed (FILE and what it includes).
 pip_install() {
   local file="$1" stamp="$2" want
-  want="$(requirements_hash requirements-flight.txt "$file")"
+  if [[ "$file" == requirements.txt ]]; then want="$(requirements_hash "${ALL_REQUIREMENTS[@]}")"
+  else want="$(requirements_hash "$file")"; fi
   if [[ "$want" == "$(cat "$stamp" 2>/dev/null || true)" ]]; then
     log "venv: $file unchanged"
     return
@@ -126,10 +135,12 @@ if ((do_venv)); then
     rm -rf "$VENV"
     "$PY_BASE" -m venv "$VENV"
   fi
-  # A flight needs a few packages (requirements-flight.txt, ~20 s); the tests the rest
-  # (requirements.txt includes the flight's). The full set installed covers the flight's.
-  if ((flight)) && [[ "$(requirements_hash requirements-flight.txt requirements.txt)" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
+  # A flight needs a few packages (requirements-flight.txt, ~20 s), a viewed one rerun too
+  # (requirements-view.txt); the tests the rest (requirements.txt includes both). The full
+  # set installed covers the flight's.
+  if ((flight)) && [[ "$(requirements_hash "${ALL_REQUIREMENTS[@]}")" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
     pip_install requirements-flight.txt "$FLIGHT_STAMP"
+    ((view)) && pip_install requirements-view.txt "$VIEW_STAMP"
   elif ((!flight)); then
     pip_install requirements.txt "$STAMP"
   else

@@ -1,4 +1,5 @@
-// ObstacleGrid::build (costs/obstacles.hpp): the per-cycle obstacle culling.
+// ObstacleGrid::build (costs/obstacles.hpp): the per-cycle obstacle culling, laid out by
+// ObstacleGridLayout::plan and filled here, hierarchically (region, blocks of cells, cells).
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -8,57 +9,28 @@
 namespace mppi {
 namespace {
 
-// A cylinder as the build sees it: the segment its axis sweeps over [0, t_end], the
-// bounding box of that segment, and its radius. Double precision.
-struct Swept {
-  double ax, ay, bx, by;          // axis at t = 0 and t = t_end
-  double lox, loy, hix, hiy;      // bounding box of the segment
-  double r;
-};
-
-struct Box {
-  double x0, y0, x1, y1;
-};
-
-// Largest distance from a point of the box to (px, py).
-double max_distance(const Box& b, double px, double py) {
-  const double dx = std::max(std::fabs(px - b.x0), std::fabs(px - b.x1));
-  const double dy = std::max(std::fabs(py - b.y0), std::fabs(py - b.y1));
-  return std::sqrt(dx * dx + dy * dy);
-}
-
-// Upper bound of the surface distance from any point of the box, at any time, to s: the
-// distance to a point of a segment is convex along it, so its maximum is at an end.
-double upper(const Box& b, const Swept& s) {
-  return std::max(max_distance(b, s.ax, s.ay), max_distance(b, s.bx, s.by)) - s.r;
-}
-
-// Lower bound of the same: the distance between the box and the segment's bounding box.
-double lower(const Box& b, const Swept& s) {
-  const double dx = std::max({0.0, s.lox - b.x1, b.x0 - s.hix});
-  const double dy = std::max({0.0, s.loy - b.y1, b.y0 - s.hiy});
-  return std::sqrt(dx * dx + dy * dy) - s.r;
-}
+using grid_bounds::Box;
+using grid_bounds::Swept;
 
 // The members of `in` (n of them) that can be nearest for some point of box b: out, and
 // how many.
 int candidates(const Box& b, const Swept* swept, const std::uint8_t* in, int n, double slack, std::uint8_t* out) {
   double u = HUGE_VAL;
-  for (int m = 0; m < n; ++m) u = std::min(u, upper(b, swept[in[m]]));
+  for (int m = 0; m < n; ++m) u = std::min(u, grid_bounds::upper(b, swept[in[m]]));
   int k = 0;
   for (int m = 0; m < n; ++m)
-    if (lower(b, swept[in[m]]) <= u + slack) out[k++] = in[m];
+    if (grid_bounds::lower(b, swept[in[m]]) <= u + slack) out[k++] = in[m];
   return k;
 }
 
-// Lays out the lists of grid g (cx x cy cells of side s from (lox, loy)); false if they
-// overflow kMaxRefs.
-bool fill(ObstacleGrid& g, const Swept* swept, int n, double lox, double loy, double s, int cx, int cy, double slack,
-          double grow) {
+// Lays out the lists of grid g for attempt a of layout L; false if they overflow kMaxRefs.
+bool fill(ObstacleGrid& g, const Swept* swept, const ObstacleGridLayout& L, const ObstacleGridLayout::Attempt& a) {
   constexpr int kBlock = ObstacleGrid::kBlock;
+  const int n = L.n, cx = a.cx, cy = a.cy;
+  const double s = a.side, grow = L.grow, slack = L.slack;
   std::uint8_t all[ObstacleSet::kCapacity];
   for (int i = 0; i < n; ++i) all[i] = static_cast<std::uint8_t>(i);
-  const Box region{lox - grow, loy - grow, lox + cx * s + grow, loy + cy * s + grow};
+  const Box region = grid_bounds::cells(L.lox, L.loy, s, 0, 0, cx, cy, grow);
   std::uint8_t region_list[ObstacleSet::kCapacity];
   const int region_n = candidates(region, swept, all, n, slack, region_list);
 
@@ -72,13 +44,13 @@ bool fill(ObstacleGrid& g, const Swept* swept, int n, double lox, double loy, do
   for (int by = 0; by * kBlock < cy; ++by) {
     for (int bx = 0; bx < bx_count; ++bx) {
       const int ix1 = std::min(cx, (bx + 1) * kBlock), iy1 = std::min(cy, (by + 1) * kBlock);
-      const Box b{lox + bx * kBlock * s - grow, loy + by * kBlock * s - grow, lox + ix1 * s + grow, loy + iy1 * s + grow};
+      const Box b = grid_bounds::cells(L.lox, L.loy, s, bx * kBlock, by * kBlock, ix1, iy1, grow);
       block_n[bx] = candidates(b, swept, region_list, region_n, slack, block_list[bx]);
     }
     for (int iy = by * kBlock; iy < std::min(cy, (by + 1) * kBlock); ++iy) {
       for (int ix = 0; ix < cx; ++ix) {
         const int bx = ix / kBlock;
-        const Box b{lox + ix * s - grow, loy + iy * s - grow, lox + (ix + 1) * s + grow, loy + (iy + 1) * s + grow};
+        const Box b = grid_bounds::cells(L.lox, L.loy, s, ix, iy, ix + 1, iy + 1, grow);
         std::uint8_t list[ObstacleSet::kCapacity];
         const int k = candidates(b, swept, block_list[bx], block_n[bx], slack, list);
         if (refs_n + k > ObstacleGrid::kMaxRefs) return false;
@@ -98,12 +70,11 @@ bool fill(ObstacleGrid& g, const Swept* swept, int n, double lox, double loy, do
 
 }  // namespace
 
-void ObstacleGrid::build(const ObstacleSet& set, const float* points, int n_points, float t_end, float reach,
-                         float cell) {
-  nx = ny = 0;
-  listed = 0;
+ObstacleGridLayout ObstacleGridLayout::plan(const ObstacleSet& set, const float* points, int n_points, float t_end,
+                                            float reach, float cell) {
+  ObstacleGridLayout L;
   const int n = std::min(set.count, ObstacleSet::kCapacity);
-  if (n <= 0 || !(reach > 0.0f) || !(cell > 0.0f) || !std::isfinite(reach) || !std::isfinite(t_end)) return;
+  if (n <= 0 || !(reach > 0.0f) || !(cell > 0.0f) || !std::isfinite(reach) || !std::isfinite(t_end)) return L;
 
   double lox = HUGE_VAL, loy = HUGE_VAL, hix = -HUGE_VAL, hiy = -HUGE_VAL;
   for (int i = 0; i < n_points; ++i) {
@@ -114,30 +85,19 @@ void ObstacleGrid::build(const ObstacleSet& set, const float* points, int n_poin
     hix = std::max(hix, px);
     hiy = std::max(hiy, py);
   }
-  if (!(lox <= hix)) return;
+  if (!(lox <= hix)) return L;
   // The corner is stored as float: lay the cells out from that float.
   lox = static_cast<float>(lox - reach);
   loy = static_cast<float>(loy - reach);
   hix += reach;
   hiy += reach;
 
-  Swept swept[ObstacleSet::kCapacity];
   double magnitude = std::max({std::fabs(lox), std::fabs(loy), std::fabs(hix), std::fabs(hiy)});
   for (int i = 0; i < n; ++i) {
-    const Cylinder& c = set.items[i];
-    Swept& o = swept[i];
-    o.ax = c.x;
-    o.ay = c.y;
-    o.bx = static_cast<double>(c.x) + static_cast<double>(c.vx) * t_end;
-    o.by = static_cast<double>(c.y) + static_cast<double>(c.vy) * t_end;
-    o.lox = std::min(o.ax, o.bx);
-    o.hix = std::max(o.ax, o.bx);
-    o.loy = std::min(o.ay, o.by);
-    o.hiy = std::max(o.ay, o.by);
-    o.r = c.radius;
+    const Swept o = grid_bounds::swept(set.items[i], t_end);
     // A cylinder with a non-finite field (which the daemon never sends) has no bounds to
     // cull with: no grid, every search scans the set.
-    if (!std::isfinite(o.lox + o.hix + o.loy + o.hiy + o.r)) return;
+    if (!std::isfinite(o.lox + o.hix + o.loy + o.hiy + o.r)) return L;
     magnitude = std::max({magnitude, std::fabs(o.lox), std::fabs(o.hix), std::fabs(o.loy), std::fabs(o.hiy),
                           std::fabs(o.r)});
   }
@@ -145,13 +105,18 @@ void ObstacleGrid::build(const ObstacleSet& set, const float* points, int n_poin
   // Float rounding: surface_distance is within a few ulp of `magnitude` of the exact value,
   // and the lookup may place a point up to a few ulp of (magnitude + extent) outside its
   // cell. Both slacks are far above that and far below any cylinder spacing.
-  const double slack = 1e-4 + 1e-6 * magnitude;
-  const double grow = 1e-4 + 1e-6 * (magnitude + std::max(w, h));
+  L.slack = 1e-4 + 1e-6 * magnitude;
+  L.grow = 1e-4 + 1e-6 * (magnitude + std::max(w, h));
+  L.n = n;
+  L.lox = lox;
+  L.loy = loy;
+  L.t_end = t_end;
 
   // Cell side: as asked, or larger to fit kMaxSide per side and kMaxCells in all; if the
   // lists overflow kMaxRefs, larger again (fewer cells: fewer references in all).
+  constexpr int kMaxSide = ObstacleGrid::kMaxSide, kMaxCells = ObstacleGrid::kMaxCells;
   double side = std::max({static_cast<double>(cell), w / kMaxSide, h / kMaxSide, std::sqrt(w * h / kMaxCells)});
-  for (int attempt = 0; attempt < 8; ++attempt, side *= 1.5) {
+  for (int a = 0; a < kMaxAttempts; ++a, side *= 1.5) {
     int cx = 0, cy = 0;
     float inv = 0.0f;
     for (int fit = 0; fit < 64; ++fit, side *= 1.1) {
@@ -160,15 +125,29 @@ void ObstacleGrid::build(const ObstacleSet& set, const float* points, int n_poin
       cy = static_cast<int>(std::ceil(h * inv)) + 1;
       if (cx <= kMaxSide && cy <= kMaxSide && cx * cy <= kMaxCells) break;
     }
-    if (!(cx <= kMaxSide && cy <= kMaxSide && cx * cy <= kMaxCells)) return;
+    if (!(cx <= kMaxSide && cy <= kMaxSide && cx * cy <= kMaxCells)) break;
     // The side is stored as its float reciprocal: lay the cells out from that float, as the
     // search computes them.
-    if (fill(*this, swept, n, lox, loy, 1.0 / static_cast<double>(inv), cx, cy, slack, grow)) {
-      x0 = static_cast<float>(lox);
-      y0 = static_cast<float>(loy);
-      inv_cell = inv;
-      nx = cx;
-      ny = cy;
+    L.attempt[L.attempts++] = Attempt{1.0 / static_cast<double>(inv), inv, cx, cy};
+  }
+  return L;
+}
+
+void ObstacleGrid::build(const ObstacleSet& set, const float* points, int n_points, float t_end, float reach,
+                         float cell) {
+  nx = ny = 0;
+  listed = 0;
+  const ObstacleGridLayout L = ObstacleGridLayout::plan(set, points, n_points, t_end, reach, cell);
+  if (L.attempts == 0) return;
+  Swept swept[ObstacleSet::kCapacity];
+  for (int i = 0; i < L.n; ++i) swept[i] = grid_bounds::swept(set.items[i], L.t_end);
+  for (int a = 0; a < L.attempts; ++a) {
+    if (fill(*this, swept, L, L.attempt[a])) {
+      x0 = static_cast<float>(L.lox);
+      y0 = static_cast<float>(L.loy);
+      inv_cell = L.attempt[a].inv;
+      nx = L.attempt[a].cx;
+      ny = L.attempt[a].cy;
       return;
     }
   }

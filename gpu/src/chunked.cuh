@@ -168,59 +168,206 @@ __device__ __forceinline__ int warp_slot() {
 // A barrier of the n consumer threads (named barrier 1; n a multiple of 32).
 __device__ __forceinline__ void consumer_sync(int n) { asm volatile("bar.sync 1, %0;" ::"r"(n) : "memory"); }
 
-// part layout: [(i * blocks + b) * (NU + 1) + n], n = 0: sum w, 1..NU: sum w du.
-// stats_part[b]: step-0 statistics of block b. pmin[i * blocks + b]: block minima.
-// S0: S~(tau_0,k), the first row of the cost-to-go (for rollout_costs()).
-// kKeep: the controls are kept in u_keep for the update (else drawn again there).
+// ---- Pieces both chunked kernels (this one and rollout_chunked_team) are made of -----------
+
+// The parameters the kernel reads at every step (chunk_param_bytes) into shared memory; the
+// caller's next block barrier publishes them.
+template <class T>
+__device__ __forceinline__ void stage_chunk_params(const typename T::Params& from, unsigned char* to) {
+  constexpr int kWords = static_cast<int>(chunk_param_bytes<T>() / 4);
+  const auto* src = reinterpret_cast<const std::uint32_t*>(&from);
+  auto* dst = reinterpret_cast<std::uint32_t*>(to);
+  for (int w = static_cast<int>(threadIdx.x); w < kWords; w += static_cast<int>(blockDim.x)) dst[w] = src[w];
+}
+
+// The warp that advances chunk ci (slot[w]: warp w's hardware slot). The producer's dependent
+// chain is the one serial part, so each producer should have a scheduler of its own: the
+// blocks that share a multiprocessor (their warps hold consecutive slots, `warps` a block)
+// start on different sub-partitions (slot mod 4) and each moves on by one every chunk.
+// Without a warp on the wanted sub-partition (fewer than 4 warps), the warps take turns.
+__device__ __forceinline__ int producer_warp(int ci, const int* slot, int warps) {
+  const int turn = ci + slot[0] / warps;
+  if (warps >= 4) {
+    for (int w = 0; w < warps; ++w)
+      if ((slot[w] & 3) == (turn & 3) && (warps < 8 || ((w >> 2) & 1) == ((turn >> 2) & 1))) return w;
+    for (int w = 0; w < warps; ++w)
+      if ((slot[w] & 3) == (turn & 3)) return w;
+  }
+  return turn % warps;
+}
+
+// The threads that consume while warp `producer` produces (-1: none, every warp consumes; one
+// warp alone does both in turn): this thread's index among them (ct) and their number (nct).
+struct Consumers {
+  int ct, nct;
+};
+__device__ __forceinline__ Consumers consumers_of(int producer) {
+  const int tid = static_cast<int>(threadIdx.x), threads = static_cast<int>(blockDim.x);
+  const int warps = threads >> 5, warp = tid >> 5;
+  const bool all = warps == 1 || producer < 0;
+  return {all || warp < producer ? tid : tid - 32, all ? threads : threads - 32};
+}
+
+// The block's running costs q and then its cost-to-go: row i, rollout l at q[i * stride + l].
+struct CostTable {
+  float* q;
+  int stride;
+  int horizon;
+};
+
+// One rollout's column of the table turned into its cost-to-go in place, with the terminal
+// cost added to the last step, summed from the end as CpuBackend does; returns S~(tau_0).
+__device__ __forceinline__ float cost_to_go(const CostTable& t, int l, float terminal) {
+  float* col = t.q + l;
+  const int qs = t.stride;
+  float acc = sanitize_cost(col[(t.horizon - 1) * qs] + terminal);
+  col[(t.horizon - 1) * qs] = acc;
+  int i = t.horizon - 2;
+  constexpr int kBatch = 8;  // loads ahead of the dependent sums
+  for (; i >= kBatch - 1; i -= kBatch) {
+    float v[kBatch];
+#pragma unroll
+    for (int b = 0; b < kBatch; ++b) v[b] = col[(i - b) * qs];
+#pragma unroll
+    for (int b = 0; b < kBatch; ++b) {
+      acc = sanitize_cost(v[b] + acc);
+      col[(i - b) * qs] = acc;
+    }
+  }
+  for (; i >= 0; --i) {
+    acc = sanitize_cost(col[i * qs] + acc);
+    col[i * qs] = acc;
+  }
+  return acc;
+}
+
+// Rollouts k0 .. k0 + valid - 1 of K in this block.
+struct BlockRollouts {
+  int k0, valid, K;
+};
+
+// Where a block's weighted sums go: pmin[i * blocks + b] its minimum at step i,
+// part[(i * blocks + b) * (NU + 1) + n] (n = 0: sum w, 1..NU: sum w du), stats_part[b] its
+// step-0 statistics.
+struct BlockSums {
+  float* pmin;
+  float* part;
+  StatsPart* stats_part;
+};
+
+// One thread per step i: the block's minimum of the weighting row (row i, or row 0 under
+// trajectory weighting), w = exp(-(S - m_b)/lambda), and the sums of w and w du (du from the
+// kept controls u_keep, or drawn again) and, at step 0, the statistics, in rollout order.
+// crashed(l): whether rollout l crashed.
+template <int NU, bool kKeep, class Crashed>
+__device__ __forceinline__ void weigh_block(const CostTable& t, const BlockRollouts& r, const float* plan,
+                                            const float* u_keep, const NoiseKey& key, const SamplerConstants<NU>& c,
+                                            float inv_lambda, int trajectory, Crashed&& crashed, const BlockSums& out) {
+  const int blocks = static_cast<int>(gridDim.x), b = static_cast<int>(blockIdx.x);
+  for (int i = static_cast<int>(threadIdx.x); i < t.horizon; i += static_cast<int>(blockDim.x)) {
+    const float* row = t.q + (trajectory ? 0 : i) * t.stride;
+    float m = kCostCeiling;
+    for (int l = 0; l < r.valid; ++l) m = fmin_(m, row[l]);
+    const float* pu = plan + i * NU;
+    float acc[NU + 1] = {};
+    float w2 = 0.0f, sum_cost = 0.0f;
+    int finite = 0, crashed_count = 0;
+#pragma unroll 4
+    for (int l = 0; l < r.valid; ++l) {
+      const float s = row[l];
+      const float w = unnormalised_weight(s - m, inv_lambda);
+      float u[NU], du[NU];
+      if constexpr (kKeep) {
+        load_floats<NU>(u_keep + (static_cast<std::size_t>(i) * r.K + r.k0 + l) * NU, u);
+#pragma unroll
+        for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
+      } else {
+        perturb<NU>(c, key, static_cast<std::uint32_t>(r.k0 + l), static_cast<std::uint32_t>(i), pu, u, du);
+      }
+      acc[0] += w;
+#pragma unroll
+      for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
+      if (i == 0) {
+        // Step-0 statistics: sum w^2 (of these block-relative weights), S~ over the finite
+        // rollouts, how many, how many crashed.
+        w2 += w * w;
+        if (s < kCostCeiling) {
+          sum_cost += s;
+          ++finite;
+        }
+        crashed_count += crashed(l) ? 1 : 0;
+      }
+    }
+    out.pmin[static_cast<std::size_t>(i) * blocks + b] = m;
+    float* o = out.part + (static_cast<std::size_t>(i) * blocks + b) * (NU + 1);
+#pragma unroll
+    for (int n = 0; n <= NU; ++n) o[n] = acc[n];
+    if (i == 0) out.stats_part[b] = StatsPart{w2, sum_cost, finite, crashed_count};
+  }
+}
+
+// ---- rollout_chunked's block: its shared memory and its phases ------------------------------
+
 template <class T, bool kKeep>
-__global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
-    rollout_chunked(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
-                    float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
-                    int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
-  constexpr int R = ChunkLayout<T>::R, QS = ChunkLayout<T>::QS, NX = T::kNx, NU = T::kNu;
-  constexpr int XS = ChunkLayout<T>::XS, US = ChunkLayout<T>::US;
-  static_assert(T::kVehicles == 1, "rollout_chunked is for single vehicles");
-  extern __shared__ __align__(16) unsigned char smem[];
-  const ChunkLayout<T> L(chunk, horizon);
+struct ChunkedBlock {
+  static constexpr int R = ChunkLayout<T>::R, QS = ChunkLayout<T>::QS, NX = T::kNx, NU = T::kNu;
+  static constexpr int XS = ChunkLayout<T>::XS, US = ChunkLayout<T>::US;
   using Params = typename T::Params;
 
-  const int tid = static_cast<int>(threadIdx.x), threads = static_cast<int>(blockDim.x);
-  const int warps = threads >> 5, warp = tid >> 5, lane = tid & 31;
-  const int k0 = static_cast<int>(blockIdx.x) * R;
-  const int blocks = static_cast<int>(gridDim.x);
-  const int valid = K - k0 < R ? K - k0 : R;  // rollouts of this block
-  const int nchunks = (horizon + chunk - 1) / chunk;
+  const Input<T>* in;
+  const float* plan;
+  float* u_keep;
+  int K, horizon, chunk, substeps;
+  float dt;
+  int tid, threads, warps, warp, lane, k0, valid, nchunks;
+  float *xs, *us, *ccs, *xf, *qb;
+  std::uint32_t* hits;
+  int *frozen, *refix, *slot;
+  const Params* p;  // staged in shared memory
+  NoiseKey key;
 
-  // Stage the parameters, clear the flags.
-  {
-    constexpr int kWords = static_cast<int>(chunk_param_bytes<T>() / 4);
-    const auto* from = reinterpret_cast<const std::uint32_t*>(&in->params);
-    auto* to = reinterpret_cast<std::uint32_t*>(smem + L.params);
-    for (int w = tid; w < kWords; w += threads) to[w] = from[w];
+  // Lays out shared memory, stages the parameters and clears the crash flags (no barrier).
+  __device__ ChunkedBlock(const Input<T>* in_, const float* plan_, float* u_keep_, int K_, int horizon_, int chunk_,
+                          float dt_, int substeps_, unsigned char* smem)
+      : in(in_), plan(plan_), u_keep(u_keep_), K(K_), horizon(horizon_), chunk(chunk_), substeps(substeps_), dt(dt_) {
+    const ChunkLayout<T> L(chunk, horizon);
+    tid = static_cast<int>(threadIdx.x);
+    threads = static_cast<int>(blockDim.x);
+    warps = threads >> 5;
+    warp = tid >> 5;
+    lane = tid & 31;
+    k0 = static_cast<int>(blockIdx.x) * R;
+    valid = K - k0 < R ? K - k0 : R;
+    nchunks = (horizon + chunk - 1) / chunk;
+    stage_chunk_params<T>(in->params, smem + L.params);
+    xs = reinterpret_cast<float*>(smem + L.xs);
+    us = reinterpret_cast<float*>(smem + L.us);
+    ccs = reinterpret_cast<float*>(smem + L.cc);
+    hits = reinterpret_cast<std::uint32_t*>(smem + L.hit);
+    xf = reinterpret_cast<float*>(smem + L.xf);
+    frozen = reinterpret_cast<int*>(smem + L.flags);
+    refix = frozen + R;
+    slot = refix + R;
+    qb = reinterpret_cast<float*>(smem + L.qb);
+    if (tid < R) frozen[tid] = 0;
+    if (lane == 0) slot[warp] = warp_slot();
+    key = in->key;
+    p = reinterpret_cast<const Params*>(smem + L.params);
   }
-  float* xs = reinterpret_cast<float*>(smem + L.xs);
-  float* us = reinterpret_cast<float*>(smem + L.us);
-  float* ccs = reinterpret_cast<float*>(smem + L.cc);
-  auto* hits = reinterpret_cast<std::uint32_t*>(smem + L.hit);
-  float* xf = reinterpret_cast<float*>(smem + L.xf);
-  int* frozen = reinterpret_cast<int*>(smem + L.flags);
-  int* refix = frozen + R;
-  int* slot = refix + R;
-  float* qb = reinterpret_cast<float*>(smem + L.qb);
-  if (tid < R) frozen[tid] = 0;
-  if (lane == 0) slot[warp] = warp_slot();
-  const NoiseKey key = in->key;
-  const Params& p = *reinterpret_cast<const Params*>(smem + L.params);
-  const Params& gp = in->params;
 
-  auto steps_of = [&](int ci) { return horizon - ci * chunk < chunk ? horizon - ci * chunk : chunk; };
-  // Rollout l's state after step s of chunk ci, its control at that step.
-  auto xs_at = [&](int ci, int s, int l) { return xs + (static_cast<std::size_t>((ci & 1) * chunk + s) * R + l) * XS; };
-  auto us_at = [&](int ci, int s, int l) { return us + (static_cast<std::size_t>((ci % 3) * chunk + s) * R + l) * US; };
-  auto cc_at = [&](int ci, int s) { return ccs + static_cast<std::size_t>((ci % 3) * chunk + s) * R; };
+  __device__ int steps_of(int ci) const { return horizon - ci * chunk < chunk ? horizon - ci * chunk : chunk; }
+  // Rollout l's state after step s of chunk ci, its control at that step, the control costs.
+  __device__ float* xs_at(int ci, int s, int l) const {
+    return xs + (static_cast<std::size_t>((ci & 1) * chunk + s) * R + l) * XS;
+  }
+  __device__ float* us_at(int ci, int s, int l) const {
+    return us + (static_cast<std::size_t>((ci % 3) * chunk + s) * R + l) * US;
+  }
+  __device__ float* cc_at(int ci, int s) const { return ccs + static_cast<std::size_t>((ci % 3) * chunk + s) * R; }
+  __device__ CostTable table() const { return {qb, QS, horizon}; }
 
   // The noise of item (step s of chunk ci, rollout l).
-  auto draw = [&](int ci, int s, int l) {
+  __device__ void draw(int ci, int s, int l, const SamplerConstants<NU>& c) const {
     const int i = ci * chunk + s;
     const float* pu = plan + i * NU;
     float u[NU], du[NU];
@@ -228,15 +375,15 @@ __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
     sts_vec<NU>(us_at(ci, s, l), u);
     cc_at(ci, s)[l] = control_cost<NU>(c, pu, du);
     if (kKeep && l < valid) store_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
-  };
+  }
   // q of item (s, l) of chunk ci at state x; bits: the crash bits, in and out.
-  auto cost = [&](int ci, int s, int l, const float* x, std::uint32_t* bits) {
+  __device__ void cost(int ci, int s, int l, const float* x, std::uint32_t* bits) const {
     const int i = ci * chunk + s;
     const float t = static_cast<float>(i + 1) * dt;
-    qb[i * QS + l] = sanitize_cost(running_chunked<T>(p, gp, x, t, bits) + cc_at(ci, s)[l]);
-  };
+    qb[i * QS + l] = sanitize_cost(running_chunked<T>(*p, in->params, x, t, bits) + cc_at(ci, s)[l]);
+  }
   // The dynamics of chunk ci, lane = rollout, from the last state of chunk ci - 1.
-  auto produce = [&](int ci) {
+  __device__ void produce(int ci) const {
     float x[NX];
     if (ci == 0) {
 #pragma unroll
@@ -252,175 +399,124 @@ __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
 #pragma unroll
       for (int n = 0; n < NU; ++n) u[n] = un[n];
       if (s + 1 < steps) lds_vec<NU>(us_at(ci, s + 1, lane), un);
-      T::advance(p, x, u, dt, substeps, 0u);
+      T::advance(*p, x, u, dt, substeps, 0u);
       sts_vec<NX>(xs_at(ci, s, lane), x);
     }
-  };
-
-  // The warp that advances chunk ci. The producer's dependent chain is the one serial part,
-  // so each producer should have a scheduler of its own: the blocks that share a
-  // multiprocessor (their warps hold consecutive slots, `warps` a block) start on different
-  // sub-partitions (slot mod 4) and each moves on by one every chunk. Without a warp on the
-  // wanted sub-partition (fewer than 4 warps), the warps take turns.
-  auto producer_of = [&](int ci) {
-    const int turn = ci + slot[0] / warps;
-    if (warps >= 4) {
-      for (int w = 0; w < warps; ++w)
-        if ((slot[w] & 3) == (turn & 3) && (warps < 8 || ((w >> 2) & 1) == ((turn >> 2) & 1))) return w;
-      for (int w = 0; w < warps; ++w)
-        if ((slot[w] & 3) == (turn & 3)) return w;
-    }
-    return turn % warps;
-  };
+  }
 
   // Prologue: the noise of chunk 0; then the dynamics of chunk 0 beside the noise of chunk 1.
-  for (int e = tid; e < steps_of(0) * R; e += threads) draw(0, e / R, e % R);
-  __syncthreads();
-  {
-    const int producer = producer_of(0);
+  __device__ void prologue(const SamplerConstants<NU>& c) const {
+    for (int e = tid; e < steps_of(0) * R; e += threads) draw(0, e / R, e % R, c);
+    __syncthreads();
+    const int producer = producer_warp(0, slot, warps);
     if (warp == producer) produce(0);
     if (nchunks > 1 && (warps == 1 || warp != producer)) {
-      const int ct = warps == 1 || warp < producer ? tid : tid - 32, nct = warps == 1 ? threads : threads - 32;
-      for (int e = ct; e < steps_of(1) * R; e += nct) draw(1, e / R, e % R);
+      const Consumers con = consumers_of(producer);
+      for (int e = con.ct; e < steps_of(1) * R; e += con.nct) draw(1, e / R, e % R, c);
+    }
+    __syncthreads();
+  }
+
+  // The consumers' part of iteration ci: the costs of chunk ci beside the noise of chunk
+  // ci + 2, then the crash fix-up.
+  __device__ void consume(int ci, int producer, const SamplerConstants<NU>& c) const {
+    const Consumers con = consumers_of(producer);
+    cost_and_draw(ci, con, c);
+    consumer_sync(con.nct);
+    freeze_at_first_crash(ci, con);
+    consumer_sync(con.nct);
+    cost_after_crash(ci, con);
+  }
+  __device__ void cost_and_draw(int ci, const Consumers& con, const SamplerConstants<NU>& c) const {
+    const int n_cost = steps_of(ci) * R;
+    const int n_items = n_cost + (ci + 2 < nchunks ? steps_of(ci + 2) * R : 0);
+    for (int e = con.ct; e < n_items; e += con.nct) {
+      if (e < n_cost) {
+        const int s = e / R, l = e % R;
+        std::uint32_t bits = 0;
+        if (l < valid) {
+          const bool fz = frozen[l] != 0;
+          float x[NX];
+          lds_vec<NX>(fz ? xf + l * XS : xs_at(ci, s, l), x);
+          bits = fz ? 1u : 0u;  // crashed before: CpuBackend's running() sees the bit
+          cost(ci, s, l, x, &bits);
+        }
+        hits[s * R + l] = bits;
+      } else {
+        const int f = e - n_cost;
+        draw(ci + 2, f / R, f % R, c);
+      }
     }
   }
-  __syncthreads();
-
-  for (int ci = 0; ci < nchunks; ++ci) {
-    // The producer of chunk ci + 1 (none after the last chunk: every warp consumes).
-    const int producer = ci + 1 < nchunks ? producer_of(ci + 1) : -1;
-    if (warp == producer) produce(ci + 1);
-    if (warps == 1 || warp != producer) {
-      const bool all = warps == 1 || producer < 0;
-      const int ct = all || warp < producer ? tid : tid - 32, nct = all ? threads : threads - 32;
-      const int steps = steps_of(ci);
-      const int n_cost = steps * R;
-      const int n_items = n_cost + (ci + 2 < nchunks ? steps_of(ci + 2) * R : 0);
-      // ---- the costs of chunk ci; the noise of chunk ci + 2 ----
-      for (int e = ct; e < n_items; e += nct) {
-        if (e < n_cost) {
-          const int s = e / R, l = e % R;
-          std::uint32_t bits = 0;
-          if (l < valid) {
-            const bool fz = frozen[l] != 0;
-            float x[NX];
-            lds_vec<NX>(fz ? xf + l * XS : xs_at(ci, s, l), x);
-            bits = fz ? 1u : 0u;  // crashed before: CpuBackend's running() sees the bit
-            cost(ci, s, l, x, &bits);
-          }
-          hits[s * R + l] = bits;
-        } else {
-          const int f = e - n_cost;
-          draw(ci + 2, f / R, f % R);
+  // Per rollout: its first crash in chunk ci freezes its state there; refix[l]: the first
+  // step of the chunk to cost again on the frozen state.
+  __device__ void freeze_at_first_crash(int ci, const Consumers& con) const {
+    if (con.ct >= R) return;
+    const int l = con.ct, steps = steps_of(ci);
+    int from = steps;
+    if (!frozen[l]) {
+      for (int s = 0; s < steps; ++s) {
+        if (hits[s * R + l] != 0u) {
+          const float* src = xs_at(ci, s, l);
+          for (int n = 0; n < XS; ++n) xf[l * XS + n] = src[n];
+          frozen[l] = 1;
+          from = s + 1;
+          break;
         }
-      }
-      consumer_sync(nct);
-      // ---- the first crash of each rollout in this chunk ----
-      if (ct < R) {
-        const int l = ct;
-        int from = steps;
-        if (!frozen[l]) {
-          for (int s = 0; s < steps; ++s) {
-            if (hits[s * R + l] != 0u) {
-              const float* src = xs_at(ci, s, l);
-              for (int n = 0; n < XS; ++n) xf[l * XS + n] = src[n];
-              frozen[l] = 1;
-              from = s + 1;
-              break;
-            }
-          }
-        }
-        refix[l] = from;
-      }
-      consumer_sync(nct);
-      // ---- the steps after a crash in this chunk, costed on the frozen state ----
-      for (int e = ct; e < n_cost; e += nct) {
-        const int s = e / R, l = e % R;
-        if (l >= valid || s < refix[l]) continue;
-        float x[NX];
-        lds_vec<NX>(xf + l * XS, x);
-        std::uint32_t bits = 1u;
-        cost(ci, s, l, x, &bits);
       }
     }
+    refix[l] = from;
+  }
+  // The steps after a crash in chunk ci, costed on the frozen state.
+  __device__ void cost_after_crash(int ci, const Consumers& con) const {
+    for (int e = con.ct; e < steps_of(ci) * R; e += con.nct) {
+      const int s = e / R, l = e % R;
+      if (l >= valid || s < refix[l]) continue;
+      float x[NX];
+      lds_vec<NX>(xf + l * XS, x);
+      std::uint32_t bits = 1u;
+      cost(ci, s, l, x, &bits);
+    }
+  }
+
+  // One thread per rollout: the terminal cost at its last (or frozen) state and its
+  // cost-to-go; S~(tau_0) and the crash flag to global memory.
+  __device__ void cost_to_go_per_rollout(float* S0, unsigned char* crashed_out) const {
+    if (tid >= valid) return;
+    const int l = tid, last = nchunks - 1;
+    float x[NX];
+    lds_vec<NX>(frozen[l] ? xf + l * XS : xs_at(last, steps_of(last) - 1, l), x);
+    S0[k0 + l] = cost_to_go(table(), l, T::terminal(*p, x));
+    crashed_out[k0 + l] = frozen[l] != 0;
+  }
+};
+
+// S0: S~(tau_0,k), the first row of the cost-to-go (for rollout_costs()); sums: BlockSums.
+// kKeep: the controls are kept in u_keep for the update (else drawn again there).
+template <class T, bool kKeep>
+__global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
+    rollout_chunked(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
+                    float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
+                    int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
+  static_assert(T::kVehicles == 1, "rollout_chunked is for single vehicles");
+  extern __shared__ __align__(16) unsigned char smem[];
+  const ChunkedBlock<T, kKeep> b(in, plan, u_keep, K, horizon, chunk, dt, substeps, smem);
+  b.prologue(c);
+  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
+  for (int ci = 0; ci < b.nchunks; ++ci) {
+    // The producer of chunk ci + 1 (none after the last chunk: every warp consumes).
+    const int producer = ci + 1 < b.nchunks ? producer_warp(ci + 1, b.slot, b.warps) : -1;
+    if (b.warp == producer) b.produce(ci + 1);
+    if (b.warps == 1 || b.warp != producer) b.consume(ci, producer, c);
     // The next iteration's producer reads the noise drawn here and overwrites the states of
     // chunk ci - 1 (read by the producer here); its consumers read these states and flags.
     __syncthreads();
   }
-
   griddep_launch_dependents();  // finalize_blocks may be scheduled behind the last blocks
-
-  // ---- terminal cost and the cost-to-go, one thread per rollout ----
-  if (tid < valid) {
-    const int l = tid, last = nchunks - 1;
-    float x[NX];
-    lds_vec<NX>(frozen[l] ? xf + l * XS : xs_at(last, steps_of(last) - 1, l), x);
-    float* col = qb + l;
-    float acc = sanitize_cost(col[(horizon - 1) * QS] + T::terminal(p, x));
-    col[(horizon - 1) * QS] = acc;
-    int i = horizon - 2;
-    constexpr int kBatch = 8;
-    for (; i >= kBatch - 1; i -= kBatch) {
-      float v[kBatch];
-#pragma unroll
-      for (int b = 0; b < kBatch; ++b) v[b] = col[(i - b) * QS];
-#pragma unroll
-      for (int b = 0; b < kBatch; ++b) {
-        acc = sanitize_cost(v[b] + acc);
-        col[(i - b) * QS] = acc;
-      }
-    }
-    for (; i >= 0; --i) {
-      acc = sanitize_cost(col[i * QS] + acc);
-      col[i * QS] = acc;
-    }
-    S0[k0 + l] = acc;
-    crashed_out[k0 + l] = frozen[l] != 0;
-  }
+  b.cost_to_go_per_rollout(S0, crashed_out);
   __syncthreads();
-
-  // ---- per step: the block's minimum and weighted sums, one thread a step ----
-  for (int i = tid; i < horizon; i += threads) {
-    const int wi = trajectory ? 0 : i;
-    const float* row = qb + wi * QS;
-    float m = kCostCeiling;
-    for (int l = 0; l < valid; ++l) m = fmin_(m, row[l]);
-    const float* pu = plan + i * NU;
-    float acc[NU + 1] = {};
-    float w2 = 0.0f, sum_cost = 0.0f;
-    int finite = 0, crashed = 0;
-#pragma unroll 4
-    for (int l = 0; l < valid; ++l) {
-      const float s = row[l];
-      const float w = unnormalised_weight(s - m, inv_lambda);
-      float u[NU], du[NU];
-      if constexpr (kKeep) {
-        load_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + l) * NU, u);
-#pragma unroll
-        for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
-      } else {
-        perturb<NU>(c, key, static_cast<std::uint32_t>(k0 + l), static_cast<std::uint32_t>(i), pu, u, du);
-      }
-      acc[0] += w;
-#pragma unroll
-      for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
-      if (i == 0) {
-        // Step-0 statistics: sum w^2 (of these block-relative weights), S~ over the finite
-        // rollouts, how many, how many crashed.
-        w2 += w * w;
-        if (s < kCostCeiling) {
-          sum_cost += s;
-          ++finite;
-        }
-        crashed += frozen[l] != 0;
-      }
-    }
-    pmin[static_cast<std::size_t>(i) * blocks + blockIdx.x] = m;
-    float* out = part + (static_cast<std::size_t>(i) * blocks + blockIdx.x) * (NU + 1);
-#pragma unroll
-    for (int n = 0; n <= NU; ++n) out[n] = acc[n];
-    if (i == 0) stats_part[blockIdx.x] = StatsPart{w2, sum_cost, finite, crashed};
-  }
+  weigh_block<T::kNu, kKeep>(b.table(), BlockRollouts{b.k0, b.valid, K}, plan, u_keep, b.key, c, inv_lambda,
+                             trajectory, [&](int l) { return b.frozen[l] != 0; }, BlockSums{pmin, part, stats_part});
 }
 
 // Block i: m = min over the blocks' minima of the weighting step; every block's sums scaled

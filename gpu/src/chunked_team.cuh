@@ -144,16 +144,10 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
   const int tid = static_cast<int>(threadIdx.x), threads = static_cast<int>(blockDim.x);
   const int warps = threads >> 5, warp = tid >> 5, lane = tid & 31;
   const int k0 = static_cast<int>(blockIdx.x) * R;
-  const int blocks = static_cast<int>(gridDim.x);
   const int valid = K - k0 < R ? K - k0 : R;
   const int nchunks = (horizon + chunk - 1) / chunk;
 
-  {
-    constexpr int kWords = static_cast<int>(chunk_param_bytes<T>() / 4);
-    const auto* from = reinterpret_cast<const std::uint32_t*>(&in->params);
-    auto* to = reinterpret_cast<std::uint32_t*>(smem + L.params);
-    for (int w = tid; w < kWords; w += threads) to[w] = from[w];
-  }
+  stage_chunk_params<T>(in->params, smem + L.params);
   float* xs = reinterpret_cast<float*>(smem + L.xs);
   float* us = reinterpret_cast<float*>(smem + L.us);
   float* ccs = reinterpret_cast<float*>(smem + L.cc);
@@ -233,16 +227,6 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
       sts_vec<VNX>(xs_at(ci, s, r, j), x);
     }
   };
-  auto producer_of = [&](int ci) {
-    const int turn = ci + slot[0] / warps;
-    if (warps >= 4) {
-      for (int w = 0; w < warps; ++w)
-        if ((slot[w] & 3) == (turn & 3) && (warps < 8 || ((w >> 2) & 1) == ((turn >> 2) & 1))) return w;
-      for (int w = 0; w < warps; ++w)
-        if ((slot[w] & 3) == (turn & 3)) return w;
-    }
-    return turn % warps;
-  };
   // The noise of chunk ci by threads ct of nct: normals, a barrier, perturb (bar: the barrier).
   auto draw_chunk = [&](int ci, int ct, int nct, auto&& bar) {
     const int steps = steps_of(ci);
@@ -256,21 +240,21 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
   draw_chunk(0, tid, threads, [] { __syncthreads(); });
   __syncthreads();
   {
-    const int producer = producer_of(0);
+    const int producer = producer_warp(0, slot, warps);
     if (warp == producer) produce(0);
     if (nchunks > 1 && (warps == 1 || warp != producer)) {
-      const int ct = warps == 1 || warp < producer ? tid : tid - 32, nct = warps == 1 ? threads : threads - 32;
-      draw_chunk(1, ct, nct, [nct] { consumer_sync(nct); });
+      const Consumers con = consumers_of(producer);
+      draw_chunk(1, con.ct, con.nct, [con] { consumer_sync(con.nct); });
     }
   }
   __syncthreads();
+  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
 
   for (int ci = 0; ci < nchunks; ++ci) {
-    const int producer = ci + 1 < nchunks ? producer_of(ci + 1) : -1;
+    const int producer = ci + 1 < nchunks ? producer_warp(ci + 1, slot, warps) : -1;
     if (warp == producer) produce(ci + 1);
     if (warps == 1 || warp != producer) {
-      const bool all = warps == 1 || producer < 0;
-      const int ct = all || warp < producer ? tid : tid - 32, nct = all ? threads : threads - 32;
+      const auto [ct, nct] = consumers_of(producer);
       const int steps = steps_of(ci);
       const int n_terms = steps * R * TERMS;
       const bool draw_next = ci + 2 < nchunks;
@@ -344,64 +328,20 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
   }
   griddep_launch_dependents();
 
-  // ---- terminal cost and the cost-to-go, one thread per rollout ----
+  // ---- terminal cost and the cost-to-go, one thread per rollout; the block's weighted sums ----
+  const CostTable table{qb, QS, horizon};
   if (tid < valid) {
     const int r = tid, last = nchunks - 1;
     const std::uint32_t m = mask[r];
     float x[M * VNX];
     for (int j = 0; j < M; ++j)
       lds_vec<VNX>(((m >> j) & 1u) != 0u ? xf + (r * M + j) * XS : xs_at(last, steps_of(last) - 1, r, j), x + j * VNX);
-    float* col = qb + r;
-    float acc = sanitize_cost(col[(horizon - 1) * QS] + T::terminal(p, x));
-    col[(horizon - 1) * QS] = acc;
-    for (int i = horizon - 2; i >= 0; --i) {
-      acc = sanitize_cost(col[i * QS] + acc);
-      col[i * QS] = acc;
-    }
-    S0[k0 + r] = acc;
+    S0[k0 + r] = cost_to_go(table, r, T::terminal(p, x));
     crashed_out[k0 + r] = m != 0u;
   }
   __syncthreads();
-
-  // ---- per step: the block's minimum and weighted sums, one thread a step ----
-  for (int i = tid; i < horizon; i += threads) {
-    const int wi = trajectory ? 0 : i;
-    const float* row = qb + wi * QS;
-    float m = kCostCeiling;
-    for (int r = 0; r < valid; ++r) m = fmin_(m, row[r]);
-    const float* pu = plan + i * NU;
-    float acc[NU + 1] = {};
-    float w2 = 0.0f, sum_cost = 0.0f;
-    int finite = 0, crashed = 0;
-    for (int r = 0; r < valid; ++r) {
-      const float s = row[r];
-      const float w = unnormalised_weight(s - m, inv_lambda);
-      float u[NU], du[NU];
-      if constexpr (kKeep) {
-        load_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + r) * NU, u);
-#pragma unroll
-        for (int n = 0; n < NU; ++n) du[n] = u[n] - pu[n];
-      } else {
-        perturb<NU>(c, key, static_cast<std::uint32_t>(k0 + r), static_cast<std::uint32_t>(i), pu, u, du);
-      }
-      acc[0] += w;
-#pragma unroll
-      for (int n = 0; n < NU; ++n) acc[1 + n] += w * du[n];
-      if (i == 0) {
-        w2 += w * w;
-        if (s < kCostCeiling) {
-          sum_cost += s;
-          ++finite;
-        }
-        crashed += mask[r] != 0u;
-      }
-    }
-    pmin[static_cast<std::size_t>(i) * blocks + blockIdx.x] = m;
-    float* out = part + (static_cast<std::size_t>(i) * blocks + blockIdx.x) * (NU + 1);
-#pragma unroll
-    for (int n = 0; n <= NU; ++n) out[n] = acc[n];
-    if (i == 0) stats_part[blockIdx.x] = StatsPart{w2, sum_cost, finite, crashed};
-  }
+  weigh_block<NU, kKeep>(table, BlockRollouts{k0, valid, K}, plan, u_keep, key, c, inv_lambda, trajectory,
+                         [&](int r) { return mask[r] != 0u; }, BlockSums{pmin, part, stats_part});
 }
 
 }  // namespace mppi::cuda_detail

@@ -13,6 +13,9 @@
 // fit in about the L2 cache, the lane kernel while they fit in the noise budget (else the
 // update draws them again). The weighting (weigh_local, or the chunked kernel itself) weighs
 // each chunk of rollouts against its own minimum and finalize_blocks combines the chunks.
+// Forest tasks build the cycle's obstacle grid on the device (obstacle_grid.cuh) from the plan's
+// path, which update() computes on the host with the layout (prepares_params(): the optimizer
+// skips its host build); MPPID_CUDA_GRID=host searches the grid of the parameters given instead.
 // For measurements, MPPID_CUDA_KERNEL=chunked|lanes, MPPID_CUDA_CHUNK=<steps>,
 // MPPID_CUDA_WARPS=<warps per chunked block, 1-8>, MPPID_CUDA_NOISE=prepass|inline (teams),
 // keep|redraw (single vehicles) and
@@ -37,6 +40,7 @@
 #include "cuda_check.cuh"
 #include "kernels.cuh"
 #include "mppi/gpu/cuda_backend.hpp"
+#include "obstacle_grid.cuh"
 
 namespace mppi::cuda_detail {
 
@@ -209,11 +213,23 @@ class CudaBackend final : public RolloutBackend<T> {
     d_part_ = DeviceBuffer(static_cast<std::size_t>(t_) * parts * (kNu + 1) * sizeof(float), "the per-chunk sums");
     d_stats_part_ = DeviceBuffer(parts * sizeof(StatsPart), "the per-chunk statistics");
     in_bytes_ = align16(sizeof(Input<T>)) + plan_floats_ * sizeof(float);
+    if constexpr (kForestTask<T>) {
+      const char* g = std::getenv("MPPID_CUDA_GRID");
+      device_grid_ = g == nullptr || std::string(g) != "host";
+    }
+    if (device_grid_) {
+      layout_offset_ = align16(in_bytes_);
+      in_bytes_ = layout_offset_ + sizeof(ObstacleGridLayout);
+      path_.resize(static_cast<std::size_t>(t_ + 1) * T::kVehicles * 2);
+      d_grid_lists_ = DeviceBuffer(kGridListBytes, "the obstacle grid's lists (every cell of every cell side tried)");
+      d_grid_counts_ = DeviceBuffer(kGridCountBytes, "the obstacle grid's list lengths");
+    }
     out_bytes_ = align16(plan_floats_ * sizeof(float)) + sizeof(DeviceStats);
     d_in_ = DeviceBuffer(in_bytes_, "the per-cycle input");
     d_out_ = DeviceBuffer(out_bytes_, "the per-cycle output");
     h_in_ = PinnedBuffer(in_bytes_, "the per-cycle input staging");
     h_out_ = PinnedBuffer(out_bytes_, "the per-cycle output staging");
+    h_costs_ = PinnedBuffer(static_cast<std::size_t>(k_) * sizeof(float), "the step-0 costs staging (K floats)");
     std::memset(h_in_.as<void>(), 0, in_bytes_);
 
     cudaStream_t stream = nullptr;
@@ -260,13 +276,16 @@ class CudaBackend final : public RolloutBackend<T> {
   }
 
   const char* name() const override { return "cuda"; }
+  bool prepares_params() const override { return device_grid_; }
 
   void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan, UpdateStats* stats) override {
     auto* in = h_in_.as<Input<T>>();
     in->key = NoiseKey{seed_, cycle};
     std::memcpy(in->x0, x0, sizeof(in->x0));
-    std::memcpy(static_cast<void*>(&in->params), &params, sizeof(Params));
+    // With the grid built on the device, its ~10 KB stay behind (staged_param_bytes: all before it).
+    std::memcpy(static_cast<void*>(&in->params), &params, device_grid_ ? staged_param_bytes<T>() : sizeof(Params));
     std::memcpy(h_in_.as<unsigned char>() + align16(sizeof(Input<T>)), plan, plan_floats_ * sizeof(float));
+    if (device_grid_) plan_obstacle_grid(x0, params, plan);
     // Messages are built only on failure: update() allocates nothing.
     if (use_graph_) {
       const cudaError_t e = cudaGraphLaunch(exec_.get(), stream_.get());
@@ -280,6 +299,19 @@ class CudaBackend final : public RolloutBackend<T> {
     if (stats != nullptr) summarise(stats, plan);
   }
 
+  // The host's share of the obstacle grid: the plan's path and the grid's layout
+  // (Task::prepare's, whose lists the device fills).
+  void plan_obstacle_grid(const float* x0, const Params& params, const float* plan) {
+    if constexpr (kForestTask<T>) {
+      T::plan_path(params, x0, plan, t_, dt_, substeps_, path_.data());
+      *reinterpret_cast<ObstacleGridLayout*>(h_in_.as<unsigned char>() + layout_offset_) =
+          ObstacleGridLayout::plan(params.cost.obstacles, path_.data(), (t_ + 1) * T::kVehicles,
+                                   static_cast<float>(t_) * dt_, params.cost.obstacle_reach, params.cost.obstacle_cell);
+    } else {
+      (void)x0, (void)params, (void)plan;
+    }
+  }
+
   std::vector<float> rollout_costs() const override {
     std::vector<float> out(static_cast<std::size_t>(k_));
     check(cudaMemcpy(out.data(), d_cost_.as<float>(), out.size() * sizeof(float), cudaMemcpyDeviceToHost),
@@ -287,10 +319,20 @@ class CudaBackend final : public RolloutBackend<T> {
     return out;
   }
 
-  std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes(); }
+  // Row 0 of the cost-to-go through a pinned staging buffer, only when asked (the display
+  // sample of the cycle's rollouts): K floats, one copy on the update's stream.
+  void step0_costs(float* out) const override {
+    const std::size_t bytes = static_cast<std::size_t>(k_) * sizeof(float);
+    cudaError_t e = cudaMemcpyAsync(h_costs_.as<void>(), d_cost_.as<void>(), bytes, cudaMemcpyDeviceToHost, stream_.get());
+    if (e == cudaSuccess) e = cudaStreamSynchronize(stream_.get());
+    if (e != cudaSuccess) fail(e, what("the copy of the step-0 costs"));
+    std::memcpy(out, h_costs_.as<void>(), bytes);
+  }
+
+  std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes() + h_costs_.bytes(); }
   std::size_t device_bytes() const override {
     return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() + d_part_.bytes() +
-           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes();
+           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes() + d_grid_lists_.bytes() + d_grid_counts_.bytes();
   }
 
  private:
@@ -356,16 +398,8 @@ class CudaBackend final : public RolloutBackend<T> {
   // finalize_blocks for `parts` chunks or blocks per step, after the kernel that wrote them.
   void launch_finalize(cudaStream_t st, int parts, float* plan_out, DeviceStats* stats) {
     const float* d_plan = reinterpret_cast<const float*>(d_in_.as<unsigned char>() + align16(sizeof(Input<T>)));
-    cudaLaunchConfig_t cfg{};
-    cfg.gridDim = dim3(static_cast<unsigned>(t_));
-    cfg.blockDim = dim3(kReduceBlock);
-    cfg.dynamicSmemBytes = 0;
-    cfg.stream = st;
-    cudaLaunchAttribute attr[1];
-    attr[0].id = cudaLaunchAttributeProgrammaticStreamSerialization;
-    attr[0].val.programmaticStreamSerializationAllowed = 1;
-    cfg.attrs = attr;
-    cfg.numAttrs = pdl_ ? 1 : 0;
+    cudaLaunchAttribute attr;
+    const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(t_)), dim3(kReduceBlock), 0, st, pdl_, &attr);
     const float* part = d_part_.as<float>();
     const StatsPart* stats_part = d_stats_part_.as<StatsPart>();
     const float* pmin = d_pmin_.as<float>();
@@ -384,6 +418,19 @@ class CudaBackend final : public RolloutBackend<T> {
     auto* d_stats = reinterpret_cast<DeviceStats*>(d_out_.as<unsigned char>() + align16(plan_floats_ * sizeof(float)));
     lazy_check(cudaMemcpyAsync(d_in_.as<void>(), h_in_.as<void>(), in_bytes_, cudaMemcpyHostToDevice, st),
                [&] { return what("cudaMemcpyAsync of the input"); });
+    if constexpr (kForestTask<T>) {
+      if (device_grid_) {
+        auto* params = reinterpret_cast<unsigned char*>(d_in_.as<unsigned char>() + offsetof(Input<T>, params));
+        using C = typename T::Cost::Params;
+        const std::size_t cost_at = offsetof(Params, cost);
+        lazy_check(enqueue_obstacle_grid(
+                       st, reinterpret_cast<const ObstacleSet*>(params + cost_at + offsetof(C, obstacles)),
+                       reinterpret_cast<const ObstacleGridLayout*>(d_in_.as<unsigned char>() + layout_offset_),
+                       d_grid_lists_.as<std::uint8_t>(), d_grid_counts_.as<int>(),
+                       reinterpret_cast<ObstacleGrid*>(params + cost_at + offsetof(C, obstacle_grid)), pdl_),
+                   [&] { return what("launching the obstacle grid build"); });
+      }
+    }
     RolloutIo<kNu> io{nullptr, nullptr};
     if (mode_ == NoiseMode::kPrepass) {
       io.u_in = d_u_.as<float>();
@@ -394,11 +441,19 @@ class CudaBackend final : public RolloutBackend<T> {
     }
     if (chunked_) {
       // Rollouts, costs and each block's weighted sums in one kernel; then the blocks combined.
+      // Behind the device's obstacle grid, a programmatic dependent launch: the noise and the
+      // first chunk's dynamics run while the grid is packed (griddep_wait before the costs).
       const int threads = 32 * chunk_warps_;
-      chunked_kernel()<<<static_cast<unsigned>(chunk_blocks_), threads, chunk_smem_, st>>>(
-          d_in, d_plan, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
-          d_stats_part_.as<StatsPart>(), keep_u_ ? d_u_.as<float>() : nullptr, k_, t_, chunk_steps_, dt_, substeps_,
-          inv_lambda_, trajectory_ ? 1 : 0, c_);
+      cudaLaunchAttribute attr;
+      const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(chunk_blocks_)),
+                                                   dim3(static_cast<unsigned>(threads)), chunk_smem_, st,
+                                                   pdl_ && device_grid_, &attr);
+      float* u_keep = keep_u_ ? d_u_.as<float>() : nullptr;
+      lazy_check(cudaLaunchKernelEx(&cfg, chunked_kernel(), d_in, d_plan, d_cost_.as<float>(),
+                                    d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
+                                    d_stats_part_.as<StatsPart>(), u_keep, k_, t_, chunk_steps_, dt_, substeps_,
+                                    inv_lambda_, trajectory_ ? 1 : 0, c_),
+                 [&] { return what("launching the chunked rollout kernel"); });
       lazy_check(cudaGetLastError(), [&] {
         return what("launching the chunked rollout kernel (" + std::to_string(chunk_blocks_) + " blocks of " +
                     std::to_string(threads) + " threads, " + std::to_string(chunk_smem_) + " bytes shared)");
@@ -469,7 +524,11 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t chunk_smem_ = 0;
   long long chunk_blocks_ = 0;
   DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
-  PinnedBuffer h_in_, h_out_;
+  bool device_grid_ = false;       // forest tasks: the obstacle grid built on the device
+  std::size_t layout_offset_ = 0;  // of the grid's layout in the per-cycle input
+  std::vector<float> path_;        // the plan's path, xy per step and vehicle
+  DeviceBuffer d_grid_lists_, d_grid_counts_;
+  PinnedBuffer h_in_, h_out_, h_costs_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;
   std::unique_ptr<CUgraphExec_st, GraphExecDeleter> exec_;

@@ -22,6 +22,7 @@
 
 #include <cuda_runtime.h>
 
+#include <cstddef>
 #include <cstdint>
 
 #include "mppi/backend.hpp"
@@ -103,6 +104,23 @@ __device__ const typename T::Params* stage_params(const typename T::Params& src,
   for (unsigned w = threadIdx.x; w < kBytes / 4; w += blockDim.x) to[w] = from[w];
   __syncthreads();
   return reinterpret_cast<const typename T::Params*>(smem);
+}
+
+// The configuration of a launch on stream st that is a programmatic dependent of the kernel
+// before it when pdl is set (sm_90 on; see below); *attr holds the attribute (it must outlive the
+// cudaLaunchKernelEx call).
+inline cudaLaunchConfig_t launch_config(dim3 grid, dim3 block, std::size_t smem, cudaStream_t st, bool pdl,
+                                        cudaLaunchAttribute* attr) {
+  cudaLaunchConfig_t cfg{};
+  cfg.gridDim = grid;
+  cfg.blockDim = block;
+  cfg.dynamicSmemBytes = smem;
+  cfg.stream = st;
+  attr->id = cudaLaunchAttributeProgrammaticStreamSerialization;
+  attr->val.programmaticStreamSerializationAllowed = 1;
+  cfg.attrs = attr;
+  cfg.numAttrs = pdl ? 1 : 0;
+  return cfg;
 }
 
 // Programmatic dependent launch (sm_90 on): the kernel after this one in the stream may be

@@ -101,7 +101,7 @@ namespace {
 Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed) {
   check_keys(c, root, "scenario",
              {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
-              "success", "mppid"});
+              "success", "mppid", "mission"});  // mppid, mission: the harness's (the controller, the mission tool)
   Scenario s;
   s.seed = seed;
   read(c, root, "scenario", "name", s.name);

@@ -302,6 +302,9 @@ void Simulation::publish_world(double t) {
     m.radius = static_cast<float>(r.radius);
     m.speed = static_cast<float>(r.speed);
     m.yaw = static_cast<float>(r.yaw);
+    m.ramp_s = 0.0f;
+    m.phase = 0.0f;
+    m.end_s = 0.0f;
     m.t0_utime = ref_t0_;
     m.vehicle_count = static_cast<std::int16_t>(plant_->vehicles());
     m.goals.assign(static_cast<std::size_t>(plant_->vehicles()), std::vector<float>(3, 0.0f));

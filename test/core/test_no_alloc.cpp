@@ -108,6 +108,36 @@ TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
   }
 }
 
+TEST(NoAlloc, CyclesThatKeepAndSampleTheirRolloutsAllocateNothing) {
+  // tools/view's rollout fan: every fifth cycle keeps its rollouts, then a sample of 32 is
+  // rebuilt into a fan reserved before.
+  for (const std::string simd : {"off", "auto"}) {
+    MppiSettings s = forest_settings();
+    s.simd = simd;
+    TaskController<QuadrotorForest> c("quadrotor_forest", s, QuadrotorForest::Params{},
+                                      std::make_unique<CpuBackend<QuadrotorForest>>(s));
+    c.set_inputs(forest_inputs());
+    RolloutFan fan;
+    fan.reserve(32, 1, s.horizon);
+    Quadrotor::Params model;
+    std::vector<float> x(Quadrotor::kNx, 0.0f), u(Quadrotor::kNu, 0.0f);
+    x[Quadrotor::PZ] = 2.0f;
+    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
+    c.iterate(x.data(), u.data());
+    int fans = 0;
+    const std::size_t before = testing::allocation_count();
+    for (int n = 0; n < 50; ++n) {
+      if (n % 5 == 0) c.keep_rollouts();
+      c.iterate(x.data(), u.data());
+      if (c.fan(16, 16, &fan)) ++fans;
+      Quadrotor::step(model, x.data(), u.data(), c.dt());
+    }
+    EXPECT_EQ(testing::allocation_count() - before, 0u) << simd;
+    EXPECT_EQ(fans, 10) << simd;
+    EXPECT_EQ(fan.count, 32) << simd;
+  }
+}
+
 TEST(NoAlloc, DdpControllerCyclesAllocateNothing) {
   // The MPC-DDP baseline, as the daemon builds it (controller: ddp).
   const auto config = app::load_config(app::default_config_path("quadrotor_forest"),

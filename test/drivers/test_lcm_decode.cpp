@@ -99,7 +99,7 @@ TEST(LcmWire, CountOffsetsMatchTheGeneratedEncoders) {
   r.goals.assign(5, std::vector<float>(3, 0.0f));
   const auto rb = encode(r);
   EXPECT_EQ(read_be(rb, wire::kReferenceCount, 2), 5);
-  EXPECT_EQ(rb.size(), wire::kReferenceCount + 2 + 5 * 12);
+  EXPECT_EQ(rb.size(), wire::kReferenceCount + 2 + 5 * 12 + wire::kReferenceTail);
 
   mppi_lcm::param_update_t p{};
   p.key = "cost.w_xy";

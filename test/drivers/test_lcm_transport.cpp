@@ -118,6 +118,56 @@ TEST(LcmTransport, SelfTestLoopsBackOnMemq) {
   EXPECT_EQ(tx.self_test(), "");
 }
 
+// rollouts_t (tools/view's fan) leaves as it was given, within the room reserved at start-up;
+// a larger one is refused, never grown into.
+TEST(LcmTransport, RolloutsGoOutWhole) {
+  test::FakeClock clock;
+  transport::LcmTransport tx("memq://", {}, &clock, 64);
+  std::vector<mppi_lcm::rollouts_t> got;
+  struct Sink {
+    std::vector<mppi_lcm::rollouts_t>* got;
+    void on(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::rollouts_t* m) { got->push_back(*m); }
+  } sink{&got};
+  tx.lcm().subscribe("MPPI_ROLLOUTS", &Sink::on, &sink);
+  tx.reserve_rollouts(2, 2 * 3 * 3);
+  const int index[2] = {7, 3};
+  const float cost[2] = {1.5f, 2.5f}, weight[2] = {0.75f, 0.25f};
+  const unsigned char crashed[2] = {0, 1};
+  float xyz[18];
+  for (int i = 0; i < 18; ++i) xyz[i] = 0.5f * static_cast<float>(i);
+  transport::RolloutsView v;
+  v.seq = 4;
+  v.cycle = 9;
+  v.total = 64;
+  v.vehicles = 1;
+  v.steps = 3;
+  v.dt = 0.02f;
+  v.lambda = 10.0f;
+  v.count = 2;
+  v.top = 1;
+  v.index = index;
+  v.cost = cost;
+  v.weight = weight;
+  v.crashed = crashed;
+  v.xyz = xyz;
+  ASSERT_TRUE(tx.publish_rollouts(v));
+  tx.lcm().handleTimeout(100);
+  ASSERT_EQ(got.size(), 1u);
+  const auto& m = got[0];
+  EXPECT_EQ(m.seq, 4);
+  EXPECT_EQ(m.cycle, 9);
+  EXPECT_EQ(m.total, 64);
+  EXPECT_EQ(m.temperature, 10.0f);
+  EXPECT_EQ(m.top, 1);
+  EXPECT_EQ(m.index, (std::vector<std::int32_t>{7, 3}));
+  EXPECT_EQ(m.weight, (std::vector<float>{0.75f, 0.25f}));
+  EXPECT_EQ(m.crashed, (std::vector<std::int8_t>{0, 1}));
+  ASSERT_EQ(m.npos, 18);
+  EXPECT_EQ(m.pos, std::vector<float>(xyz, xyz + 18));
+  v.steps = 4;  // 24 floats: more than reserved
+  EXPECT_FALSE(tx.publish_rollouts(v));
+}
+
 TEST(LcmTransport, BadUrlIsAnError) {
   FakeClock clock;
   EXPECT_THROW(transport::LcmTransport("nosuchprovider://x", {}, &clock, 64), std::runtime_error);

@@ -6,6 +6,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
@@ -71,6 +73,59 @@ TEST(SettingsInput, TheTriggerIsClockOrStateAndItsFractionsAreBounded) {
   EXPECT_EQ(d.loop.trigger, daemon::Trigger::kState);
   EXPECT_DOUBLE_EQ(d.loop.state_trigger_min_gap, 0.5);
   EXPECT_DOUBLE_EQ(d.loop.state_trigger_grace, 1.0);
+}
+
+// daemon.spin (the loop and receive threads poll instead of sleeping): a boolean, off by default.
+TEST(SettingsInput, SpinIsABooleanOffByDefault) {
+  const auto off = daemon::parse_daemon_settings(YAML::Load("rate_hz: 50"), "cartpole_swingup", 1);
+  EXPECT_FALSE(off.spin);
+  const auto on = daemon::parse_daemon_settings(YAML::Load("spin: true"), "cartpole_swingup", 1);
+  EXPECT_TRUE(on.spin);
+  EXPECT_THROW(daemon::parse_daemon_settings(YAML::Load("spin: fast"), "cartpole_swingup", 1), app::ConfigError);
+}
+
+// The loop rate as a dial (tools/gpu/rate_dial.py: one plan step a period, the horizon the same
+// in seconds): every task file takes 50 to 400 Hz, in each of its sections (mppid checks them
+// all, whatever the machine), and the default anytime margin (3 ms) stays within a quarter of
+// the period.
+TEST(SettingsInput, EveryTaskFileTakesEveryLoopRateOfTheDial) {
+  int files = 0;
+  for (const char* task : {"cartpole_swingup", "quadrotor_forest", "quadrotor_rate_forest", "quadrotor_rate_track",
+                           "quadrotor_track", "racecar_ellipse", "team3_forest", "team9_forest"}) {
+    for (const double rate : {50.0, 100.0, 200.0, 400.0}) {
+      const app::AppConfig file = app::load_config(app::default_config_path(task), {"daemon.rate_hz=" + std::to_string(rate)});
+      const int nu = static_cast<int>(file.mppi.u_init.size());
+      std::vector<std::pair<std::string, const app::AppConfig*>> sections = {{"file", &file}};
+      if (file.cuda) sections.emplace_back("cuda", file.cuda.get());
+      for (const auto& [target, v] : file.cpu_targets) sections.emplace_back("cpu_targets." + target, v.get());
+      for (const auto& [name, c] : sections) {
+        try {
+          const auto d = daemon::parse_daemon_settings(c->root["daemon"], c->task, nu);
+          EXPECT_LE(static_cast<double>(d.loop.anytime_margin_ns), 0.25e9 / rate + 1.0) << task << " " << name;
+        } catch (const app::ConfigError& e) {
+          ADD_FAILURE() << task << " " << name << " at " << rate << " Hz: " << e.what();
+        }
+      }
+    }
+    ++files;
+  }
+  EXPECT_EQ(files, 8);
+}
+
+// The rollout fan for tools/view: off unless asked; its fields bounded and named.
+TEST(SettingsInput, TheRolloutFanIsOffByDefaultAndBounded) {
+  const app::AppConfig base = app::parse_config(YAML::Load(std::string(kGood)));
+  EXPECT_EQ(daemon::parse_daemon_settings(base.root["daemon"], base.task, 1).loop.rollouts.hz, 0.0);
+  EXPECT_EQ(config_error(std::string(kGood) + "daemon: {rollouts: {top: 200, random: 100, hz: 5}}\n"),
+            "daemon.rollouts.random: top + random must be at most 256");
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {rollouts: {hz: -1}}\n").find("daemon.rollouts.hz: must be in"),
+            std::string::npos);
+  EXPECT_NE(config_error(std::string(kGood) + "daemon: {rollouts: {every: 3}}\n").find("every"), std::string::npos);
+  const app::AppConfig c = app::parse_config(YAML::Load(std::string(kGood) + "daemon: {rollouts: {hz: 5, top: 8}}\n"));
+  const auto d = daemon::parse_daemon_settings(c.root["daemon"], c.task, 1);
+  EXPECT_DOUBLE_EQ(d.loop.rollouts.hz, 5.0);
+  EXPECT_EQ(d.loop.rollouts.top, 8);
+  EXPECT_EQ(d.loop.rollouts.random, 16);
 }
 
 // A `cuda:` section may carry daemon settings (the GPU's state trigger): merged key by key

@@ -70,11 +70,12 @@ def main():
         write("fuzz_state", f"{task}_late", state(utime=1_500_000), ti)
 
         # reference_t of every kind.
-        for kind, name in ((0, "hold"), (1, "circle"), (2, "figure_eight"), (3, "waypoint")):
+        for kind, name in ((0, "hold"), (1, "circle"), (2, "figure_eight"), (3, "waypoint"), (4, "line")):
             r = m.reference_t()
             r.utime, r.seq, r.kind = 1_000_000, 1, kind
             r.center, r.radius, r.speed, r.yaw, r.t0_utime = [0.0, 0.0, 2.0], 5.0, 3.0, 0.0, 900_000
-            r.vehicle_count = vehicles if kind in (0, 3) else 0
+            r.ramp_s, r.phase, r.end_s = (2.0, 0.5, 20.0) if kind in (1, 2, 4) else (0.0, 0.0, 0.0)
+            r.vehicle_count = vehicles if kind in (0, 3, 4) else 0
             r.goals = [[40.0, 2.0 * v, 2.0] for v in range(r.vehicle_count)]
             write("fuzz_reference", f"{task}_{name}", r, ti)
 

@@ -1,10 +1,16 @@
 // mppid-gpu-timing: time one full CUDA update (state and plan up, sample, roll out, weigh,
 // update, plan down) with steady_clock around RolloutBackend::update(), and print JSON.
-//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] CASE...   CASE = task:K[:T]
+//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench] CASE...
+//   CASE = task:K[:T]
 // --period-us P: one update every P us on an absolute grid (the daemon's 20,000 at 50 Hz), the
 // GPU and this thread idle in between, instead of back to back: the tail an idle GPU adds.
-// The forest tasks run with the obstacle grid the optimizer builds each cycle (Task::prepare
-// from the plan), as in the daemon; --no-grid: every search scans all 32 cylinders.
+// --scene test (default): the parity tests' scenario (test/gpu/scenarios.hpp: 32 obstacles, the
+// obstacle grid built from the plan); --no-grid: every search scans all 32 cylinders.
+// --scene bench: mppid-bench's (the task file's settings, the offline forest with the 32
+// obstacles nearest the start, the plan after 20 cycles of the controller): the update alone
+// where mppid-bench times the whole Controller::iterate, so the two can be compared.
+// Forest tasks build the obstacle grid on the device, inside update() (MPPID_CUDA_GRID=host:
+// the host's grid, built once here, as the optimizer would).
 // e.g. mppid-gpu-timing quadrotor_forest:16384 team9_forest:6000 team3_forest:1200
 #include <algorithm>
 #include <chrono>
@@ -13,11 +19,15 @@
 #include <cstdlib>
 #include <ctime>
 #include <exception>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "mppi/app/config.hpp"
+#include "mppi/controller.hpp"
 #include "mppi/gpu/cuda_backend.hpp"
+#include "mppi/offline/offline.hpp"
 #include "scenarios.hpp"
 
 namespace {
@@ -30,33 +40,29 @@ struct Result {
   std::size_t device_bytes = 0;
 };
 
+// Updates of `backend` from x0 with params, the plan starting from plan0 (and put back every 50
+// updates: the problem stays stationary).
 template <class T>
-Result time_case(const std::string& name, int k, int t, int iters, int warmup, bool grid, int period_us) {
-  auto sc = mppi::gpu_test::make_scenario<T>(k, t);
-  auto backend = mppi::make_cuda_backend<T>(sc.settings);
-  auto plan = mppi::gpu_test::initial_plan(sc.settings);
-  if (grid) mppi::gpu_test::prepare(sc, plan);  // the obstacle grid, as the optimizer builds it
-  const auto plan0 = plan;
+Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, const typename T::Params& params,
+                    const std::vector<float>& plan0, int iters, int warmup, int period_us) {
+  std::vector<float> plan = plan0;
   mppi::UpdateStats stats;
   std::vector<double> us;
   us.reserve(static_cast<std::size_t>(iters));
   auto release = std::chrono::steady_clock::now();
   for (int n = 0; n < warmup + iters; ++n) {
-    if (n % 50 == 0) plan = plan0;  // keep the problem stationary
+    if (n % 50 == 0) plan = plan0;
     if (period_us > 0) {
       release += std::chrono::microseconds(period_us);
       std::this_thread::sleep_until(release);
     }
     const auto t0 = std::chrono::steady_clock::now();
-    backend->update(sc.x0.data(), sc.params, static_cast<std::uint32_t>(n), plan.data(), &stats);
+    backend.update(x0, params, static_cast<std::uint32_t>(n), plan.data(), &stats);
     const auto t1 = std::chrono::steady_clock::now();
     if (n >= warmup) us.push_back(std::chrono::duration<double, std::micro>(t1 - t0).count());
   }
   std::sort(us.begin(), us.end());
   Result r;
-  r.task = name;
-  r.k = k;
-  r.t = t;
   r.median_us = us[us.size() / 2];
   r.p99_us = us[std::min(us.size() - 1, static_cast<std::size_t>(0.99 * static_cast<double>(us.size())))];
   double sum = 0;
@@ -66,8 +72,41 @@ Result time_case(const std::string& name, int k, int t, int iters, int warmup, b
   r.max_us = us.back();
   r.ess = stats.ess;
   r.min_cost = stats.min_cost;
-  r.device_bytes = backend->device_bytes();
+  r.device_bytes = backend.device_bytes();
   return r;
+}
+
+// The parity tests' scenario.
+template <class T>
+Result time_test_scene(int k, int t, int iters, int warmup, bool grid, int period_us) {
+  auto sc = mppi::gpu_test::make_scenario<T>(k, t);
+  auto backend = mppi::make_cuda_backend<T>(sc.settings);
+  const auto plan = mppi::gpu_test::initial_plan(sc.settings);
+  if constexpr (T::kUsesPath) {
+    if (grid) mppi::gpu_test::prepare(sc, plan);  // the host's obstacle grid (unless built on the device)
+    else sc.params.cost.obstacle_reach = 0.0f;    // no grid on either side: every search scans the set
+  }
+  return time_updates<T>(*backend, sc.x0.data(), sc.params, plan, iters, warmup, period_us);
+}
+
+// mppid-bench's scene, through the controller mppid-bench times.
+template <class T>
+Result time_bench_scene(const std::string& task, int k, int t, int iters, int warmup, int period_us) {
+  const auto cfg = mppi::app::load_config(mppi::app::default_config_path(task),
+                                          {"backend=cuda", "mppi.rollouts=" + std::to_string(k),
+                                           "mppi.horizon=" + std::to_string(t)});
+  auto c = mppi::app::make_controller(cfg);
+  auto* tc = dynamic_cast<mppi::TaskController<T>*>(c.get());
+  if (tc == nullptr) throw std::runtime_error(task + ": not an MPPI controller");
+  const auto scene = mppi::offline::bench_scenario(*c, 32, 32);
+  c->set_inputs(scene.inputs);
+  std::vector<float> u(static_cast<std::size_t>(c->nu()));
+  for (int i = 0; i < 20; ++i) c->iterate(scene.x0.data(), u.data());
+  auto& backend = tc->optimizer().backend();
+  // The parameters as the optimizer hands them over: prepared on the host unless the backend
+  // prepares them itself.
+  const auto& params = backend.prepares_params() ? tc->params() : tc->optimizer().prepared_params();
+  return time_updates<T>(backend, scene.x0.data(), params, tc->plan(), iters, warmup, period_us);
 }
 
 }  // namespace
@@ -75,6 +114,7 @@ Result time_case(const std::string& name, int k, int t, int iters, int warmup, b
 int main(int argc, char** argv) {
   int iters = 1000, warmup = 50, period_us = 0;
   bool grid = true;
+  std::string scene = "test";
   std::vector<std::string> cases;
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
@@ -82,13 +122,19 @@ int main(int argc, char** argv) {
     else if (arg == "--warmup" && a + 1 < argc) warmup = std::atoi(argv[++a]);
     else if (arg == "--no-grid") grid = false;
     else if (arg == "--period-us" && a + 1 < argc) period_us = std::atoi(argv[++a]);
+    else if (arg == "--scene" && a + 1 < argc) scene = argv[++a];
     else if (arg == "--help" || arg == "-h") {
-      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] task:K[:T]...\n");
+      std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench] "
+                  "task:K[:T]...\n");
       return 0;
     } else cases.push_back(arg);
   }
   if (cases.empty()) cases = {"quadrotor_forest:16384", "team9_forest:6000", "team3_forest:1200"};
   if (iters < 1) iters = 1;
+  if (scene != "test" && scene != "bench") {
+    std::fprintf(stderr, "mppid-gpu-timing: --scene: test or bench, got %s\n", scene.c_str());
+    return 2;
+  }
   std::string why;
   if (!mppi::cuda_device_available(&why)) {
     std::fprintf(stderr, "mppid-gpu-timing: no CUDA device: %s\n", why.c_str());
@@ -97,15 +143,16 @@ int main(int argc, char** argv) {
   const char* graph = std::getenv("MPPID_CUDA_GRAPH");
   // The kernel choices set from the environment (cuda_backend_impl.cuh), to label the run.
   std::string env;
-  for (const char* k : {"MPPID_CUDA_KERNEL", "MPPID_CUDA_CHUNK", "MPPID_CUDA_WARPS", "MPPID_CUDA_NOISE", "MPPID_CUDA_LANES"})
+  for (const char* k : {"MPPID_CUDA_KERNEL", "MPPID_CUDA_CHUNK", "MPPID_CUDA_WARPS", "MPPID_CUDA_NOISE", "MPPID_CUDA_LANES",
+                        "MPPID_CUDA_GRID"})
     if (const char* v = std::getenv(k)) env += std::string(env.empty() ? "" : " ") + k + "=" + v;
   char date[32];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   std::printf("{\n  \"device\": \"%s\",\n  \"date\": \"%s\",\n  \"cuda_graph\": %s,\n  \"iterations\": %d,\n"
-              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
+              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"scene\": \"%s\",\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
               mppi::cuda_device_name().c_str(), date, graph != nullptr && std::string(graph) == "0" ? "false" : "true",
-              iters, warmup, period_us, grid ? "true" : "false", env.c_str());
+              iters, warmup, period_us, scene.c_str(), grid ? "true" : "false", env.c_str());
   bool first = true;
   int status = 0;
   for (const auto& c : cases) {
@@ -118,7 +165,11 @@ int main(int argc, char** argv) {
     try {
       const bool known = mppi::visit_task(name, [&](auto tag) {
         using T = typename decltype(tag)::type;
-        r = time_case<T>(name, k, t, iters, warmup, grid, period_us);
+        r = scene == "bench" ? time_bench_scene<T>(name, k, t, iters, warmup, period_us)
+                             : time_test_scene<T>(k, t, iters, warmup, grid, period_us);
+        r.task = name;
+        r.k = k;
+        r.t = t;
       });
       if (!known) throw std::runtime_error("unknown task " + name);
     } catch (const std::exception& e) {

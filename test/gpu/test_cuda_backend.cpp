@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "mppi/cpu_backend.hpp"
+#include "cuda_skip.hpp"
 #include "mppi/gpu/cuda_backend.hpp"
 #include "mppi/optimizer.hpp"
 #include "scenarios.hpp"
@@ -26,12 +27,6 @@
 
 namespace mppi {
 namespace {
-
-#define SKIP_WITHOUT_CUDA()                                           \
-  do {                                                                \
-    std::string why_;                                                 \
-    if (!cuda_device_available(&why_)) GTEST_SKIP() << "no CUDA device: " << why_; \
-  } while (0)
 
 constexpr float kCostTolerance = 1e-5f;  // relative, per rollout
 constexpr float kPlanTolerance = 1e-4f;  // relative to max(1, |u|)
@@ -408,6 +403,45 @@ TEST(CudaDeterminism, RepeatedUpdateOnOneBackendIsIdentical) {
   gpu->update(sc.x0.data(), sc.params, 3, p2.data(), nullptr);
   EXPECT_EQ(p1, p2);
   EXPECT_EQ(c1, gpu->rollout_costs());
+}
+
+// The rollout fan (rollout_fan.hpp, tools/view) of a CUDA update: step0_costs is the device's
+// row 0 (what rollout_costs gives), and each rollout rebuilt on the host from the shared
+// noise costs what the device said, to the parity tolerance (a rare divergent rollout, as
+// above, may differ: at most one of the 32 here).
+template <class T>
+void expect_cuda_fan_is_the_update(int k) {
+  auto sc = gpu_test::make_scenario<T>(k, 100);
+  Mppi<T> mppi(sc.settings, make_cuda_backend<T>(sc.settings));
+  std::vector<float> u(T::kNu);
+  mppi.iterate(sc.x0.data(), sc.params, u.data());
+  mppi.keep_rollouts();
+  mppi.iterate(sc.x0.data(), sc.params, u.data());
+  std::vector<float> step0(static_cast<std::size_t>(k));
+  mppi.backend().step0_costs(step0.data());
+  EXPECT_EQ(step0, mppi.backend().rollout_costs());
+  RolloutFan fan;
+  fan.reserve(32, T::kVehicles, sc.settings.horizon);
+  ASSERT_TRUE(mppi.fan(16, 16, &fan));
+  ASSERT_EQ(fan.count, 32);
+  int off = 0;
+  for (int r = 0; r < fan.count; ++r) {
+    EXPECT_EQ(fan.cost[r], step0[static_cast<std::size_t>(fan.index[r])]);
+    const double rel = std::fabs(static_cast<double>(fan.rebuilt_cost[r]) - fan.cost[r]) /
+                       std::max(1.0, std::fabs(static_cast<double>(fan.cost[r])));
+    if (rel > kCostTolerance) ++off;
+  }
+  EXPECT_LE(off, 1) << "rollouts whose rebuilt cost is off the device's";
+}
+
+TEST(CudaRolloutFan, RebuiltRolloutsCostWhatTheDeviceSaidQuadrotor) {
+  SKIP_WITHOUT_CUDA();
+  expect_cuda_fan_is_the_update<QuadrotorForest>(16384);
+}
+
+TEST(CudaRolloutFan, RebuiltRolloutsCostWhatTheDeviceSaidTeam3) {
+  SKIP_WITHOUT_CUDA();
+  expect_cuda_fan_is_the_update<Team3Forest>(1200);
 }
 
 template <class F>

@@ -61,10 +61,11 @@ class Chain:
         return self.procs.start("mavproxy", IO_PRIO + cmd)
 
     def start_bridge(self, url=None):
+        # The simulated autopilot sends to the bridge's UDP port whatever the config names.
+        url = url or f"udpin:127.0.0.1:{VEHICLE_PORT}"
         cmd = [PYTHON, "-m", "mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,
-               "--set", f"control.socket={self.sock}", "--set", f"trace.file={self.out / 'bridge_trace.jsonl'}"]
-        if url:
-            cmd += ["--url", url]
+               "--set", f"control.socket={self.sock}", "--set", f"trace.file={self.out / 'bridge_trace.jsonl'}",
+               "--url", url]
         for kv in self.bridge_sets:
             cmd += ["--set", kv]
         return self.procs.start("bridge", IO_PRIO + cmd)

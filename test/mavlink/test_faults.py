@@ -179,7 +179,8 @@ def test_wrong_guid_options_refuses_to_fly(netns, procs, tmp_path, tap):
             r = c.ctl(cmd)
             assert not r["ok"] and "GUID_OPTIONS=1" in r["message"] and "bit 3" in r["message"], r
         assert tap.setpoints() == []
-        assert not any(m.get_type() == "COMMAND_LONG" for _, m in tap.decoded("down"))
+        # No flight command: only the telemetry requests every link-up sends.
+        assert all(m.command == 511 for _, m in tap.decoded("down") if m.get_type() == "COMMAND_LONG")
         assert c.status()["dropped_refused"] > 20
         assert any("GUID_OPTIONS" in m.error for _, m in c.link_msgs)
         assert "refusing to fly" in procs.log("bridge")
@@ -188,7 +189,8 @@ def test_wrong_guid_options_refuses_to_fly(netns, procs, tmp_path, tap):
 
 
 def test_ardupilot_guided_arm_takeoff_rates(netns, procs, tmp_path, tap):
-    """The same with GUID_OPTIONS = 8: arm, take off (GUIDED), then rate targets are flown."""
+    """The same with GUID_OPTIONS = 8: arm, take off (GUIDED), then `offboard`: rate targets
+    are flown (none before; test_ardupilot.py)."""
     ctl = StandInController()
     try:
         c = _chain(procs, tmp_path, autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.35"])
@@ -198,10 +200,10 @@ def test_ardupilot_guided_arm_takeoff_rates(netns, procs, tmp_path, tap):
         wait_for(lambda: c.status().get("states_published", 0) >= 60, 10, "1.2 s of state")
         r = c.ctl("takeoff")
         assert not r["ok"] and "disarmed" in r["message"]          # the autopilot's reason, passed on
-        c.ok("offboard")                                             # GUIDED
         c.ok("arm")
         c.ok("takeoff 1.5")
         wait_for(lambda: c.status().get("mode") == "GUIDED", 5, "GUIDED")
+        c.ok("offboard")                                             # after the take-off
         time.sleep(1.0)
         sp = tap.setpoints()
         assert sp and sp[-1][1].thrust == pytest.approx(0.35, abs=1e-6)

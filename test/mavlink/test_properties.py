@@ -183,7 +183,7 @@ def make_bridge():
     b.lc = FakeLcm()
     b.wire = Wire()
     b.mav = FakeConn(b.wire)
-    b.link_up, b.target_system, b.refusal = True, 1, ""
+    b.link_up, b.target_system, b.param_refusal = True, 1, ""
     b.last_status_mono, b.last_status_healthy = bridge_mod.mono_us(), True
     return b
 

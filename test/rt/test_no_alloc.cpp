@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <new>
@@ -46,14 +47,20 @@ class NullTransport final : public transport::Transport {
   }
   bool publish_status(const transport::StatusReport&) override { return ++statuses > 0; }
   bool publish_plan(const transport::PlanView&) override { return ++plans > 0; }
+  bool publish_rollouts(const transport::RolloutsView& r) override {
+    for (long i = 0; i < static_cast<long>(r.count) * r.vehicles * r.steps * 3; ++i)
+      if (!std::isfinite(r.xyz[i])) return false;
+    last_fan = r.count;
+    return ++fans > 0;
+  }
   transport::Command last;
-  long commands = 0, statuses = 0, plans = 0;
+  long commands = 0, statuses = 0, plans = 0, fans = 0, last_fan = 0;
 };
 }  // namespace
 
 // trigger state: each state arrives a period after the last, so each starts its cycle (the
 // wait on the inbox's semaphore is on the path).
-void steady_state_cycles_allocate_nothing(daemon::Trigger trigger) {
+void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts = false) {
   app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=128", "mppi.horizon=30"});
   auto controller = app::make_controller(cfg);
@@ -68,6 +75,7 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger) {
   daemon::LoopSettings s;
   s.trigger = trigger;
   s.status_hz = 5;  // several status messages inside the counted window
+  if (rollouts) s.rollouts = daemon::FanSettings{10.0, 8, 8};  // every fifth cycle: tools/view's fan
   daemon::ControlLoop loop(controller.get(), &clock, &tx, &inbox, s);
   std::atomic<bool> stop{false};
   auto offer_state = [&](std::int64_t seq) {
@@ -109,10 +117,19 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger) {
   if (trigger == daemon::Trigger::kState) {
     EXPECT_EQ(loop.counters().state_triggered.load(), 80);
   }
+  if (rollouts) {
+    EXPECT_GE(tx.fans, 15);  // 80 cycles, one fan in five
+    EXPECT_EQ(tx.last_fan, 16);
+  } else {
+    EXPECT_EQ(tx.fans, 0);  // off by default
+  }
 }
 
 TEST(HotPath, SteadyStateCyclesAllocateNothing) { steady_state_cycles_allocate_nothing(daemon::Trigger::kClock); }
 TEST(HotPath, StateTriggeredCyclesAllocateNothing) { steady_state_cycles_allocate_nothing(daemon::Trigger::kState); }
+TEST(HotPath, CyclesPublishingRolloutsAllocateNothing) {
+  steady_state_cycles_allocate_nothing(daemon::Trigger::kClock, true);
+}
 
 // A live optimizer update: the builder thread builds the new controller (allocating, off
 // the loop thread); the loop forwards the updates, swaps the new controller in between two

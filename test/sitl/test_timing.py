@@ -98,6 +98,7 @@ def test_per_cycle_figures_come_from_the_commands():
     assert t["compute_ms_max"] == pytest.approx(28.5)
     assert t["state_age_ms_p99"] == pytest.approx(3.0)
     assert t["state_to_command_ms_p99"] == pytest.approx(np.percentile(np.array(comp) + 3.0, 99), rel=1e-3)
+    assert t["state_to_command_ms_p50"] == pytest.approx(np.percentile(np.array(comp) + 3.0, 50), rel=1e-3)
     assert t["state_to_command_samples_ms"] == pytest.approx(list(np.array(comp) + 3.0), rel=1e-3)
     assert t["lead_ms_mean"] == pytest.approx(15.0 + np.mean(comp), rel=1e-3)
     assert timing.command_timing([_command(1, 0, 0, 0)]) == {}

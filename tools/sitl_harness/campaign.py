@@ -67,7 +67,7 @@ def resolve_scenarios(names) -> list[tuple[str, str]]:
 
 
 def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", realtime=False, sets=(), plots=True,
-              timeout=0.0, ideal=False, latency=None) -> list[FlightJob]:
+              timeout=0.0, ideal=False, latency=None, autopilot="sim", ardupilot_bin=None) -> list[FlightJob]:
     """One job per scenario and seed, scenario-major; folders out/<label>/seed_NNNN."""
     jobs = []
     for spec, label in scenarios:
@@ -75,14 +75,15 @@ def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", re
             jobs.append(FlightJob(index=len(jobs), scenario=spec, label=label, seed=seed,
                                   out=Path(out) / label / f"seed_{seed:04d}", backend=backend, controller=controller,
                                   realtime=realtime, sets=list(sets), plots=plots, timeout=timeout, ideal=ideal,
-                                  latency=latency))
+                                  latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin))
     return jobs
 
 
 def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: str = "cpu", first_seed: int = 1,
                  controller: str = "mppid", realtime: bool = False, sets=(), engine: str = "local",
                  address: str | None = None, cpus_per_flight: float = 1.0, ideal: bool = False,
-                 latency: float | None = None, realtime_jobs: int = 1, plots: bool = True) -> dict:
+                 latency: float | None = None, realtime_jobs: int = 1, plots: bool = True, autopilot: str = "sim",
+                 ardupilot_bin: str | None = None) -> dict:
     """Flies every scenario (names or YAML files) over the seeds (a count from first_seed, or
     a list) on the engine; writes summary.json, summary.md, summary.png; returns the summary."""
     out = Path(out).resolve()
@@ -98,8 +99,7 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
         # lengthen it. With --ideal, a fixed --latency or the stand-in, two at a time.
         jobs = 2 if (ideal or latency is not None or controller == "standin") else 1
     flights = make_jobs(resolved, seed_list, out, backend=backend, controller=controller, realtime=realtime, sets=sets,
-                        plots=plots,
-                        ideal=ideal, latency=latency)
+                        plots=plots, ideal=ideal, latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin)
     eng = make_engine(engine, jobs=jobs, address=address, cpus_per_flight=cpus_per_flight,
                       pin=realtime and jobs > 1)
     try:
@@ -113,6 +113,7 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
     summary["jobs"] = desc["jobs"]
     summary["sets"] = list(sets)
     summary["seeds"] = seed_list
+    summary["autopilot"] = autopilot
     summary["clock"] = ("realtime" if realtime else "lockstep, " + (
         "ideal (no latency charged)" if ideal else f"fixed latency {latency:g} s" if latency is not None
         else "measured latency charged"))
@@ -153,6 +154,9 @@ def summarize(results) -> dict:
             "runs": n, "successes": k, "success_rate": k / n if n else 0.0, "wilson95": wilson(k, n),
             "time_to_goal": _stat([r.get("time_to_goal") for r in ok]),
             "tracking_rmse": _stat([r.get("tracking_rmse") for r in ok]),
+            # Through an autopilot (ap_score.py): the hover error, the largest tilt.
+            "hover_rmse": _stat([r.get("hover_rmse") for r in ok]),
+            "max_tilt_deg": _stat([r.get("max_tilt_deg") for r in rs]),
             "min_clearance": _stat([r.get("min_clearance") for r in rs]),
             "mean_speed": _stat([r.get("mean_speed") for r in ok]),
             # Per flight: p99 over its cycles (timing.py); the column shows the worst flight.

@@ -14,7 +14,7 @@ from . import paths
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="sitl", description="mppid software-in-the-loop flights")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    sub.add_parser("list", help="scenario names, one a line")
+    sub.add_parser("list", help="scenario names, then mission names (config/missions), one a line")
 
     r = sub.add_parser("run", help="fly one scenario; writes a result folder; exit 0 on success, 1 on failure")
     r.add_argument("--scenario", required=True, help="a name from `sitl list` or a YAML file")
@@ -27,8 +27,11 @@ def main(argv=None) -> int:
                      help="lock-step without charging the controller's latency (algorithm studies only)")
     lat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
                      help="lock-step: charge this fixed latency instead of the measured one (repeatable runs)")
-    r.add_argument("--controller", choices=["mppid", "ddp", "standin"], default="mppid",
-                   help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the simulator without the daemon)")
+    r.add_argument("--controller", choices=["mppid", "ddp", "standin", "guided"], default="mppid",
+                   help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the "
+                        "simulator without the daemon); guided: ArduCopter's own position controller (--autopilot "
+                        "ardupilot)")
+    _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
     r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
@@ -41,6 +44,15 @@ def main(argv=None) -> int:
     r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
     r.add_argument("--niceness", type=int, default=None, help=argparse.SUPPRESS)  # Ray: the driver's niceness
     r.add_argument("--no-plots", action="store_true", help="skip path/traces/timing.png")
+    r.add_argument("--view", action="store_true",
+                   help="the live 3D view in the browser (tools/view; rollouts on at 5 Hz); prints its URL; "
+                        "flight.rrd after the flight")
+    r.add_argument("--view-hold", type=float, default=0.0, metavar="SECONDS",
+                   help="with --view: keep the view serving this long after the flight")
+    r.add_argument("--view-wait", type=float, default=0.0, metavar="SECONDS",
+                   help="with --view: serve this long before the flight starts (time to open the page)")
+    r.add_argument("--view-port", type=int, default=9090, help="with --view: the web viewer's port (gRPC: +786)")
+    r.add_argument("--rrd", action="store_true", help="also write flight.rrd (the log in rerun's format, tools/view)")
     r.add_argument("--quiet", action="store_true")
 
     c = sub.add_parser("campaign", help="seeds x scenarios, summary table with Wilson intervals")
@@ -59,8 +71,10 @@ def main(argv=None) -> int:
                         "(default 1: one at a time)")
     c.add_argument("--cpus-per-flight", type=float, default=1.0, help="ray: CPUs a flight task asks for")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
-    c.add_argument("--controller", choices=["mppid", "ddp", "standin"], default="mppid",
-                   help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline) or the stand-in")
+    c.add_argument("--controller", choices=["mppid", "ddp", "standin", "guided"], default="mppid",
+                   help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, or guided "
+                        "(ArduCopter's position controller, --autopilot ardupilot)")
+    _autopilot_args(c)
     c.add_argument("--realtime", action="store_true")
     clat = c.add_mutually_exclusive_group()
     clat.add_argument("--ideal", action="store_true", help="lock-step without charging the controller's latency")
@@ -86,6 +100,10 @@ def main(argv=None) -> int:
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
+    apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter SITL side by side (markdown)")
+    apt.add_argument("folders", type=Path, nargs="+")
+    apt.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
+
     o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
     o.add_argument("file", type=Path)
 
@@ -97,8 +115,13 @@ def main(argv=None) -> int:
 
     a = ap.parse_args(argv)
     if a.cmd == "list":
-        print("\n".join(paths.scenario_names()))
+        print("\n".join(paths.scenario_names() + paths.mission_names()))
         return 0
+    if a.cmd in ("run", "campaign"):
+        why = _autopilot_check(a)
+        if why:
+            print(f"sitl: {why}", file=sys.stderr)
+            return 2
     if a.cmd in ("run", "campaign", "overlay"):
         from .overlay import OverlayError, load_sets
         try:
@@ -124,7 +147,8 @@ def main(argv=None) -> int:
         spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
                           ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
                           kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
-                          params=a.param)
+                          params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, view=a.view,
+                          view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
         try:
             from .inject import parse_update
             for u in a.param:
@@ -177,7 +201,8 @@ def main(argv=None) -> int:
             summary = run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
                                    realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
                                    cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
-                                   realtime_jobs=a.realtime_jobs, plots=not a.no_plots)
+                                   realtime_jobs=a.realtime_jobs, plots=not a.no_plots, autopilot=a.autopilot,
+                                   ardupilot_bin=a.ardupilot_bin)
         except KeyboardInterrupt:
             print("\nsitl: campaign interrupted", file=sys.stderr)
             return 130
@@ -219,6 +244,10 @@ def main(argv=None) -> int:
         if a.json:
             a.json.write_text(json.dumps(rows, indent=2))
         return 0
+    if a.cmd == "autopilot-table":
+        from .ap_table import table as ap_table
+        print(ap_table(a.folders, a.labels.split(",") if a.labels else [f.name for f in a.folders]), end="")
+        return 0
     if a.cmd == "tune":
         from .flight import interrupt_on_stop_signals
         from .tune import main_tune
@@ -230,3 +259,24 @@ def main(argv=None) -> int:
             print(f)
         return 0
     return 2
+
+
+def _autopilot_args(p):
+    p.add_argument("--autopilot", choices=["sim", "ardupilot"], default="sim",
+                   help="sim: mppid-sim (scenarios); ardupilot: ArduCopter SITL through the MAVLink bridge, flying "
+                        "missions (config/missions) in real time")
+    p.add_argument("--ardupilot-bin", default=None, metavar="PATH",
+                   help="the ArduCopter SITL binary (<ardupilot>/build/sitl/bin/arducopter; default "
+                        "$MPPID_ARDUPILOT_BIN)")
+
+
+def _autopilot_check(a) -> str:
+    """Why the autopilot options do not fit the others ('' when they do)."""
+    if a.controller == "guided" and a.autopilot != "ardupilot":
+        return "--controller guided is ArduCopter's own controller: it needs --autopilot ardupilot"
+    if a.autopilot == "ardupilot":
+        if a.controller not in ("mppid", "guided"):
+            return "--autopilot ardupilot flies --controller mppid or guided"
+        if not a.realtime:
+            return "--autopilot ardupilot flies in real time (ArduPilot's SITL runs on the wall clock): add --realtime"
+    return ""

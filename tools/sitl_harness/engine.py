@@ -47,6 +47,8 @@ class FlightJob:
     sets: list[str] = field(default_factory=list)
     plots: bool = True
     timeout: float = 0.0
+    autopilot: str = "sim"
+    ardupilot_bin: str | None = None
 
     @property
     def lcm_port(self) -> int:
@@ -64,6 +66,8 @@ class FlightJob:
             a += ["--latency", repr(float(self.latency))]
         if not self.plots:
             a.append("--no-plots")
+        if self.autopilot != "sim":
+            a += ["--autopilot", self.autopilot] + (["--ardupilot-bin", self.ardupilot_bin] if self.ardupilot_bin else [])
         if self.timeout:
             a += ["--timeout", str(self.timeout)]
         for kv in self.sets:

@@ -31,6 +31,9 @@ LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 LOGGER_RECV_BUF = 4 * 1024 * 1024
 SIM_FIFO_PRIORITY = 90
 LOGGER_FIFO_PRIORITY = 79
+VIEW_READY_TIMEOUT_S = 60.0    # the view imports rerun and starts its servers (seconds under load)
+VIEW_GRPC_OFFSET = 786         # 9090 -> 9876, rerun's default pair
+VIEW_ROLLOUTS = ["daemon.rollouts.hz=5", "daemon.rollouts.top=16", "daemon.rollouts.random=16"]
 INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (seconds under load)
 _NETNS_SETUP = "ip link set lo up && ip route add 224.0.0.0/4 dev lo && echo ready && exec sleep 86400"
 
@@ -65,6 +68,13 @@ class FlightSpec:
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
+    autopilot: str = "sim"           # sim: mppid-sim; ardupilot: ArduCopter SITL and the bridge (ardupilot.py)
+    ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
+    view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
+    view_hold: float = 0.0           # ... kept serving this long after the flight [s]
+    view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]
+    view_port: int = 9090            # ... its web viewer's port; its gRPC server's is this + VIEW_GRPC_OFFSET
+    rrd: bool = False                # flight.rrd: the LCM log converted for rerun's viewer
 
 
 class Flight:
@@ -107,6 +117,55 @@ class Flight:
         self.procs[name] = p
         return p
 
+    def _start_view(self):
+        """tools/view live in this (the host's) network namespace, so the browser reaches its
+        servers, reading the flight's LCM bus from inside the flight's namespace (--netns-pid).
+        Its own process group: the flight's killpg must not end it before view_hold."""
+        spec = self.spec
+        # The logger's receive buffer: a lock-step flight bursts faster than a normal-policy
+        # reader drains. What the view still drops shows live only: flight.rrd is converted
+        # from the complete log after the flight (fly()).
+        cmd = [sys.executable, "-m", "mppid_view", "live", "--lcm-url",
+               f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}", "--netns-pid", str(self.holder.pid),
+               "--web-port", str(spec.view_port), "--grpc-port", str(spec.view_port + VIEW_GRPC_OFFSET)]
+        log = open(self.out / "view.log", "wb")
+        self.logs["view"] = log
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(str(d) for d in (paths.ROOT / "tools", paths.lcm_python_dir()) if d)
+        main = threading.current_thread() is threading.main_thread()
+        self.view = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=paths.ROOT,
+                                     env=env, process_group=0, preexec_fn=_pdeathsig if main else None)
+        deadline = time.monotonic() + VIEW_READY_TIMEOUT_S
+        path = self.out / "view.log"
+        while "view: http" not in path.read_text(errors="replace"):
+            if self.view.poll() is not None:
+                raise FlightError(f"view exited at start (rc={self.view.returncode}); see view.log")
+            if time.monotonic() > deadline:
+                raise FlightError(f"view not serving after {VIEW_READY_TIMEOUT_S:g} s; see view.log")
+            time.sleep(0.05)
+        url = next(l for l in path.read_text(errors="replace").splitlines() if l.startswith("view: http"))
+        print(url, flush=True)
+        if spec.view_wait > 0:
+            print(f"view: the flight starts in {spec.view_wait:g} s (time to open the page)", flush=True)
+            time.sleep(spec.view_wait)
+
+    def _stop_view(self):
+        view = getattr(self, "view", None)
+        if view is None or view.poll() is not None:
+            return
+        if self.spec.view_hold > 0:
+            print(f"view: serving {self.spec.view_hold:g} s more (Ctrl-C to stop)", flush=True)
+            try:
+                view.wait(timeout=self.spec.view_hold)
+            except (subprocess.TimeoutExpired, KeyboardInterrupt):
+                pass
+        try:
+            view.send_signal(signal.SIGTERM)
+            view.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            view.kill()
+            view.wait(timeout=5)
+
     def _wait_ready(self, name: str, timeout: float):
         """Waits for `{"event": "ready"}` on a helper's log (it has subscribed), or fails."""
         deadline = time.monotonic() + timeout
@@ -146,6 +205,7 @@ class Flight:
         finally:
             for sig, h in saved.items():
                 signal.signal(sig, h)
+        self._stop_view()  # after: its hold ends on Ctrl-C / SIGTERM
 
     def _signal_group(self, sig, wait_s: float) -> bool:
         """sig to the flight's process group, then up to wait_s for it to be gone; True if gone."""
@@ -159,7 +219,7 @@ class Flight:
         return not _group_alive(self.pgid)
 
     def _cleanup(self):
-        for name in ("sim", "controller", "inject"):
+        for name in [n for n in self.procs if n != "logger"]:
             self._terminate(name, 3.0)
         if "logger" in self.procs and self.procs["logger"].poll() is None:
             time.sleep(0.3)  # the logger drains what is still in its socket
@@ -218,7 +278,9 @@ class Flight:
             # The flight's seed also seeds the controller's sampling (a campaign over seeds
             # varies both the world and the noise); --set can still override it.
             ctrl_cmd += ["--set", f"mppi.seed={spec.seed}"]
-            for kv in list(mp.get("set", [])) + list(spec.sets):
+            # The live view's rollout fan, unless the flight sets its own daemon.rollouts.
+            view_sets = VIEW_ROLLOUTS if spec.view and not any("daemon.rollouts." in str(s) for s in spec.sets) else []
+            for kv in list(mp.get("set", [])) + view_sets + list(spec.sets):
                 ctrl_cmd += ["--set", str(kv)]
         else:
             ctrl_cmd = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url",
@@ -251,6 +313,8 @@ class Flight:
         cfg = locals().get("cfg")
         try:
             self._start_namespace()
+            if spec.view:
+                self._start_view()
             self._spawn("logger", logger_cmd)
             self._spawn("controller", ctrl_cmd)
             time.sleep(0.5)  # let both subscribe before the first state
@@ -262,6 +326,12 @@ class Flight:
                 self._spawn("inject", inject_cmd)
                 self._wait_ready("inject", INJECT_READY_TIMEOUT_S)
             self._spawn("sim", sim_cmd)
+            if scen.get("mission"):
+                # The operator's side: the mission tool gives mppid its references (the
+                # scenario's own reference is `none`), as on a real vehicle.
+                self._spawn("mission", [str(paths.ROOT / "drivers" / "mission" / "mppid-mission"), "fly",
+                                        str(paths.ROOT / scen["mission"]), "--seed", str(spec.seed), "--out",
+                                        str(self.out), "--lcm-url", spec.lcm_url])
             (self.out / "pids.json").write_text(json.dumps(
                 {"pgid": self.pgid, "holder": self.holder.pid, **{k: p.pid for k, p in self.procs.items()}}))
             killed = False
@@ -290,20 +360,21 @@ class Flight:
             raise
         finally:
             self.cleanup()
-            info = {
-                "harness_outcome": outcome,
-                "wall_s": time.monotonic() - t0,
-                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
-                "returncodes": {k: p.returncode for k, p in self.procs.items()},
-                "events": self.events,
+            info = self._record(t0, outcome, {
                 "commands": {"sim": sim_cmd, "controller": ctrl_cmd, "logger": logger_cmd,
                              **({"inject": inject_cmd} if spec.params else {})},
                 "controller_config": str(cfg) if spec.controller in ("mppid", "ddp") else None,
                 "spec": {"scenario": spec.scenario, "seed": spec.seed, "backend": spec.backend,
                          "realtime": spec.realtime, "ideal": spec.ideal, "latency": spec.latency,
-                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params},
-            }
-            (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+                         "controller": spec.controller, "lcm_url": spec.lcm_url, "params": spec.params}})
+        return info
+
+    def _record(self, t0: float, outcome, extra: dict) -> dict:
+        """harness.json: how the flight ended, its processes' exit codes and events, and `extra`."""
+        info = {"harness_outcome": outcome, "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
+                "returncodes": {k: p.returncode for k, p in self.procs.items()}, "events": self.events, **extra}
+        (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
         return info
 
 
@@ -354,26 +425,48 @@ def _group_alive(pgid: int) -> bool:
     return False
 
 
+def _flight_for(spec: FlightSpec):
+    """The flight and its scorer: mppid-sim's (score.py, plots.py), or ArduCopter SITL's
+    (ardupilot.py, ap_score.py, ap_plots.py). Raises FlightError (no SITL binary, say)."""
+    if spec.autopilot == "ardupilot":
+        from . import ap_plots, ap_score, ardupilot
+        return ardupilot.ArduPilotFlight(spec, ardupilot.ardupilot_binary(spec.ardupilot_bin)), ap_score, ap_plots
+    from . import plots, score
+    return Flight(spec), score, plots
+
+
 def fly(spec: FlightSpec) -> dict:
     """Runs one flight, scores it and plots it; returns the score (also in score.json)."""
-    from . import plots, score
-
     interrupt_on_stop_signals()
-    flight = Flight(spec)
+    out = Path(spec.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        flight, scorer, plotter = _flight_for(spec)
+    except FlightError as e:
+        result = {"success": False, "reason": str(e), "harness_outcome": "error"}
+        (out / "score.json").write_text(json.dumps(result, indent=2))
+        return result
     info = {}
     try:
         info = flight.run()
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}
-        (flight.out / "harness.json").write_text(json.dumps(info, indent=2))
-    result = score.score_flight(flight.out, spec, info)
-    (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+        (out / "harness.json").write_text(json.dumps(info, indent=2))
+    if spec.rrd or spec.view:
+        try:
+            from mppid_view.convert import convert
+            paths.add_lcm_types_to_path()
+            convert(out / "flight.lcmlog", out / "flight.rrd")
+        except Exception as e:  # the rrd must never turn a flight into a crash
+            info.setdefault("events", []).append(f"flight.rrd failed: {e!r}")
+    result = scorer.score_flight(out, spec, info)
+    (out / "score.json").write_text(json.dumps(result, indent=2))
     if spec.plots:
         try:
-            plots.plot_flight(flight.out)
+            plotter.plot_flight(out)
         except Exception as e:  # plots must never turn a flight into a crash
             result.setdefault("warnings", []).append(f"plots failed: {e!r}")
-            (flight.out / "score.json").write_text(json.dumps(result, indent=2))
+            (out / "score.json").write_text(json.dumps(result, indent=2))
     return result
 
 

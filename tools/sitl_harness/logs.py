@@ -12,11 +12,12 @@ def read_lcm_log(path: Path, channels=None) -> dict[str, list]:
     paths.add_lcm_types_to_path()
     import lcm
     from mppi_lcm import (command_t, controller_status_t, obstacles_t, param_result_t, param_update_t, plan_t,
-                          reference_t, sim_clock_t, vehicle_state_t)
+                          reference_t, rollouts_t, sim_clock_t, vehicle_state_t)
 
     types = {"MPPI_COMMAND": command_t, "MPPI_STATE": vehicle_state_t, "MPPI_STATUS": controller_status_t,
              "MPPI_PLAN": plan_t, "MPPI_REFERENCE": reference_t, "MPPI_OBSTACLES": obstacles_t,
-             "MPPI_SIM_CLOCK": sim_clock_t, "MPPI_PARAMS": param_update_t, "MPPI_PARAM_RESULT": param_result_t}
+             "MPPI_SIM_CLOCK": sim_clock_t, "MPPI_PARAMS": param_update_t, "MPPI_PARAM_RESULT": param_result_t,
+             "MPPI_ROLLOUTS": rollouts_t}
     out: dict[str, list] = {}
     if not Path(path).is_file():
         return out

@@ -7,6 +7,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "config" / "scenarios"
+MISSIONS = ROOT / "config" / "missions"   # what the mission tool flies; the scenarios of --autopilot ardupilot
 TASKS = ROOT / "config" / "tasks"
 VENV_BIN = ROOT / ".venv" / "bin"
 
@@ -48,13 +49,14 @@ def add_lcm_types_to_path() -> None:
 
 
 def scenario_path(name: str) -> Path:
+    """A YAML file, a scenario name (config/scenarios) or a mission name (config/missions)."""
     p = Path(name)
     if p.suffix in (".yaml", ".yml") and p.is_file():
         return p.resolve()
-    p = SCENARIOS / f"{name}.yaml"
-    if not p.is_file():
-        raise FileNotFoundError(f"no scenario '{name}' in {SCENARIOS}")
-    return p
+    for folder in (SCENARIOS, MISSIONS):
+        if (folder / f"{name}.yaml").is_file():
+            return folder / f"{name}.yaml"
+    raise FileNotFoundError(f"no scenario or mission '{name}' in {SCENARIOS} or {MISSIONS}")
 
 
 def scenario_label(name: str) -> str:
@@ -76,3 +78,7 @@ def scenario_label(name: str) -> str:
 
 def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIOS.glob("*.yaml"))
+
+
+def mission_names() -> list[str]:
+    return sorted(p.stem for p in MISSIONS.glob("*.yaml"))

@@ -24,20 +24,10 @@ QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 
 
 def reference_eval(ref: dict, t: np.ndarray):
-    """core's Reference::eval, vectorised: positions (len(t), 3)."""
-    c = np.asarray(ref.get("center", [0, 0, 2]), float)
-    pos = np.tile(c, (len(t), 1))
-    kind, r, v = ref.get("kind"), float(ref.get("radius", 0)), float(ref.get("speed", 0))
-    if kind not in ("circle", "figure_eight") or r <= 0:
-        return pos
-    a = v / r * t
-    if kind == "circle":
-        pos[:, 0] += r * np.cos(a)
-        pos[:, 1] += r * np.sin(a)
-    else:
-        pos[:, 0] += r * np.sin(a)
-        pos[:, 1] += 0.5 * r * np.sin(2 * a)
-    return pos
+    """core's Reference::eval, vectorised (the mission tool's mirror of it): positions
+    (len(t), 3)."""
+    from .ap_score import _reference
+    return _reference().evaluate({"center": [0, 0, 2], **ref}, t)[0]
 
 
 def _wrap(a):
@@ -179,6 +169,14 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         ok = res["tracking_rmse"] is not None and res["tracking_rmse"] <= float(crit.get("max_rmse", 0.5))
         res["success"] = bool(full and ok)
         res["reason"] = "tracked" if res["success"] else f"tracking RMSE {res['tracking_rmse']:.3f} m > {crit.get('max_rmse', 0.5)}"
+    elif kind == "mission":
+        # The mission tool flew it (the scenario's `mission`): done, and its paths tracked.
+        ms = logs.read_json(out / "mission_summary.json") or {}
+        rms = [leg["rmse"] for leg in ms.get("legs", []) if "rmse" in leg and leg["kind"] != "hold"]
+        res["tracking_rmse"] = max(rms) if rms else None
+        ok = ms.get("outcome") == "done" and (res["tracking_rmse"] or 0.0) <= float(crit.get("max_rmse", 0.5))
+        res["success"] = bool(ok)
+        res["reason"] = "mission done" if ok else f"mission {ms.get('outcome')}, path RMSE {res['tracking_rmse']}"
     elif kind == "swingup":
         th, w = X[:, 2], X[:, 3]
         err = np.abs(_wrap(th - np.pi))

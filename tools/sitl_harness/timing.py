@@ -9,7 +9,7 @@ Definitions (all in ms):
                     the median, the longest and the mean of the same per-cycle times.
   state_age_ms_p99  the state's age at the start of the cycles that optimised from it
                     (command_t.age_us; 0 in lock-step, where the cycle starts on the tick).
-  state_to_command_ms_p99
+  state_to_command_ms_p99, state_to_command_ms_p50
                     age + compute of the fresh commands: the state's sample time to the
                     command leaving, the controller's real latency (in real time; in
                     lock-step the age is 0 and the simulator measures it, per tick).
@@ -122,6 +122,7 @@ def command_timing(command_msgs) -> dict:
         out["state_age_ms_p99"] = float(np.percentile(age, 99))
         state_to_command = age + np.array([m.compute_us for m in normal], float) / 1e3
         out["state_to_command_ms_p99"] = float(np.percentile(state_to_command, 99))
+        out["state_to_command_ms_p50"] = float(np.percentile(state_to_command, 50))
         out["state_to_command_samples_ms"] = state_to_command.tolist()
         lead = np.array([m.lead_us for m in normal if m.lead_us > 0], float) / 1e3
         if lead.size:
@@ -134,7 +135,7 @@ def flight_timing(status_msgs, command_msgs=()) -> dict:
     """The flight's figures: per-cycle ones from the commands where they exist, the rest
     (periods, worst windows) from the status stream."""
     out = status_timing(status_msgs)
-    out.update(state_age_ms_p99=None, state_to_command_ms_p99=None, state_to_command_samples_ms=None, lead_ms_mean=None,
-               lead_ms_p99=None)
+    out.update(state_age_ms_p99=None, state_to_command_ms_p99=None, state_to_command_ms_p50=None,
+               state_to_command_samples_ms=None, lead_ms_mean=None, lead_ms_p99=None)
     out.update(command_timing(command_msgs))
     return out

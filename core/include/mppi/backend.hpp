@@ -3,6 +3,7 @@
 // owns the plan, the warm start and the smoothing.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -82,6 +83,12 @@ class RolloutBackend {
 
   // S~(tau_0,k) of every rollout of the last update (tests and tools; may allocate).
   virtual std::vector<float> rollout_costs() const = 0;
+  // The same K floats into out without allocating (the display sample of a cycle's
+  // rollouts, rollout_fan.hpp, on the cycles that publish one). The default allocates.
+  virtual void step0_costs(float* out) const {
+    const std::vector<float> c = rollout_costs();
+    std::copy(c.begin(), c.end(), out);
+  }
 
   // The anytime cycle: the backend reads *stop between chunks of rollouts; once it is set,
   // update() uses the rollouts finished so far (UpdateStats::rollouts, partial). The caller
@@ -90,6 +97,11 @@ class RolloutBackend {
   // early (CUDA) ignores it.
   virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
 
+  // Whether update() prepares the parameters for the cycle itself (Task::prepare: the forest
+  // cost's obstacle grid over the plan's path, which the CUDA backend builds on the device
+  // from x0 and the plan it is given). The optimizer then skips Task::prepare and passes the
+  // parameters as they are; any grid in them is ignored.
+  virtual bool prepares_params() const { return false; }
   // Bytes allocated at start-up (host, device).
   virtual std::size_t host_bytes() const = 0;
   virtual std::size_t device_bytes() const { return 0; }

@@ -88,6 +88,18 @@ class Controller {
   // The counter that keys the next update's noise with the seed (Philox: seed, cycle).
   virtual std::uint32_t noise_cycle() const { return 0; }
 
+  // Display sample of the rollouts (rollout_fan.hpp): keep_rollouts() before an iterate()
+  // makes it keep what a sample needs (copies into buffers sized at start-up); fan() right
+  // after (the backend's K step-0 costs are read then: on CUDA one device-to-host copy)
+  // fills `out` (reserved by the caller) with the `top` lowest-cost and `random` other
+  // rollouts of that iterate, rebuilt from the shared noise. False when the last iterate
+  // kept nothing or did not update the plan.
+  virtual void keep_rollouts() {}
+  virtual bool fan(int top, int random, RolloutFan* out) {
+    (void)top, (void)random, (void)out;
+    return false;
+  }
+
   virtual const std::vector<float>& plan() const = 0;
   virtual const MppiSettings& settings() const = 0;
   virtual std::vector<float> rollout_costs() const = 0;
@@ -199,6 +211,8 @@ class TaskController final : public Controller {
     return true;
   }
   std::uint32_t noise_cycle() const override { return mppi_.cycle(); }
+  void keep_rollouts() override { mppi_.keep_rollouts(); }
+  bool fan(int top, int random, RolloutFan* out) override { return mppi_.fan(top, random, out); }
 
   const std::vector<float>& plan() const override { return mppi_.plan(); }
   const MppiSettings& settings() const override { return mppi_.settings(); }

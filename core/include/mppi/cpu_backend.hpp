@@ -176,6 +176,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   // S~(tau_0,k) of every rollout of the last update (after a partial one, the first
   // UpdateStats::rollouts are this cycle's).
   std::vector<float> rollout_costs() const override { return std::vector<float>(cost_.begin(), cost_.begin() + k_); }
+  void step0_costs(float* out) const override { std::copy_n(cost_.begin(), k_, out); }
 
   std::size_t host_bytes() const override {
     return (cost_.size() + du_.size() + weights_.size()) * sizeof(float) + crashed_.size();

@@ -2,7 +2,8 @@
 // update per control cycle, smooths the plan inside the limits, hands out u_0 and warm
 // starts the next cycle by shifting (u_{N-1} <- u_init). Before each update it lets the
 // task's cost prepare for the cycle from the plan's noise-free path (Task::prepare: the
-// forest cost's obstacle culling), on its own copy of the parameters.
+// forest cost's obstacle culling), on its own copy of the parameters, unless the backend
+// does that itself (RolloutBackend::prepares_params).
 #pragma once
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 
 #include "mppi/backend.hpp"
 #include "mppi/held_plan.hpp"
+#include "mppi/rollout_fan.hpp"
 #include "mppi/settings.hpp"
 
 namespace mppi {
@@ -32,6 +34,9 @@ class Mppi {
         scratch_(plan_.size()),
         path_(static_cast<std::size_t>(s.horizon + 1) * Task::kVehicles * 2),
         work_(std::make_unique<Params>()) {
+    kept_.plan.assign(plan_.size(), 0.0f);
+    kept_.x0.assign(kNx, 0.0f);
+    kept_.costs.assign(static_cast<std::size_t>(s.rollouts), 0.0f);
     const std::string err = validate(s, kNu);
     if (!err.empty()) throw std::invalid_argument(err);
     if (!backend_) throw std::invalid_argument("backend: none given");
@@ -43,16 +48,36 @@ class Mppi {
   // held plan goes out and the plan shifts, as fallback() does.
   const UpdateStats& iterate(const float* x0, const Params& params, float* u_out) {
     const Params* p = &params;
-    if constexpr (Task::kUsesPath) {
+    if (Task::kUsesPath && !backend_->prepares_params()) {
       *work_ = params;
       Task::prepare(*work_, x0, plan_.data(), settings_.horizon, settings_.dt, settings_.substeps, path_.data());
       p = work_.get();
     }
+    const bool keep = keep_next_;
+    keep_next_ = false;
+    kept_ok_ = false;
+    if (keep) keep_inputs(x0, *p);
     backend_->update(x0, *p, cycle_++, plan_.data(), &stats_);
+    kept_.rollouts = stats_.rollouts;
+    kept_ok_ = keep;
     if (stats_.updated && settings_.smoothing_window > 1) smooth();
     std::copy_n(plan_.data(), kNu, u_out);
     plan_.shift();
     return stats_;
+  }
+
+  // The next iterate() keeps what a display sample of its rollouts needs (the plan it
+  // starts from, the state, the parameters: copies into buffers sized at construction);
+  // fan() then rebuilds the sample. Off again after that iterate().
+  void keep_rollouts() { keep_next_ = true; }
+  // The `top` lowest-cost and `random` other rollouts of the last iterate() into fan, if it
+  // kept them and updated the plan; false (fan untouched) otherwise. Reads the backend's
+  // step-0 costs of that update here, after the command is out (on CUDA a device-to-host
+  // copy), so the kept cycle itself pays only the copies above. Allocates nothing.
+  bool fan(int top, int random, RolloutFan* out) {
+    if (!kept_ok_ || !stats_.updated) return false;
+    backend_->step0_costs(kept_.costs.data());
+    return fill_rollout_fan<Task>(*kept_params_, settings_, kept_, top, random, out);
   }
 
   // The anytime cycle (RolloutBackend::set_stop_flag).
@@ -95,6 +120,13 @@ class Mppi {
   void set_cycle(std::uint32_t c) { cycle_ = c; }
 
  private:
+  void keep_inputs(const float* x0, const Params& p) {
+    std::copy(plan_.values().begin(), plan_.values().end(), kept_.plan.begin());
+    std::copy_n(x0, kNx, kept_.x0.begin());
+    *kept_params_ = p;
+    kept_.cycle = cycle_;
+  }
+
   // Centred moving average over time, the window shrinking at the ends. Each output is a
   // convex combination of in-limit controls, so the limits hold mathematically; in float the
   // average of equal values can round one ulp outside ((2.2f * 3) * (1.0f / 3) > 2.2f), so
@@ -122,6 +154,10 @@ class Mppi {
   std::unique_ptr<Params> work_;  // the parameters as prepared for this cycle
   UpdateStats stats_;
   std::uint32_t cycle_ = 0;
+  bool keep_next_ = false;
+  KeptRollouts kept_;                     // the last iterate's inputs (costs: at fan()) ...
+  std::unique_ptr<Params> kept_params_ = std::make_unique<Params>();  // ... and parameters
+  bool kept_ok_ = false;                  // ... when it kept them
 };
 
 }  // namespace mppi

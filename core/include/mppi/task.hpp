@@ -108,24 +108,31 @@ struct Task {
   static void prepare(Params& p, const float* x0, const float* plan, int horizon, float dt, int substeps,
                       float* path_xy) {
     if constexpr (kUsesPath) {
-      float x[kNx];
-      for (int n = 0; n < kNx; ++n) x[n] = x0[n];
-      auto put = [&](int i) {
-        for (int j = 0; j < M; ++j) {
-          float pos[3];
-          Vehicle::position(x + j * kVehicleNx, pos);
-          path_xy[2 * (i * M + j)] = pos[0];
-          path_xy[2 * (i * M + j) + 1] = pos[1];
-        }
-      };
-      put(0);
-      for (int i = 0; i < horizon; ++i) {
-        advance(p, x, plan + i * kNu, dt, substeps, std::uint32_t{0});
-        put(i + 1);
-      }
+      plan_path(p, x0, plan, horizon, dt, substeps, path_xy);
       Cost::prepare(p.cost, path_xy, (horizon + 1) * M, static_cast<float>(horizon) * dt);
     } else {
       (void)p, (void)x0, (void)plan, (void)horizon, (void)dt, (void)substeps, (void)path_xy;
+    }
+  }
+
+  // The plan's noise-free path from x0: each vehicle's xy at steps 0..horizon, step-major
+  // ((horizon + 1) * M pairs), with the rollouts' own Euler steps.
+  static void plan_path(const Params& p, const float* x0, const float* plan, int horizon, float dt, int substeps,
+                        float* path_xy) {
+    float x[kNx];
+    for (int n = 0; n < kNx; ++n) x[n] = x0[n];
+    auto put = [&](int i) {
+      for (int j = 0; j < M; ++j) {
+        float pos[3];
+        Vehicle::position(x + j * kVehicleNx, pos);
+        path_xy[2 * (i * M + j)] = pos[0];
+        path_xy[2 * (i * M + j) + 1] = pos[1];
+      }
+    };
+    put(0);
+    for (int i = 0; i < horizon; ++i) {
+      advance(p, x, plan + i * kNu, dt, substeps, std::uint32_t{0});
+      put(i + 1);
     }
   }
 };

@@ -35,6 +35,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       period_ns_(std::llround(1e9 / s_.rate_hz)),
       status_every_(every(s_.rate_hz, s_.status_hz)),
       plan_every_(every(s_.rate_hz, s_.plan_hz)),
+      rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
       schedule_(period_ns_),
       monitor_(period_ns_),
       gate_(controller->settings().u_min, controller->settings().u_max),
@@ -440,6 +441,7 @@ void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64
 
   maybe_status(published != last_status_mode_);
   if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);
+  rollouts_.after_cycle(*c_, *tx_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
 }
 
 void ControlLoop::apply_between_cycles() {
@@ -491,11 +493,18 @@ void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_
   if (reference_changed) {
     const transport::ReferenceInput& r = in_->reference.front();
     Reference& ref = inputs_.reference;
-    ref.kind = (r.kind == 1) ? Reference::kCircle : (r.kind == 2) ? Reference::kFigureEight : Reference::kHold;
+    ref.kind = (r.kind == 1)   ? Reference::kCircle
+               : (r.kind == 2) ? Reference::kFigureEight
+               : (r.kind == 4 && r.vehicle_count > 0) ? Reference::kLine  // to goals[0]
+                                                      : Reference::kHold;
     std::copy_n(r.center, 3, ref.center);
+    std::copy_n(r.vehicle_count > 0 ? r.goals[0] : r.center, 3, ref.end);
     ref.radius = r.radius;
     ref.speed = r.speed;
     ref.yaw = r.yaw;
+    ref.ramp = r.ramp_s;
+    ref.phase = r.phase;
+    ref.end_s = r.end_s;
     reference_t0_utime_ = r.t0_utime;
     have_reference_ = true;
     const int n = std::min<int>(r.vehicle_count, inputs_.vehicle_count);

@@ -1,5 +1,6 @@
 #include "mppi/daemon/daemon_settings.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <set>
@@ -91,9 +92,10 @@ void parse_timing(const YAML::Node& section, LoopSettings* l) {
       static_cast<int>(number(section, "watchdog_max_optimizer_errors", l->watchdog_max_optimizer_errors, 1, 1e6));
   l->lockstep = flag(section, "lockstep", l->lockstep);
   l->deadline_guard = flag(section, "deadline_guard", l->deadline_guard);
-  l->anytime_margin_ns = std::llround(
-      number(section, "anytime_margin_ms", static_cast<double>(l->anytime_margin_ns) / 1e6, 0.0, 1000.0 / l->rate_hz) *
-      1e6);
+  // Default 3 ms, at most a quarter of the period (faster loops: tools/gpu/rate_dial.py).
+  const double default_margin_ms = std::min(static_cast<double>(l->anytime_margin_ns) / 1e6, 250.0 / l->rate_hz);
+  l->anytime_margin_ns =
+      std::llround(number(section, "anytime_margin_ms", default_margin_ms, 0.0, 1000.0 / l->rate_hz) * 1e6);
 }
 
 // What starts a cycle, in real time and in lock-step.
@@ -131,6 +133,16 @@ void parse_channels(const YAML::Node& c, transport::LcmChannels* ch) {
   ch->params = text(c, "params", ch->params, p);
   ch->param_result = text(c, "param_result", ch->param_result, p);
   ch->clock = text(c, "clock", ch->clock, p);
+  ch->rollouts = text(c, "rollouts", ch->rollouts, p);
+}
+
+// The rollout fan on the wire (RolloutPublisher): off unless hz > 0.
+void parse_rollouts(const YAML::Node& n, double rate_hz, FanSettings* f) {
+  f->hz = number(n, "hz", f->hz, 0.0, rate_hz, "rollouts.");
+  f->top = static_cast<int>(number(n, "top", f->top, 0, FanSettings::kMaxRollouts, "rollouts."));
+  f->random = static_cast<int>(number(n, "random", f->random, 0, FanSettings::kMaxRollouts, "rollouts."));
+  if (f->top + f->random > FanSettings::kMaxRollouts)
+    fail("rollouts.random", "top + random must be at most " + std::to_string(FanSettings::kMaxRollouts));
 }
 
 void parse_latency(const YAML::Node& n, double rate_hz, LatencySettings* lat) {
@@ -208,15 +220,17 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts",
+               "spin"});
   parse_timing(section, &d.loop);
   parse_triggers(section, &d);
+  d.spin = flag(section, "spin", d.spin);
   d.lcm_url = text(section, "lcm_url", d.lcm_url);
   d.receive_timeout_ms = static_cast<int>(number(section, "receive_timeout_ms", d.receive_timeout_ms, 1, 50));
   d.warmup_iterations = static_cast<int>(number(section, "warmup_iterations", d.warmup_iterations, 0, 1000));
   if (const YAML::Node f = section["failsafe_u"]) parse_failsafe_u(f, nu, &d.loop.failsafe_u);
   if (const YAML::Node c = subsection(section, "channels", {"state", "command", "status", "plan", "reference",
-                                                            "obstacles", "params", "param_result", "clock"}))
+                                                            "obstacles", "params", "param_result", "clock", "rollouts"}))
     parse_channels(c, &d.channels);
   // The default ceiling of the expected latency is one period: a cycle that needs longer
   // misses its deadline anyway (and the deadline guard covers it).
@@ -229,6 +243,8 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     parse_disturbance(n, &d.loop.disturbance);
   if (const YAML::Node n = subsection(section, "live", {"enabled", "max_horizon", "max_rollouts", "max_threads"}))
     parse_live(n, &d.live);
+  if (const YAML::Node n = subsection(section, "rollouts", {"hz", "top", "random"}))
+    parse_rollouts(n, d.loop.rate_hz, &d.loop.rollouts);
   if (const YAML::Node r = subsection(section, "realtime", {"priority", "cpu", "lock_memory"}))
     parse_realtime(r, &d.realtime);
   return d;

@@ -174,6 +174,12 @@ int open_transport(const DaemonSettings& ds, const mppi::Controller& c, mppi::rt
     return kExitRuntime;
   }
   spdlog::info("transport self-test passed on {}", ds.lcm_url);
+  if (const mppi::daemon::FanSettings& fan = ds.loop.rollouts; fan.hz > 0.0) {
+    const int n = fan.top + fan.random;
+    (*tx)->reserve_rollouts(n, n * c.vehicles() * (c.horizon() + 1) * 3);
+    spdlog::info("rollouts: {} lowest-cost and {} random at {} Hz on {}", fan.top, fan.random, fan.hz,
+                 ds.channels.rollouts);
+  }
   return 0;
 }
 
@@ -367,7 +373,7 @@ int main(int argc, char** argv) {
   mppi::rt::RealtimeResult rt_result;
   std::unique_ptr<mppi::Controller> controller;
   if (const int rc = build_controller(opt, &cfg, &ds, &rt_result, &controller); rc != 0) return rc;
-  mppi::rt::MonotonicClock clock;
+  mppi::rt::MonotonicClock clock(ds.spin && !ds.loop.lockstep);
   std::unique_ptr<mppi::transport::LcmTransport> tx;
   if (const int rc = open_transport(ds, *controller, &clock, &tx); rc != 0) return rc;
   auto inbox = std::make_unique<mppi::transport::Inbox>(mppi::daemon::inbox_expects(ds, *controller));
@@ -395,6 +401,7 @@ int main(int argc, char** argv) {
   // ---- run ---------------------------------------------------------------------------------
   // States and ticks must be taken in while the optimizer fills the cores.
   if (opt.realtime && ds.realtime.fifo_priority > 0) tx->set_receive_fifo_priority(std::min(99, ds.realtime.fifo_priority + 2));
+  tx->set_receive_spin(ds.spin && !ds.loop.lockstep);
   tx->start(inbox.get());
   const long rss_start = mppi::rt::resident_kb();
   const std::int64_t t_start = mppi::rt::monotonic_ns();

@@ -63,8 +63,9 @@ Reject Inbox::offer_state() {
 void Inbox::offer_reference() {
   const ReferenceInput& r = reference.back();
   bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && r.t0_utime >= 0 && r.t0_utime <= kMaxUtime &&
-            std::isfinite(r.radius) &&
-            std::isfinite(r.speed) && std::isfinite(r.yaw);
+            std::isfinite(r.radius) && std::isfinite(r.speed) && std::isfinite(r.yaw) &&
+            std::isfinite(r.phase) && std::isfinite(r.ramp_s) && r.ramp_s >= 0.0f && std::isfinite(r.end_s) &&
+            r.end_s >= 0.0f;
   for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.center[d]);
   for (int v = 0; ok && v < r.vehicle_count; ++v)
     for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.goals[v][d]);

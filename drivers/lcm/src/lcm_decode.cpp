@@ -32,9 +32,10 @@ bool backed(std::int64_t count, std::size_t elem, std::size_t from, std::size_t 
   return count >= 0 && from <= size && static_cast<std::uint64_t>(count) * elem <= size - from;
 }
 
-bool counted(const void* data, std::size_t size, std::size_t at, int bytes, std::size_t elem) {
+// The count at `at` (`bytes` wide) of `elem`-byte elements, then `tail` bytes of fixed fields.
+bool counted(const void* data, std::size_t size, std::size_t at, int bytes, std::size_t elem, std::size_t tail = 0) {
   std::int64_t n = 0;
-  return read_be(data, size, at, bytes, &n) && backed(n, elem, at + static_cast<std::size_t>(bytes), size);
+  return read_be(data, size, at, bytes, &n) && backed(n, elem, at + static_cast<std::size_t>(bytes) + tail, size);
 }
 
 // The whole buffer is one message: a wrong fingerprint, short or padded bytes fail.
@@ -64,7 +65,7 @@ bool decode_message(const void* data, std::size_t size, mppi_lcm::obstacles_t* m
 }
 
 bool decode_message(const void* data, std::size_t size, mppi_lcm::reference_t* m) {
-  return counted(data, size, wire::kReferenceCount, 2, 3 * sizeof(float)) && run(m, data, size);
+  return counted(data, size, wire::kReferenceCount, 2, 3 * sizeof(float), wire::kReferenceTail) && run(m, data, size);
 }
 
 bool decode_message(const void* data, std::size_t size, mppi_lcm::param_update_t* m) {
@@ -118,6 +119,9 @@ void LcmDecoder::reference(const void* data, std::size_t size, Inbox* inbox) {
   r.radius = m.radius;
   r.speed = m.speed;
   r.yaw = m.yaw;
+  r.ramp_s = m.ramp_s;
+  r.phase = m.phase;
+  r.end_s = m.end_s;
   r.t0_utime = m.t0_utime;
   r.vehicle_count = m.vehicle_count;
   for (int v = 0; v < m.vehicle_count; ++v)

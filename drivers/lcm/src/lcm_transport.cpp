@@ -72,7 +72,7 @@ void LcmTransport::start(Inbox* inbox) {
       receive_fifo_ok_.store(pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0);
     }
     while (running_.load(std::memory_order_relaxed)) {
-      if (lcm_.handleTimeout(timeout_ms_) < 0) break;
+      if (lcm_.handleTimeout(receive_spin_ ? 0 : timeout_ms_) < 0) break;
     }
   });
 }
@@ -183,6 +183,43 @@ bool LcmTransport::publish_plan(const PlanView& p) {
   for (std::int32_t i = 0; i < p.npos; ++i)
     for (int d = 0; d < 3; ++d) m.pos[static_cast<std::size_t>(i)][static_cast<std::size_t>(d)] = p.pos[3 * i + d];
   return send(ch_.plan, m);
+}
+
+void LcmTransport::reserve_rollouts(int rollouts, int floats) {
+  auto& m = rollouts_out_;
+  const auto n = static_cast<std::size_t>(std::max(0, rollouts)), f = static_cast<std::size_t>(std::max(0, floats));
+  m.index.reserve(n);
+  m.cost.reserve(n);
+  m.weight.reserve(n);
+  m.crashed.reserve(n);
+  m.pos.reserve(f);
+  const std::size_t bytes = 4096 + n * (3 * sizeof(float) + sizeof(std::int32_t) + 1) + f * sizeof(float);
+  if (bytes > buf_.size()) buf_.resize(bytes);
+}
+
+bool LcmTransport::publish_rollouts(const RolloutsView& r) {
+  auto& m = rollouts_out_;
+  const auto n = static_cast<std::size_t>(r.count);
+  const std::size_t f = n * static_cast<std::size_t>(r.vehicles) * static_cast<std::size_t>(r.steps) * 3;
+  if (n > m.index.capacity() || f > m.pos.capacity()) return false;  // sized by reserve_rollouts
+  m.utime = r.utime;
+  m.seq = r.seq;
+  m.state_seq = r.state_seq;
+  m.cycle = r.cycle;
+  m.total = r.total;
+  m.vehicles = r.vehicles;
+  m.steps = r.steps;
+  m.dt = r.dt;
+  m.temperature = r.lambda;
+  m.count = r.count;
+  m.top = r.top;
+  m.index.assign(r.index, r.index + n);
+  m.cost.assign(r.cost, r.cost + n);
+  m.weight.assign(r.weight, r.weight + n);
+  m.crashed.assign(r.crashed, r.crashed + n);
+  m.npos = static_cast<std::int32_t>(f);
+  m.pos.assign(r.xyz, r.xyz + f);
+  return send(ch_.rollouts, m);
 }
 
 bool LcmTransport::publish_param_result(const ParamResult& r) {

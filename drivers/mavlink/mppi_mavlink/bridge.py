@@ -9,8 +9,15 @@ control socket thread (arm / takeoff / offboard / land / status, one at a time).
 The forwarding gate (`_gate`): a command reaches the wire only when its seq advanced, it is
 a thrust+rates command, mppid's latest status says healthy and is fresh, it answers a state
 the bridge published less than max_state_age_s ago, every value is finite, the thrust map
-is known and nothing refuses flight (GUID_OPTIONS). Nothing is ever re-sent or made up: a
-hung or dead mppid stops the stream, and the autopilot's offboard-loss failsafe takes over.
+is known, nothing refuses flight (GUID_OPTIONS, too slow a telemetry stream) and the bridge
+is engaged (below). Nothing is ever re-sent or made up: a hung or dead mppid stops the
+stream, and the autopilot's offboard-loss failsafe takes over.
+
+Engagement: ArduPilot takes any SET_ATTITUDE_TARGET in GUIDED over its own take-off, so it
+gets nothing before `offboard` is requested; PX4 ignores setpoints outside OFFBOARD and needs
+a stream before it, so it is pre-streamed from the start, as before. Either way the bridge
+disengages (forwards nothing until the next `offboard`) on `land`, `hold`, `disarm`, an
+ArduPilot `takeoff`, and on a mode change or disarm made by someone else after `offboard`.
 """
 from __future__ import annotations
 
@@ -26,7 +33,7 @@ from collections import OrderedDict
 os.environ.setdefault("MAVLINK20", "1")  # ODOMETRY and the SET_ATTITUDE_TARGET extensions
 from pymavlink import mavutil  # noqa: E402
 
-from . import frames, lcm_types, signing  # noqa: E402
+from . import frames, lcm_types, signing, telemetry  # noqa: E402
 from .thrust import ThrustMap  # noqa: E402
 
 log = logging.getLogger("mppi_mavlink")
@@ -37,6 +44,7 @@ PX4_MAIN_AUTO = 4
 PX4_SUB_LOITER = 3
 PX4_SUB_LAND = 6
 APM_COPTER_GUIDED = 4
+APM_COPTER_LOITER = 5
 APM_COPTER_LAND = 9
 GUID_OPTIONS_THRUST_AS_THRUST = 8
 ATTITUDE_IGNORE = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
@@ -133,8 +141,19 @@ class Bridge:
         if vh["hover_thrust"] is not None:
             self.thrust = ThrustMap(vh["mass"], vh["gravity"], float(vh["hover_thrust"]))
             self.hover_source = "settings"
-        self.refusal = "autopilot parameters not read yet"
+        self.param_refusal = "autopilot parameters not read yet"
+        self.rate_refusal = ""
         self.params_checked_gen = -1
+        self.state_rate = telemetry.StateRate(1.0)
+        self.link_up_mono = None
+
+        # Engagement (module doc): PX4 is pre-streamed from the start, ArduPilot waits for
+        # `offboard`. engaged_mode: the custom mode `offboard` confirmed; leaving it ends it.
+        self.engaged = self.dialect == "px4"
+        self.engaged_mode = None
+        self.disengaged_why = "" if self.engaged else "waiting for `offboard`"
+        self.landed_state = None
+        self.takeoff_in_progress = False
 
         # State.
         self.boot_clock = BootClock()
@@ -153,15 +172,22 @@ class Bridge:
         self.last_status_mono = None
         self.last_status_healthy = False
         self.last_forward_mono = None
-        self.stream_since = None
-        self.forward_times = []  # monotonic us of recent forwards (offboard pre-stream check)
+        self.ready_since = None
+        self.last_ready_mono = None
+        self.ready_times = []  # monotonic us of recent commands that passed the gate (offboard's stream check)
         self.counters = dict(setpoints_sent=0, dropped_not_advanced=0, dropped_unhealthy=0, dropped_nonfinite=0,
-                             dropped_stale=0, dropped_refused=0, dropped_undecodable=0, states_published=0,
-                             states_rejected=0)
+                             dropped_stale=0, dropped_refused=0, dropped_disengaged=0, dropped_undecodable=0,
+                             states_published=0, states_rejected=0)
         self.streaming = False
         self.trace = open(settings["trace"]["file"], "a", buffering=1) if settings["trace"]["file"] else None
         self.link_seq = 0
         self.last_link_key = None
+
+    @property
+    def refusal(self) -> str:
+        """Why the bridge will not fly ('' when it may): the parameter checks, then the
+        telemetry rate."""
+        return self.param_refusal or self.rate_refusal
 
     # ---- the MAVLink connection -------------------------------------------------------
     def _open(self):
@@ -183,7 +209,7 @@ class Bridge:
 
     def _reopen(self):
         url = self.s["mavlink"]["url"]
-        if url.startswith(("udpin:", "udp:", "udpout:", "udpbcast:")):
+        if self.mav is not None and url.startswith(("udpin:", "udp:", "udpout:", "udpbcast:")):
             return  # a datagram socket stays valid; the autopilot simply talks again
         try:
             old = self.mav
@@ -247,10 +273,12 @@ class Bridge:
                 if self.last_hb_mono is not None and now - self.last_hb_mono < 5.0:
                     self.hb_period += 0.2 * (min(now - self.last_hb_mono, 2.0) - self.hb_period)
                 self.last_hb_mono = now
+                was_armed = self.armed
                 self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 self.base_mode, self.custom_mode = msg.base_mode, msg.custom_mode
                 self.mode = mavutil.mode_string_v10(msg)
                 self.cond.notify_all()
+            self._watch_engagement(was_armed)
             return
         if self.target_system and src != self.target_system:
             return
@@ -260,6 +288,13 @@ class Bridge:
             self._on_attitude(msg)
         elif t == "LOCAL_POSITION_NED":
             self.last_lpn = (msg, wall_us())
+        elif t == "EXTENDED_SYS_STATE":
+            with self.cond:
+                self.landed_state = msg.landed_state
+                if msg.landed_state != mavlink.MAV_LANDED_STATE_TAKEOFF and msg.landed_state != \
+                        mavlink.MAV_LANDED_STATE_ON_GROUND:
+                    self.takeoff_in_progress = False
+                self.cond.notify_all()
         elif t == "SYS_STATUS":
             self.battery_voltage = msg.voltage_battery / 1000.0 if msg.voltage_battery != 65535 else -1.0
             self.battery_remaining = msg.battery_remaining
@@ -340,6 +375,7 @@ class Bridge:
         msg.x = x
         self.lc.publish(self.s["lcm"]["state_channel"], msg.encode())
         self.counters["states_published"] += 1
+        self.state_rate.add(time.monotonic())
 
     # ---- LCM thread: the forwarding gate -----------------------------------------------
     def _lcm_loop(self):
@@ -365,6 +401,10 @@ class Bridge:
             self.counters["dropped_undecodable"] += 1
             return
         reason = self._gate(cmd, now)
+        if reason is None:
+            self._note_ready(now)
+            if not self.engaged:
+                reason = "disengaged"
         if reason is not None:
             self.counters["dropped_" + reason] += 1
             if self.streaming and (self.last_forward_mono is None or now - self.last_forward_mono > 100_000):
@@ -406,6 +446,36 @@ class Bridge:
             return "refused"
         return None
 
+    def _note_ready(self, now):
+        """A command that passed the gate: `offboard` checks the stream of these (forwarded or,
+        while disengaged, not)."""
+        if self.last_ready_mono is None or now - self.last_ready_mono > 500_000:
+            self.ready_since = now
+        self.last_ready_mono = now
+        self.ready_times.append(now)
+        if len(self.ready_times) > 512:
+            del self.ready_times[:256]
+
+    def _watch_engagement(self, was_armed: bool):
+        """After `offboard`: a mode change or a disarm that the bridge did not ask for ends the
+        engagement (the operator, a failsafe or the RC took over)."""
+        if not self.engaged or self.engaged_mode is None:
+            return
+        if self.custom_mode != self.engaged_mode:
+            self._disengage(f"mode changed to {self.mode} by someone else")
+        elif was_armed and not self.armed:
+            self._disengage("the autopilot disarmed")
+
+    def _disengage(self, why: str):
+        if self.engaged:
+            log.warning("forwarding stopped: %s; nothing goes to the autopilot until the next `offboard`", why)
+        self.engaged, self.engaged_mode, self.disengaged_why = False, None, why
+        self.takeoff_in_progress = False
+        if self.streaming:
+            self._set_streaming(False, why)
+        else:
+            self._publish_link(force=True)
+
     def _forward(self, cmd, now):
         thrust = self.thrust.to_normalized(float(cmd.u[0]))
         rates = frames.flu_to_frd((float(cmd.u[1]), float(cmd.u[2]), float(cmd.u[3])))
@@ -423,9 +493,6 @@ class Bridge:
         sent = mono_us()
         self.counters["setpoints_sent"] += 1
         self.last_forward_mono = sent
-        self.forward_times.append(sent)
-        if len(self.forward_times) > 512:
-            del self.forward_times[:256]
         if not self.streaming:
             self._set_streaming(True, "")
         if self.trace is not None:
@@ -437,10 +504,8 @@ class Bridge:
     def _set_streaming(self, on: bool, reason: str):
         self.streaming = on
         if on:
-            self.stream_since = mono_us()
             log.info("setpoint stream started")
         else:
-            self.stream_since = None
             log.warning("setpoint stream stopped (%s)", reason or "no fresh command")
         self._publish_link(force=True)
 
@@ -465,21 +530,37 @@ class Bridge:
                 if up:
                     log.info("link up: autopilot %d heartbeat, mode %s, %s", self.target_system, self.mode,
                              "armed" if self.armed else "disarmed")
-                    threading.Thread(target=self._check_params, daemon=True).start()
+                    self.link_up_mono = now
+                    threading.Thread(target=self._on_link_up, daemon=True).start()
                 else:
                     self.link_losses += 1
                     log.error("link lost: autopilot HEARTBEAT overdue by %.1f s (%.1f s since the last)",
                               m["heartbeat_timeout_s"], now - hb)
                 self._publish_link(force=True)
-            if not up and hb is not None and now >= next_reopen and now - hb > m["reconnect_period_s"]:
+            lost = hb is not None and now - hb > m["reconnect_period_s"]
+            if not up and now >= next_reopen and (self.mav is None or lost):
                 next_reopen = now + m["reconnect_period_s"]
                 self._reopen()
             if self.streaming and (self.last_forward_mono is None or mono_us() - self.last_forward_mono > 200_000):
                 self._set_streaming(False, "no fresh command for 200 ms")
+            self._check_state_rate(now)
             if now >= next_link:
                 next_link = now + link_period
                 self._publish_link()
             self.stop.wait(0.02)
+
+    def _check_state_rate(self, now: float):
+        t = self.s["telemetry"]
+        why = "" if not self.link_up else telemetry.rate_refusal(
+            self.state_rate.rate(now), t["min_state_hz"], now - (self.link_up_mono or now), t["grace_s"])
+        changed = bool(why) != bool(self.rate_refusal)
+        self.rate_refusal = why  # the text follows the rate; the log and the link message the verdict
+        if changed:
+            if why:
+                log.error("%s", why)
+            else:
+                log.info("telemetry: states at %.1f Hz", self.state_rate.rate(now))
+            self._publish_link(force=True)
 
     def _publish_link(self, force=False):
         msg = self.link_t()
@@ -508,6 +589,9 @@ class Bridge:
         msg.battery_voltage = float(self.battery_voltage)
         msg.battery_remaining = int(max(-1, min(100, self.battery_remaining)))
         msg.error = self.refusal or ""
+        msg.engaged = int(self.engaged)
+        msg.dropped_disengaged = c["dropped_disengaged"]
+        msg.state_rate_hz = float(self.state_rate.rate(time.monotonic()))
         msg.signing = int(self.signing_key is not None)
         sc = self.signing_counters()
         msg.rejected_unsigned = sc["rejected_unsigned"]
@@ -533,9 +617,26 @@ class Bridge:
                     return self.params[name]
         raise CommandError(f"parameter {name}: no PARAM_VALUE after {m['param_retries']} requests")
 
+    def _on_link_up(self):
+        self._request_telemetry()
+        self._check_params()
+
+    def _request_telemetry(self):
+        """MAV_CMD_SET_MESSAGE_INTERVAL for every message the bridge reads (telemetry.py); a
+        refusal is logged, and the state rate check says what it costs."""
+        t = self.s["telemetry"]
+        if not t["request"]:
+            return
+        for mid, name, interval_us in telemetry.requests(self.dialect, t["state_hz"], t["status_hz"]):
+            try:
+                self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [mid, interval_us], f"stream {name}")
+            except CommandError as e:
+                log.warning("%s", e)
+        log.info("telemetry asked for: states at %g Hz, status at %g Hz", t["state_hz"], t["status_hz"])
+
     def _check_params(self):
         """On every link-up: the hover thrust (unless set in the settings) and, on ArduPilot,
-        GUID_OPTIONS bit 3. Sets self.refusal to the reason the bridge will not fly, or ''."""
+        GUID_OPTIONS bit 3. Sets self.param_refusal to the reason the bridge will not fly, or ''."""
         vh = self.s["vehicle"]
         refusal = ""
         try:
@@ -558,9 +659,9 @@ class Bridge:
             refusal = f"{e}; refusing to fly (set vehicle.hover_thrust to fly without it)" if not refusal else refusal
         if refusal:
             log.error("%s", refusal)
-        elif self.refusal:
+        elif self.param_refusal:
             log.info("flight checks passed")
-        self.refusal = refusal
+        self.param_refusal = refusal
         self._publish_link(force=True)
 
     # ---- commands to the autopilot (explicit, from the control socket) -----------------
@@ -615,6 +716,7 @@ class Bridge:
         return "armed"
 
     def do_disarm(self):
+        self._disengage("disarm requested")
         self.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, [0.0], "disarm")
         self._wait_mode(lambda: not self.armed, "disarm")
         return "disarmed"
@@ -629,27 +731,47 @@ class Bridge:
             self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, [-1.0, 0, 0, math.nan, math.nan, math.nan, math.nan],
                               "takeoff")
         else:
+            # ArduPilot flies any attitude target in GUIDED instead of its take-off.
+            self._disengage("takeoff requested: the autopilot's own take-off flies")
             if self.custom_mode != APM_COPTER_GUIDED:
                 self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
                                   [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, APM_COPTER_GUIDED], "mode GUIDED")
             self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, [0, 0, 0, 0, 0, 0, alt], "takeoff")
+            self.takeoff_in_progress = True
         return f"taking off to {alt:g} m"
 
     def stream_ok(self) -> tuple[bool, str]:
+        """Whether mppid's commands pass the gate fast enough and long enough for `offboard`
+        (on PX4 they are on the wire already: the pre-stream)."""
         o = self.s["offboard"]
         now = mono_us()
-        if self.stream_since is None or self.last_forward_mono is None or now - self.last_forward_mono > 500_000:
-            return False, "no setpoint stream (is mppid running, healthy and getting states?)"
-        if now - self.stream_since < o["prestream_s"] * 1e6:
-            return False, f"stream only {(now - self.stream_since) / 1e6:.2f} s old"
-        window = [t for t in self.forward_times if now - t <= o["prestream_s"] * 1e6]
+        if self.ready_since is None or self.last_ready_mono is None or now - self.last_ready_mono > 500_000:
+            return False, "no command stream (is mppid running, healthy and getting states?)"
+        if now - self.ready_since < o["prestream_s"] * 1e6:
+            return False, f"stream only {(now - self.ready_since) / 1e6:.2f} s old"
+        window = [t for t in self.ready_times if now - t <= o["prestream_s"] * 1e6]
         rate = len(window) / o["prestream_s"]
         if rate < o["min_rate_hz"]:
             return False, f"stream at {rate:.1f} Hz, below {o['min_rate_hz']:g} Hz"
-        return True, f"stream at {rate:.1f} Hz for {(now - self.stream_since) / 1e6:.1f} s"
+        return True, f"stream at {rate:.1f} Hz for {(now - self.ready_since) / 1e6:.1f} s"
+
+    def _wait_takeoff_done(self):
+        """ArduPilot: `offboard` right after `takeoff` waits for the take-off to end (landed
+        state IN_AIR), or mppid's first setpoint would take it over."""
+        deadline = time.monotonic() + self.s["offboard"]["takeoff_wait_s"]
+        with self.cond:
+            while self.takeoff_in_progress and time.monotonic() < deadline:
+                self.cond.wait(max(0.0, deadline - time.monotonic()))
+            if self.takeoff_in_progress:
+                raise CommandError(f"offboard refused: the take-off is not complete after "
+                                   f"{self.s['offboard']['takeoff_wait_s']:g} s")
 
     def do_offboard(self):
         self._require_fly("offboard")
+        if self.dialect == "px4":
+            self.engaged = True  # pre-stream again after a stop
+        else:
+            self._wait_takeoff_done()
         deadline = time.monotonic() + self.s["offboard"]["wait_s"]
         ok, why = self.stream_ok()
         while not ok and time.monotonic() < deadline:
@@ -661,13 +783,22 @@ class Bridge:
             self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
                               [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4_MAIN_OFFBOARD, 0], "mode OFFBOARD")
             self._wait_mode(lambda: self._px4_main() == PX4_MAIN_OFFBOARD, "mode OFFBOARD")
+            self._engage()
             return f"OFFBOARD ({why})"
         self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
                           [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, APM_COPTER_GUIDED], "mode GUIDED")
         self._wait_mode(lambda: self.custom_mode == APM_COPTER_GUIDED, "mode GUIDED")
+        self._engage()
         return f"GUIDED, attitude/rate targets ({why})"
 
+    def _engage(self):
+        with self.cond:
+            self.engaged, self.engaged_mode, self.disengaged_why = True, self.custom_mode, ""
+        log.info("engaged in mode %s: mppid's setpoints go to the autopilot", self.mode)
+        self._publish_link(force=True)
+
     def do_land(self):
+        self._disengage("land requested")
         if self.dialect == "px4":
             self.command_long(mavlink.MAV_CMD_NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, math.nan], "land")
         else:
@@ -676,11 +807,13 @@ class Bridge:
         return "landing"
 
     def do_hold(self):
+        self._disengage("hold requested")
         if self.dialect == "px4":
             self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
                               [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PX4_MAIN_AUTO, PX4_SUB_LOITER], "mode HOLD")
         else:
-            raise CommandError("hold: use the autopilot's own modes on ArduPilot (LOITER needs a position estimate)")
+            self.command_long(mavlink.MAV_CMD_DO_SET_MODE,
+                              [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, APM_COPTER_LOITER], "mode LOITER")
         return "holding"
 
     def signing_counters(self) -> dict:
@@ -699,6 +832,9 @@ class Bridge:
                 "armed": self.armed, "mode": self.mode, "streaming": self.streaming,
                 "hover_thrust": self.thrust.hover if self.thrust else None, "hover_source": self.hover_source,
                 "refusal": self.refusal, "battery_voltage": self.battery_voltage,
+                "engaged": self.engaged, "disengaged_why": self.disengaged_why,
+                "state_rate_hz": round(self.state_rate.rate(time.monotonic()), 1),
+                "landed_state": self.landed_state,
                 "controller_healthy": self.last_status_healthy, "signing": self.signing_key is not None,
                 **self.signing_counters(), **self.counters}
 
@@ -724,7 +860,11 @@ class Bridge:
 
     # ---- run ---------------------------------------------------------------------------
     def start(self):
-        self._open()
+        try:
+            self._open()
+        except OSError as e:  # a TCP autopilot (a SITL) not listening yet: housekeeping retries
+            log.warning("cannot open %s yet (%s): retrying every %g s", self.s["mavlink"]["url"], e,
+                        self.s["mavlink"]["reconnect_period_s"])
         self.threads = [threading.Thread(target=f, name=n, daemon=True) for f, n in (
             (self._rx_loop, "mavlink-rx"), (self._lcm_loop, "lcm"), (self._housekeeping, "housekeeping"))]
         for t in self.threads:

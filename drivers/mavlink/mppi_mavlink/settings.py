@@ -47,10 +47,18 @@ DEFAULTS = {
         "forward_hold_plan": True,        # MODE_HOLD_PLAN commands (deadline guard) are forwarded
         "restart_gap_s": 1.0,             # a seq step back after this long a silence: mppid restarted
     },
+    "telemetry": {
+        "request": True,                  # ask for the streams below on every link-up (ArduPilot sends none unasked)
+        "state_hz": 50.0,                 # the messages states are built from (telemetry.py)
+        "status_hz": 2.0,                 # SYS_STATUS, EXTENDED_SYS_STATE
+        "min_state_hz": 30.0,             # states slower than this over the last second: refuse to fly
+        "grace_s": 2.0,                   # after a link-up, before the rate is judged
+    },
     "offboard": {
         "min_rate_hz": 5.0,               # stream at least this fast (PX4 needs > 2 Hz) ...
         "prestream_s": 1.0,               # ... for this long before OFFBOARD is requested
         "wait_s": 3.0,                    # how long `offboard` waits for such a stream
+        "takeoff_wait_s": 30.0,           # ArduPilot: how long `offboard` waits for a take-off to end
     },
     "takeoff": {"altitude": 2.0},         # m above home
     "control": {"socket": "/run/mppid-mavlink/control.sock"},
@@ -139,6 +147,16 @@ def validate(s: dict):
     num("offboard", "min_rate_hz", 2.0001, 1000)
     num("offboard", "prestream_s", 1.0, 60)
     num("offboard", "wait_s", 0.0, 60)
+    num("offboard", "takeoff_wait_s", 0.0, 600)
+    if not isinstance(s["telemetry"]["request"], bool):
+        raise SettingsError(f"telemetry.request: must be true or false, got {s['telemetry']['request']!r}")
+    num("telemetry", "state_hz", 1.0, 1000)
+    num("telemetry", "status_hz", 0.1, 100)
+    num("telemetry", "min_state_hz", 0.0, 1000)
+    num("telemetry", "grace_s", 0.0, 60)
+    if s["telemetry"]["min_state_hz"] > s["telemetry"]["state_hz"]:
+        raise SettingsError(f"telemetry.min_state_hz ({s['telemetry']['min_state_hz']:g}) must not exceed "
+                            f"telemetry.state_hz ({s['telemetry']['state_hz']:g})")
     num("takeoff", "altitude", 0.1, 1000)
     num("mavlink", "signing_link_id", 0, 255)
     if not isinstance(s["mavlink"]["signing_link_id"], int):

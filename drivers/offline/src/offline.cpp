@@ -1,6 +1,7 @@
 #include "mppi/offline/offline.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -328,6 +329,27 @@ Scenario default_scenario(const Controller& c, float spacing, std::uint64_t seed
   if (t == "racecar_ellipse") return ellipse_scenario(c);
   if (t.find("_track") != std::string::npos) return tracking_scenario(c, Reference::kCircle, 5.0f, 3.0f);
   return forest_scenario(c, spacing, seed);
+}
+
+Scenario bench_scenario(const Controller& c, int obstacles, int scene_obstacles) {
+  Scenario s = default_scenario(c, 4.0f, 1);
+  if (!s.forest.empty() && static_cast<int>(s.forest.size()) < scene_obstacles) {
+    std::vector<std::array<float, 2>> clear;
+    for (int j = 0; j < c.vehicles(); ++j) {
+      clear.push_back({s.x0[0], s.inputs.goals[j][1]});
+      clear.push_back({s.inputs.goals[j][0], s.inputs.goals[j][1]});
+    }
+    for (float e = 4.0f; static_cast<int>(s.forest.size()) < scene_obstacles; e += 4.0f)
+      s.forest = make_forest(4.0f, 36.0f + e, -12.0f - e, 12.0f + e, 4.0f, 1, clear);
+  }
+  s.inputs.obstacles.count = std::min<int>({obstacles, static_cast<int>(s.forest.size()), ObstacleSet::kCapacity});
+  auto forest = s.forest;
+  const float x0 = s.x0[0], y0 = s.x0[1];
+  std::sort(forest.begin(), forest.end(), [&](const Cylinder& a, const Cylinder& b) {
+    return std::hypot(a.x - x0, a.y - y0) - a.radius < std::hypot(b.x - x0, b.y - y0) - b.radius;
+  });
+  for (int i = 0; i < s.inputs.obstacles.count; ++i) s.inputs.obstacles.items[i] = forest[static_cast<std::size_t>(i)];
+  return s;
 }
 
 std::string to_json(const Scenario& s, const Result& r) {

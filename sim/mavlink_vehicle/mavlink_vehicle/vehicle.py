@@ -2,6 +2,11 @@
 with PX4's custom modes (or ArduPilot Copter's, --autopilot ardupilot), arming checks,
 its own position controller for take-off, hold and landing, and the offboard-loss failsafe.
 
+Two ArduPilot behaviours that a bridge must handle, as ArduCopter has them: it streams no
+telemetry to a link until the link asks (MAV_CMD_SET_MESSAGE_INTERVAL; at most state_hz),
+and an attitude target received in GUIDED during its own take-off takes the vehicle over
+(the take-off is abandoned where it is: `takeoff_taken_over` in the events).
+
 One thread, paced by the wall clock: receive whatever MAVLink is waiting, step the physics
 (RK4, physics_hz) up to now, send telemetry at state_hz, run the mission at 10 Hz; sleep in
 select() on the link's socket until the next physics step, so a setpoint is applied within
@@ -71,12 +76,15 @@ class Vehicle:
         self.stale_hold = None
         self.landed_since = None
         self.counters = {"setpoints": 0, "setpoints_rejected": 0, "nonfinite_rejected": 0, "failsafes": 0,
-                         "overruns": 0, "heartbeats_from_companion": 0}
+                         "overruns": 0, "heartbeats_from_companion": 0, "states_sent": 0}
         self.events = []
         self.companion = None
         self.wire = open(os.path.join(out, "wire.jsonl"), "w") if out else None
         self.truth = open(os.path.join(out, "truth.jsonl"), "w") if out else None
         self.gcs_seen = set()
+        # ArduPilot: message id -> [interval s, next send time], set by SET_MESSAGE_INTERVAL.
+        self.streams = {}
+        self.taking_off = False
 
     # ---- helpers ------------------------------------------------------------------------
     def event(self, what, **kw):
@@ -168,6 +176,9 @@ class Vehicle:
         self.setpoint = (min(max(vals[0], 0.0), 1.0), vals[1], vals[2], vals[3])
         self.setpoint_t = self.t
         self.counters["setpoints"] += 1
+        if self.ap == "ardupilot" and self.mode == "GUIDED" and self.taking_off:
+            self.taking_off = False
+            self.event("takeoff_taken_over", z=round(self.plant.x[2], 3))
 
     def ack(self, cmd, result, text=None):
         self.conn.mav.command_ack_send(cmd, result)
@@ -214,14 +225,47 @@ class Vehicle:
                 self.set_mode("AUTO.TAKEOFF", "command")
             self.takeoff_alt = float(alt)
             self.hold_sp = [self.plant.x[0], self.plant.x[1], float(alt)]
+            self.taking_off = self.ap == "ardupilot"
+            self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         if c == mavlink.MAV_CMD_NAV_LAND:
             self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", "command")
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
-        if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
-                 mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+        if c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
+            self.set_stream(int(m.param1), m.param2)
+            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+        if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def set_stream(self, msg_id: int, interval_us: float):
+        """ArduPilot's MAV_CMD_SET_MESSAGE_INTERVAL: -1 stops a message, 0 is its default
+        rate (here state_hz), else every interval_us, no faster than state_hz."""
+        if interval_us < 0:
+            self.streams.pop(msg_id, None)
+            return
+        interval = self.state_period if interval_us == 0 else max(interval_us * 1e-6, self.state_period)
+        self.streams[msg_id] = [interval, self.t]
+        self.event("stream", msg_id=msg_id, interval_s=round(interval, 4))
+
+    def streaming(self, msg_id: int) -> bool:
+        """PX4 streams everything unasked; ArduPilot what was asked for, each at its interval."""
+        if self.ap == "px4":
+            return True
+        st = self.streams.get(msg_id)
+        if st is None or self.t + 1e-9 < st[1]:
+            return False
+        st[1] = max(st[1] + st[0], self.t)
+        return True
+
+    def landed_state(self):
+        if self.plant.on_ground and not (self.taking_off or self.mode == "AUTO.TAKEOFF"):
+            return mavlink.MAV_LANDED_STATE_ON_GROUND
+        if self.mode in ("AUTO.LAND", "LAND"):
+            return mavlink.MAV_LANDED_STATE_LANDING
+        if self.taking_off or self.mode == "AUTO.TAKEOFF":
+            return mavlink.MAV_LANDED_STATE_TAKEOFF
+        return mavlink.MAV_LANDED_STATE_IN_AIR
 
     def decode_mode(self, m):
         if self.ap == "px4":
@@ -326,6 +370,9 @@ class Vehicle:
                 abs(self.plant.x[2] - self.takeoff_alt) < 0.15:
             self.hold_sp = [self.plant.x[0], self.plant.x[1], self.takeoff_alt]
             self.set_mode("AUTO.LOITER", "takeoff complete")
+        if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[2] - self.takeoff_alt) < 0.15):
+            self.taking_off = False  # ArduPilot stays in GUIDED, holding where the take-off ended
+            self.event("takeoff_complete", z=round(self.plant.x[2], 3))
         if self.armed and self.plant.on_ground and self.mode in ("AUTO.LAND", "LAND"):
             self.landed_since = self.landed_since if self.landed_since is not None else self.t
             if self.t - self.landed_since > self.params["COM_DISARM_LAND"]:
@@ -350,19 +397,24 @@ class Vehicle:
         tb_ms = tb_us // 1000
         mono = time.monotonic_ns() // 1000
         cov = [math.nan] + [0.0] * 20
-        self.conn.mav.odometry_send(tb_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
-                                    p[0], p[1], p[2], list(q), vb[0], vb[1], vb[2], w[0], w[1], w[2], cov, cov, 0,
-                                    mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
-        self.conn.mav.attitude_quaternion_send(tb_ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2])
-        self.conn.mav.local_position_ned_send(tb_ms, p[0], p[1], p[2], v[0], v[1], v[2])
-        self._wire({"mono_us": mono, "type": "ODOMETRY", "time_usec": tb_us})
+        if self.ap == "px4":  # ArduPilot sends no ODOMETRY
+            self.conn.mav.odometry_send(tb_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
+                                        p[0], p[1], p[2], list(q), vb[0], vb[1], vb[2], w[0], w[1], w[2], cov, cov, 0,
+                                        mavlink.MAV_ESTIMATOR_TYPE_UNKNOWN, 100)
+            self._wire({"mono_us": mono, "type": "ODOMETRY", "time_usec": tb_us})
+        # Position first: a bridge pairs each attitude with the latest position.
+        if self.streaming(mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED):
+            self.conn.mav.local_position_ned_send(tb_ms, p[0], p[1], p[2], v[0], v[1], v[2])
+        if self.streaming(mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION):
+            self.conn.mav.attitude_quaternion_send(tb_ms, q[0], q[1], q[2], q[3], w[0], w[1], w[2])
+            self.counters["states_sent"] += 1
 
     def send_slow(self):
-        on_ground = self.plant.on_ground
         sensors = 0x7FFF
-        self.conn.mav.sys_status_send(sensors, sensors, sensors, 100, 15800, -1, 90, 0, 0, 0, 0, 0, 0)
-        landed = mavlink.MAV_LANDED_STATE_ON_GROUND if on_ground else mavlink.MAV_LANDED_STATE_IN_AIR
-        self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, landed)
+        if self.streaming(mavlink.MAVLINK_MSG_ID_SYS_STATUS):
+            self.conn.mav.sys_status_send(sensors, sensors, sensors, 100, 15800, -1, 90, 0, 0, 0, 0, 0, 0)
+        if self.streaming(mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE):
+            self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, self.landed_state())
 
     # ---- run ----------------------------------------------------------------------------
     def run(self, duration=0.0, stop=None):

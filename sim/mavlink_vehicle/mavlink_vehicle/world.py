@@ -17,9 +17,10 @@ after `settle` s), waypoint missions until the goal (or `timeout`).
 from __future__ import annotations
 
 import math
-import random
 
 import yaml
+
+from mppi_mission import forest
 
 
 def load_world(path) -> dict:
@@ -38,32 +39,10 @@ def load_world(path) -> dict:
 
 
 def make_forest(f: dict, w: dict) -> list:
-    """Jittered hexagonal lattice (the layout of sim/README.md's forests, with this module's
-    own random stream): spacing, +-jitter/2 of it, radius +- radius_jitter, clear of start
-    and goal by clear_radius, no two closer than 0.5 m surface to surface."""
-    rng = random.Random(int(f.get("seed", 1)))
-    sp = float(f["spacing"])
-    jit = float(f.get("jitter", 0.0)) * sp
-    x0, x1 = f["x_range"]
-    y0, y1 = f["y_range"]
+    """The mission tool's virtual forest (drivers/mission/mppi_mission/forest.py), clear of
+    the start and the goal."""
     keep_out = [tuple(w["start"][:2])] + ([tuple(w["goal"][:2])] if w.get("goal") else [])
-    out = []
-    row = 0
-    y = y0
-    while y <= y1:
-        x = x0 + (sp / 2 if row % 2 else 0.0)
-        while x <= x1:
-            cx = x + rng.uniform(-jit / 2, jit / 2)
-            cy = y + rng.uniform(-jit / 2, jit / 2)
-            r = float(f["radius"]) + rng.uniform(-1, 1) * float(f.get("radius_jitter", 0.0))
-            ok = all(math.hypot(cx - k[0], cy - k[1]) > float(f.get("clear_radius", 2.0)) + r for k in keep_out)
-            ok = ok and all(math.hypot(cx - o[0], cy - o[1]) > r + o[2] + 0.5 for o in out)
-            if ok:
-                out.append((cx, cy, r))
-            x += sp
-        y += sp * math.sqrt(3) / 2
-        row += 1
-    return out
+    return forest.make_forest(f, keep_out)
 
 
 def circle_eval(ref: dict, t: float):
@@ -130,9 +109,7 @@ class Mission:
                 self.err2.append(sum((a - b) ** 2 for a, b in zip(x[0:3], r)))
 
     def clearance(self, x) -> float:
-        best = float("inf")
-        for cx, cy, r in self.w["obstacles"]:
-            best = min(best, math.hypot(x[0] - cx, x[1] - cy) - r - self.w["vehicle_radius"])
+        best = forest.clearance(x, self.w["obstacles"], self.w["vehicle_radius"])
         self.min_clearance = min(self.min_clearance, best)
         return best
 

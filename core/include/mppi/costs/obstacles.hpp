@@ -125,10 +125,91 @@ struct ObstacleGrid {
   // Builds the grid over the bounding box of `points` (xy pairs; non-finite ones skipped)
   // widened by `reach`, with cells of side `cell` (or larger, to stay within kMaxSide x
   // kMaxSide and kMaxCells), for times [0, t_end]. reach <= 0, no obstacles or no finite
-  // point: no grid. If the lists overflow kMaxRefs: no grid either (the search stays
-  // exact, only slower). Allocates nothing; host only (core/src/obstacle_grid.cpp).
+  // point: no grid. If the lists overflow kMaxRefs, coarser cells (ObstacleGridLayout); past
+  // its last attempt no grid either (the search stays exact, only slower). Allocates
+  // nothing; host only (core/src/obstacle_grid.cpp).
   static constexpr int kMaxSide = 64;
   void build(const ObstacleSet& set, const float* points, int n_points, float t_end, float reach, float cell);
 };
+
+// How ObstacleGrid::build lays its grid out (ObstacleGrid::layout, host, cheap): the corner,
+// the slacks that cover float rounding, and the cell sides it tries in turn, each coarser,
+// until the lists fit kMaxRefs. Plain data, so the lists can also be filled elsewhere (the
+// CUDA backend fills them on the device, one warp a cell: gpu/src/obstacle_grid.cuh).
+struct ObstacleGridLayout {
+  static constexpr int kMaxAttempts = 8;
+  struct Attempt {
+    double side;  // 1 / inv, in double: the cells as the float lookup sees them
+    float inv;    // ObstacleGrid::inv_cell
+    int cx, cy;   // cells per side
+  };
+  int attempts = 0;  // 0: no grid
+  int n = 0;         // cylinders indexed (the set's first n)
+  double lox = 0.0, loy = 0.0;  // the corner, float values
+  double slack = 0.0;           // on the surface distances
+  double grow = 0.0;            // on the cells' sides
+  double t_end = 0.0;
+  Attempt attempt[kMaxAttempts] = {};
+
+  static ObstacleGridLayout plan(const ObstacleSet& set, const float* points, int n_points, float t_end, float reach,
+                                 float cell);
+};
+
+// The bounds the lists are built from, in double, one definition for the host build and the
+// CUDA backend's.
+namespace grid_bounds {
+
+// A cylinder as the build sees it: the segment its axis sweeps over [0, t_end], the
+// bounding box of that segment, and its radius.
+struct Swept {
+  double ax, ay, bx, by;      // axis at t = 0 and t = t_end
+  double lox, loy, hix, hiy;  // bounding box of the segment
+  double r;
+};
+
+struct Box {
+  double x0, y0, x1, y1;
+};
+
+MPPI_HD Swept swept(const Cylinder& c, double t_end) {
+  Swept o;
+  o.ax = c.x;
+  o.ay = c.y;
+  o.bx = static_cast<double>(c.x) + static_cast<double>(c.vx) * t_end;
+  o.by = static_cast<double>(c.y) + static_cast<double>(c.vy) * t_end;
+  o.lox = fmin_(o.ax, o.bx);
+  o.hix = fmax_(o.ax, o.bx);
+  o.loy = fmin_(o.ay, o.by);
+  o.hiy = fmax_(o.ay, o.by);
+  o.r = c.radius;
+  return o;
+}
+
+// Cells ix0..ix1-1 by iy0..iy1-1 of a grid of side s from (lox, loy), grown by `grow`.
+MPPI_HD Box cells(double lox, double loy, double s, int ix0, int iy0, int ix1, int iy1, double grow) {
+  return Box{lox + ix0 * s - grow, loy + iy0 * s - grow, lox + ix1 * s + grow, loy + iy1 * s + grow};
+}
+
+// Largest distance from a point of the box to (px, py).
+MPPI_HD double max_distance(const Box& b, double px, double py) {
+  const double dx = fmax_(fabs_(px - b.x0), fabs_(px - b.x1));
+  const double dy = fmax_(fabs_(py - b.y0), fabs_(py - b.y1));
+  return fsqrt(dx * dx + dy * dy);
+}
+
+// Upper bound of the surface distance from any point of the box, at any time, to s: the
+// distance to a point of a segment is convex along it, so its maximum is at an end.
+MPPI_HD double upper(const Box& b, const Swept& s) {
+  return fmax_(max_distance(b, s.ax, s.ay), max_distance(b, s.bx, s.by)) - s.r;
+}
+
+// Lower bound of the same: the distance between the box and the segment's bounding box.
+MPPI_HD double lower(const Box& b, const Swept& s) {
+  const double dx = fmax_(0.0, fmax_(s.lox - b.x1, b.x0 - s.hix));
+  const double dy = fmax_(0.0, fmax_(s.loy - b.y1, b.y0 - s.hiy));
+  return fsqrt(dx * dx + dy * dy) - s.r;
+}
+
+}  // namespace grid_bounds
 
 }  // namespace mppi

@@ -26,6 +26,11 @@ bool cuda_device_available(std::string* why = nullptr);
 // Name of the current CUDA device, or "" when there is none.
 std::string cuda_device_name();
 
+// ObstacleGrid::build's grid as the CUDA backend builds it each cycle, on the device (tests:
+// its search must be the full scan's). Throws as make_cuda_backend does.
+ObstacleGrid build_obstacle_grid_on_device(const ObstacleSet& set, const float* points, int n_points, float t_end,
+                                           float reach, float cell);
+
 #define MPPI_CUDA_DECLARE(T) \
   extern template std::unique_ptr<RolloutBackend<T>> make_cuda_backend<T>(const MppiSettings&);
 MPPI_CUDA_DECLARE(CartpoleSwingup)

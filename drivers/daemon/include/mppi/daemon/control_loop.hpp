@@ -20,6 +20,7 @@
 #include "mppi/daemon/cycle_outcome.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/held_plan.hpp"
 #include "mppi/rt/clock.hpp"
@@ -87,6 +88,8 @@ struct LoopSettings {
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
   // out on time. 0: off.
   std::int64_t anytime_margin_ns = 0;
+  // A display sample of the rollouts on their own channel (tools/view); off by default.
+  FanSettings rollouts;
 };
 
 // Counters since start (the loop thread writes, others read).
@@ -257,6 +260,7 @@ class ControlLoop {
   std::int64_t period_ns_;
   std::int64_t status_every_;
   std::int64_t plan_every_;
+  RolloutPublisher rollouts_;
 
   rt::PeriodicSchedule schedule_;
   rt::DeadlineMonitor monitor_;

@@ -18,6 +18,9 @@ struct DaemonSettings {
   std::string lcm_url = "udpm://239.255.76.67:7667?ttl=0";
   transport::LcmChannels channels;
   int receive_timeout_ms = 20;
+  // daemon.spin: the loop thread and the LCM receive thread poll instead of sleeping (a busy
+  // core each; for a host with cores to spare, e.g. next to a GPU): no wake-up latency.
+  bool spin = false;
   std::string lockstep_trigger = "clock";  // clock | state
   rt::RealtimeRequest realtime;
   int warmup_iterations = 3;

@@ -44,6 +44,7 @@ constexpr std::size_t kCommandCount = 8 + 8 + 8 + 8 + 1 + 1 + 4 + 4 + 4;  // int
 constexpr std::size_t kObstaclesCount = 8 + 8 + 8;               // int32 n, then n cylinders
 constexpr std::size_t kCylinderBytes = 5 * 4;
 constexpr std::size_t kReferenceCount = 8 + 8 + 8 + 1 + 12 + 4 + 4 + 4 + 8;  // int16, then 3 floats each
+constexpr std::size_t kReferenceTail = 3 * 4;  // after the goals: ramp_s, phase, end_s
 constexpr std::size_t kParamKeyLength = 8 + 8 + 8;  // int32 length including the NUL, then bytes
 }  // namespace wire
 

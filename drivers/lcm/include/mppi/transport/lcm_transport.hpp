@@ -21,6 +21,7 @@
 #include "mppi_lcm/param_update_t.hpp"
 #include "mppi_lcm/plan_t.hpp"
 #include "mppi_lcm/reference_t.hpp"
+#include "mppi_lcm/rollouts_t.hpp"
 #include "mppi_lcm/sim_clock_t.hpp"
 #include "mppi_lcm/vehicle_state_t.hpp"
 
@@ -36,6 +37,7 @@ struct LcmChannels {
   std::string params = "MPPI_PARAMS";
   std::string param_result = "MPPI_PARAM_RESULT";
   std::string clock = "MPPI_SIM_CLOCK";
+  std::string rollouts = "MPPI_ROLLOUTS";
 };
 
 class LcmTransport final : public Transport {
@@ -53,10 +55,17 @@ class LcmTransport final : public Transport {
   // A refusal leaves it at its policy; receive_priority_ok() says which happened.
   void set_receive_fifo_priority(int priority) { receive_fifo_ = priority; }
   bool receive_priority_ok() const { return receive_fifo_ok_.load(); }
+  // Before start(): the receive thread polls the socket (handleTimeout(0) in a loop) instead of
+  // sleeping in it: a busy core, no wake-up between a datagram and its decode.
+  void set_receive_spin(bool spin) { receive_spin_ = spin; }
   void stop() override;
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
   bool publish_plan(const PlanView& p) override;
+  // Before the loop runs: room for rollouts_t messages of up to `rollouts` rollouts with
+  // `floats` position floats (publish_rollouts refuses larger ones; it never grows).
+  void reserve_rollouts(int rollouts, int floats);
+  bool publish_rollouts(const RolloutsView& r) override;
   bool publish_param_result(const ParamResult& r) override;
 
   lcm::LCM& lcm() { return lcm_; }
@@ -77,6 +86,7 @@ class LcmTransport final : public Transport {
   Inbox* inbox_ = nullptr;
   std::thread thread_;
   int receive_fifo_ = 0;
+  bool receive_spin_ = false;
   std::atomic<bool> receive_fifo_ok_{false};
   std::atomic<bool> running_{false};
 
@@ -86,6 +96,7 @@ class LcmTransport final : public Transport {
   mppi_lcm::command_t command_out_;
   mppi_lcm::controller_status_t status_out_;
   mppi_lcm::plan_t plan_out_;
+  mppi_lcm::rollouts_t rollouts_out_{};
   mppi_lcm::param_result_t param_result_out_{};
   std::vector<std::uint8_t> buf_;
 };

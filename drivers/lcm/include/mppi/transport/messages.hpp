@@ -53,6 +53,7 @@ struct ReferenceInput {
   std::int8_t kind = 0;  // reference_t::KIND_*
   float center[3] = {0.0f, 0.0f, 1.0f};
   float radius = 0.0f, speed = 0.0f, yaw = 0.0f;
+  float ramp_s = 0.0f, phase = 0.0f, end_s = 0.0f;
   std::int64_t t0_utime = 0;
   std::int16_t vehicle_count = 0;
   float goals[kMaxVehicles][3] = {};
@@ -135,6 +136,23 @@ struct PlanView {
   const float* u = nullptr;  // horizon * nu, step-major
   std::int32_t npos = 0;
   const float* pos = nullptr;  // npos x 3, vehicle-major predicted positions
+};
+
+// A view of a display sample of one cycle's rollouts (core's RolloutFan); the pointed-to
+// data lives in the loop.
+struct RolloutsView {
+  std::int64_t utime = 0;
+  std::int64_t seq = 0;
+  std::int64_t state_seq = -1;
+  std::int64_t cycle = 0;
+  std::int32_t total = 0, vehicles = 0, steps = 0;
+  float dt = 0, lambda = 0;
+  std::int32_t count = 0, top = 0;
+  const int* index = nullptr;             // count each
+  const float* cost = nullptr;
+  const float* weight = nullptr;
+  const unsigned char* crashed = nullptr;
+  const float* xyz = nullptr;             // count x vehicles x steps x 3
 };
 
 }  // namespace mppi::transport

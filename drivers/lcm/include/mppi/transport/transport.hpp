@@ -25,6 +25,11 @@ class Transport {
   virtual bool publish_command(const Command& c) = 0;
   virtual bool publish_status(const StatusReport& s) = 0;
   virtual bool publish_plan(const PlanView& p) = 0;
+  // A display sample of a cycle's rollouts (off unless daemon.rollouts.hz > 0).
+  virtual bool publish_rollouts(const RolloutsView& r) {
+    (void)r;
+    return false;
+  }
   // The answer to a parameter update (loop thread, between cycles).
   virtual bool publish_param_result(const ParamResult& r) {
     (void)r;

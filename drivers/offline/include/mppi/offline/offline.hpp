@@ -61,6 +61,12 @@ Scenario tracking_scenario(const Controller& c, int kind, float radius, float sp
 // Picks the scenario that goes with the controller's task.
 Scenario default_scenario(const Controller& c, float spacing, std::uint64_t seed);
 
+// The speed benchmarks' scene (mppid-bench, mppid-gpu-timing --scene bench): the default
+// scenario, its forest widened (same 4 m spacing and seed) until it holds `scene_obstacles`
+// cylinders, and the controller told about the `obstacles` nearest the start, nearest first
+// (as the daemon sends them).
+Scenario bench_scenario(const Controller& c, int obstacles, int scene_obstacles);
+
 // JSON object with the result's scores.
 std::string to_json(const Scenario& s, const Result& r);
 

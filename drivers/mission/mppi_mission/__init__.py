@@ -1,0 +1,1 @@
+"""mppid-mission: missions for mppid (plan, reference, runner, links)."""

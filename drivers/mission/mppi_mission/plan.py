@@ -1,0 +1,252 @@
+"""A mission: what the operator asks the vehicle to do, as a file (config/missions/*.yaml)
+or built from the command line. Validated at load; an error names the field.
+
+    name: circle_3ms
+    frame: start          # start (default): x, y relative to where the mission starts, z above
+                          # home; local: the autopilot's local frame as it is
+    task: quadrotor_rate_forest    # the mppid task file it is meant for, and the settings over it
+    mppid: {set: [cost.w_speed=8]} # that mppid flies it with (the harness passes them)
+    takeoff: 2.0          # arm and take off with the autopilot's own take-off (through the bridge)
+    land: true            # land at the end (default: when it took off)
+    vehicle_radius: 0.2
+    obstacles:            # virtual trees: only mppid knows them (published on MPPI_OBSTACLES)
+      trees: [[x, y, r], ...]
+      forest: {spacing: 4, jitter: 0.5, radius: 0.3, radius_jitter: 0.1, x_range: [4, 26],
+               y_range: [-8, 8], clear_radius: 2.5}     # seeded by --seed
+    legs:
+      - hold: {for: 3}                                  # where the last leg ended (or [x, y, z] `at`)
+      - goal: {at: [40, 0, 2], radius: 1.0, timeout: 40}
+      - line: {to: [10, 0, 2], speed: 2}
+      - waypoints: {points: [[10, 0, 2], [10, 10, 2]], speed: 2}
+      - circle: {center: [-5, 0, 2], radius: 5, speed: 3, laps: 2}
+      - figure_eight: {center: [0, 0, 2], radius: 5, speed: 3, laps: 1}
+    score: {settle: 3.0}  # tracking error counts this long after a path reaches full speed
+
+Every path starts at rest, ramps to its speed over `ramp` seconds (default: speed / 1 m/s²,
+at least 1 s) and ramps down to rest at its end, from the point where the previous leg ended;
+a circle or figure-eight begins at its point nearest to there, reached first along a line if
+it is more than 0.5 m away, and ends after its laps where it began.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from . import forest, reference
+
+LEG_KEYS = {
+    "hold": {"at", "for"},
+    "goal": {"at", "radius", "timeout"},
+    "line": {"to", "speed", "ramp"},
+    "waypoints": {"points", "speed", "ramp"},
+    "circle": {"center", "radius", "speed", "ramp", "laps"},
+    "figure_eight": {"center", "radius", "speed", "ramp", "laps"},
+}
+TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
+            "score"}
+TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it
+ON_PATH = 0.5        # m: closer than this to a curve's start point needs no transit
+
+
+class PlanError(ValueError):
+    pass
+
+
+@dataclass
+class Mission:
+    name: str
+    legs: list[dict]
+    frame: str = "start"
+    takeoff: float | None = None
+    land: bool = False
+    vehicle_radius: float = 0.2
+    obstacles: dict = field(default_factory=dict)
+    settle: float = 3.0
+    task: str | None = None
+
+    def trees(self, origin_xy, seed: int) -> list[tuple[float, float, float]]:
+        """The virtual trees in local coordinates (the forest seeded by `seed`)."""
+        ox, oy = origin_xy
+        out = [(float(x) + ox, float(y) + oy, float(r)) for x, y, r in self.obstacles.get("trees", [])]
+        f = self.obstacles.get("forest")
+        if f:
+            f = {**f, "seed": seed}
+            keep = [(0.0, 0.0)] + [tuple(leg["goal"]["at"][:2]) for leg in self.legs if "goal" in leg]
+            out += [(x + ox, y + oy, r) for x, y, r in forest.make_forest(f, keep)]
+        return out
+
+
+def load(path: str | Path) -> Mission:
+    doc = yaml.safe_load(Path(path).read_text())
+    if not isinstance(doc, dict):
+        raise PlanError(f"{path}: expected a map")
+    return from_dict(doc, default_name=Path(path).stem)
+
+
+def from_dict(doc: dict, default_name="mission") -> Mission:
+    unknown = set(doc) - TOP_KEYS
+    if unknown:
+        raise PlanError(f"{sorted(unknown)[0]}: unknown field (fields: {', '.join(sorted(TOP_KEYS))})")
+    legs = doc.get("legs")
+    if not isinstance(legs, list) or not legs:
+        raise PlanError("legs: a list of at least one leg")
+    for i, leg in enumerate(legs):
+        _check_leg(i, leg)
+    frame = doc.get("frame", "start")
+    if frame not in ("start", "local"):
+        raise PlanError(f"frame: start or local, got {frame!r}")
+    takeoff = doc.get("takeoff")
+    if takeoff is not None and not _num(takeoff, 0.5, 100):
+        raise PlanError(f"takeoff: an altitude in [0.5, 100] m, got {takeoff!r}")
+    obstacles = doc.get("obstacles") or {}
+    if set(obstacles) - {"trees", "forest"}:
+        raise PlanError("obstacles: trees and/or forest")
+    for j, tr in enumerate(obstacles.get("trees", [])):
+        if not (isinstance(tr, list) and len(tr) == 3 and all(_num(c) for c in tr) and tr[2] > 0):
+            raise PlanError(f"obstacles.trees[{j}]: [x, y, radius] with radius > 0")
+    score = doc.get("score") or {}
+    settle = score.get("settle", 3.0)
+    if not _num(settle, 0, 600):
+        raise PlanError("score.settle: seconds in [0, 600]")
+    vr = doc.get("vehicle_radius", 0.2)
+    if not _num(vr, 0, 5):
+        raise PlanError("vehicle_radius: metres in [0, 5]")
+    return Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
+                   takeoff=None if takeoff is None else float(takeoff),
+                   land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
+                   obstacles=obstacles, settle=float(settle), task=doc.get("task"))
+
+
+def _num(v, lo=-1e6, hi=1e6) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
+
+
+def _point(v) -> bool:
+    return isinstance(v, list) and len(v) == 3 and all(_num(c) for c in v)
+
+
+def _check_leg(i: int, leg):
+    if not isinstance(leg, dict) or len(leg) != 1 or next(iter(leg)) not in LEG_KEYS:
+        raise PlanError(f"legs[{i}]: one of {', '.join(LEG_KEYS)}, as `- kind: {{...}}`")
+    kind, a = next(iter(leg.items()))
+    a = a or {}
+    leg[kind] = a
+    where = f"legs[{i}].{kind}"
+    if set(a) - LEG_KEYS[kind]:
+        raise PlanError(f"{where}.{sorted(set(a) - LEG_KEYS[kind])[0]}: unknown (fields: {sorted(LEG_KEYS[kind])})")
+    for key in ("at", "to", "center"):
+        if key in a and not _point(a[key]):
+            raise PlanError(f"{where}.{key}: a point [x, y, z]")
+    if kind in ("goal",) and "at" not in a:
+        raise PlanError(f"{where}.at: required")
+    if kind == "line" and "to" not in a:
+        raise PlanError(f"{where}.to: required")
+    if kind == "waypoints" and not (isinstance(a.get("points"), list) and a["points"]
+                                    and all(_point(p) for p in a["points"])):
+        raise PlanError(f"{where}.points: a list of points [x, y, z]")
+    if kind in ("circle", "figure_eight"):
+        for key in ("center", "radius", "speed"):
+            if key not in a:
+                raise PlanError(f"{where}.{key}: required")
+        if not _num(a["radius"], 0.5, 1000):
+            raise PlanError(f"{where}.radius: metres in [0.5, 1000]")
+        if not _num(a.get("laps", 1), 0.1, 1000):
+            raise PlanError(f"{where}.laps: in [0.1, 1000]")
+    if kind in ("line", "waypoints", "circle", "figure_eight") and not _num(a.get("speed", 1.0), 0.05, 30):
+        raise PlanError(f"{where}.speed: m/s in [0.05, 30]")
+    if "ramp" in a and not _num(a["ramp"], 0, 60):
+        raise PlanError(f"{where}.ramp: seconds in [0, 60]")
+    for key, lo, hi in (("for", 0, 1e6), ("radius", 0.05, 100), ("timeout", 0.1, 1e4)):
+        if key in a and kind in ("hold", "goal") and not _num(a[key], lo, hi):
+            raise PlanError(f"{where}.{key}: in [{lo}, {hi}]")
+
+
+# ---- legs at run time ------------------------------------------------------------------
+@dataclass
+class Step:
+    """One reference the runner publishes until its end condition: a leg, or one piece of
+    it (a transit line, a waypoint's line)."""
+    leg: int
+    kind: str                  # hold, goal, line, circle, figure_eight
+    ref: dict                  # reference.py's dict (goal: a hold at the goal)
+    duration: float | None     # s after t0; None: until reached (goal) or forever (hold)
+    goal_radius: float = 1.0
+    timeout: float | None = None
+    transit: bool = False      # a line to a curve's start, not what the leg asked for
+
+    @property
+    def end(self) -> np.ndarray:
+        if self.kind in ("hold", "goal"):
+            return np.asarray(self.ref["center"], float)
+        t = 1e9 if self.duration is None else self.duration
+        return reference.evaluate(self.ref, [t])[0][0]
+
+    @property
+    def full_speed_at(self) -> float:
+        return float(self.ref.get("ramp", 0.0))
+
+
+def default_ramp(speed: float) -> float:
+    return max(1.0, speed / 1.0)
+
+
+def steps(mission: Mission, leg_index: int, here, origin) -> list[Step]:
+    """The steps of one leg, started where the previous one ended (`here`, local ENU);
+    `origin` maps the mission's x, y to local ones (frame: start)."""
+    kind, a = next(iter(mission.legs[leg_index].items()))
+    here = np.asarray(here, float)
+
+    def loc(p):
+        p = np.asarray(p, float).copy()
+        p[:2] += origin[:2]
+        return p
+
+    if kind == "hold":
+        at = loc(a["at"]) if "at" in a else here
+        return [Step(leg_index, "hold", {"kind": "hold", "center": at.tolist()}, a.get("for"))]
+    if kind == "goal":
+        at = loc(a["at"])
+        return [Step(leg_index, "goal", {"kind": "hold", "center": at.tolist()}, None,
+                     goal_radius=float(a.get("radius", 1.0)), timeout=a.get("timeout", 60.0))]
+    speed = float(a.get("speed", 1.0))
+    ramp = float(a.get("ramp", default_ramp(speed)))
+    if kind in ("line", "waypoints"):
+        pts = [a["to"]] if kind == "line" else a["points"]
+        out, prev = [], here
+        for p in pts:
+            out.append(_line(leg_index, prev, loc(p), speed, ramp))
+            prev = loc(p)
+        return out
+    laps, radius = float(a.get("laps", 1.0)), float(a["radius"])
+    speed = reference.line_speed(laps * 2 * math.pi * radius, speed, ramp)  # a lap too short to reach it
+    ref = {"kind": kind, "center": loc(a["center"]).tolist(), "radius": radius, "speed": speed, "ramp": ramp}
+    ref["phase"] = _nearest_phase(ref, here)
+    ref["end_s"] = reference.duration(ref, laps)
+    start = reference.evaluate({**ref, "speed": 0.0}, [0.0])[0][0]
+    curve = Step(leg_index, kind, ref, ref["end_s"])
+    if np.linalg.norm(start - here) <= ON_PATH:
+        return [curve]
+    t_speed = min(TRANSIT_SPEED, speed)
+    return [_line(leg_index, here, start, t_speed, default_ramp(t_speed), transit=True), curve]
+
+
+def _line(leg, a, b, speed, ramp, transit=False) -> Step:
+    ref = {"kind": "line", "center": np.asarray(a, float).tolist(), "end": np.asarray(b, float).tolist(),
+           "speed": speed, "ramp": ramp}
+    return Step(leg, "line", ref, reference.duration(ref), transit=transit)
+
+
+def _nearest_phase(ref: dict, p) -> float:
+    """The curve parameter whose point is nearest p (circle: exactly; figure-eight: on a grid)."""
+    c = np.asarray(ref["center"], float)
+    if ref["kind"] == "circle":
+        return float(math.atan2(p[1] - c[1], p[0] - c[0]))
+    a = np.linspace(0.0, 2 * np.pi, 720, endpoint=False)
+    r = ref["radius"]
+    d = (c[0] + r * np.sin(a) - p[0]) ** 2 + (c[1] + 0.5 * r * np.sin(2 * a) - p[1]) ** 2
+    return float(a[int(np.argmin(d))])

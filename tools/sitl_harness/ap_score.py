@@ -1,0 +1,162 @@
+"""The score of a flight through ArduCopter SITL (ardupilot.py), from the SITL's simulated
+truth (ap_truth.py's truth.jsonl), the mission tool's record of what it asked for
+(mission.jsonl: each step's reference and epoch) and, for mppid, its commands in the LCM log.
+
+Per leg of the mission: the RMS and largest distance between the true position and the
+reference while the path is at speed (from `score.settle` s after its ramp; hold legs from
+`settle` s after they start: the hover error) and the same from the autopilot's own estimate
+(what the controller saw). Over the flight: crashes (the truth below 5 cm while flying or
+tilted past 80 degrees, or the SITL's "crash" text), the largest tilt, the clearance to the
+virtual trees (truth), whether the mission was done. success: the mission done, no crash,
+no tree hit.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import paths
+
+CRASH_TILT_DEG = 80.0
+GROUND_Z = 0.05
+
+
+def _jsonl(p: Path) -> list[dict]:
+    if not p.is_file():
+        return []
+    out = []
+    for line in p.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass
+    return out
+
+
+def _reference():
+    import sys
+    d = str(paths.ROOT / "drivers" / "mission")
+    if d not in sys.path:
+        sys.path.insert(0, d)
+    from mppi_mission import reference
+    return reference
+
+
+def score_flight(out: Path, spec, info: dict) -> dict:
+    out = Path(out)
+    truth = [r for r in _jsonl(out / "truth.jsonl") if "x" in r]
+    events = [r for r in _jsonl(out / "truth.jsonl") if "event" in r]
+    mission = _jsonl(out / "mission.jsonl")
+    summary = json.loads((out / "mission_summary.json").read_text()) if (out / "mission_summary.json").is_file() else {}
+    res = {"scenario": paths.scenario_label(spec.scenario), "seed": spec.seed, "autopilot": "ardupilot",
+           "controller": spec.controller, "success": False, "reason": None,
+           "harness_outcome": info.get("harness_outcome"), "mission_outcome": summary.get("outcome"),
+           "wall_s": info.get("wall_s")}
+    if not truth or not mission:
+        res["reason"] = info.get("error") or "no truth or mission record"
+        return res
+    head = next((m for m in mission if m.get("event") == "mission"), {})
+    clock = head.get("clock", "state")
+    t_truth = _truth_clock(truth, clock)
+    X = np.array([r["x"] for r in truth])
+    est = np.array([r["est"] if r.get("est") else [np.nan] * 3 for r in truth])
+    flying = np.array([r.get("armed", False) for r in truth])
+    res.update(_legs(mission, t_truth, X, est, settle=float(head.get("settle", 3.0))))
+    res.update(_safety(truth, events, X, flying, head))
+    res.update(_timing(out) if spec.controller != "guided" else {})
+    done = summary.get("outcome") == "done"
+    res["success"] = bool(done and not res["crashes"] and (res.get("min_clearance") is None or res["min_clearance"] > 0))
+    res["reason"] = ("mission done" if res["success"] else
+                     res["crashes"][0] if res["crashes"] else
+                     "hit a tree" if done else f"mission {summary.get('outcome') or 'not finished'}"
+                     + (f" (harness: {info.get('harness_outcome')})" if info.get("harness_outcome") else ""))
+    return res
+
+
+def _truth_clock(truth, clock: str) -> np.ndarray:
+    """The truth's times on the mission's clock: the autopilot's boot time (the GUIDED
+    baseline's), or this host's wall clock as the bridge maps boot times onto it (mppid's
+    states): boot time + the smallest receipt delay, as the bridge's BootClock takes it."""
+    boot = np.array([r["boot_us"] for r in truth], float)
+    if clock == "boot":
+        return boot
+    wall = np.array([r["wall_us"] for r in truth], float)
+    ok = boot > 0
+    return boot + (np.min(wall[ok] - boot[ok]) if ok.any() else 0.0)
+
+
+def _legs(mission, t_truth, X, est, settle) -> dict:
+    reference = _reference()
+    steps = [m for m in mission if m.get("event") == "step" and m["leg"] >= 0]
+    legs = {}
+    for i, s in enumerate(steps):
+        t_end = steps[i + 1]["t0_us"] if i + 1 < len(steps) else t_truth[-1]
+        t = (t_truth - s["t0_us"]) * 1e-6
+        start = settle + (float(s["ref"].get("ramp", 0.0)) if s["kind"] != "hold" else 0.0)
+        sel = (t >= start) & (t_truth < t_end)
+        if s["duration"] is not None:
+            sel &= t <= s["duration"]
+        if s.get("transit") or s["kind"] == "goal" or not sel.any():
+            continue
+        ref = reference.evaluate(s["ref"], t[sel])[0]
+        e_true = np.linalg.norm(X[sel] - ref, axis=1)
+        e_est = np.linalg.norm(est[sel] - ref, axis=1)
+        key = f"leg{s['leg']}_{s['kind']}"
+        legs[key] = {"rmse": float(np.sqrt(np.mean(e_true ** 2))), "max": float(np.max(e_true)),
+                     "rmse_estimate": float(np.sqrt(np.nanmean(e_est ** 2))), "samples": int(sel.sum()),
+                     "speed": s["ref"].get("speed")}
+    out = {"legs": legs}
+    paths_ = [v for k, v in legs.items() if not k.endswith("_hold")]
+    holds = [v for k, v in legs.items() if k.endswith("_hold")]
+    if paths_:
+        out["tracking_rmse"] = float(np.sqrt(np.mean([v["rmse"] ** 2 for v in paths_])))
+        out["tracking_max"] = max(v["max"] for v in paths_)
+    if holds:
+        out["hover_rmse"] = float(np.sqrt(np.mean([v["rmse"] ** 2 for v in holds])))
+        out["hover_max"] = max(v["max"] for v in holds)
+    return out
+
+
+def _safety(truth, events, X, flying, head) -> dict:
+    crashes = []
+    tilt = np.array([r.get("tilt_deg", 0.0) for r in truth])
+    airborne = np.flatnonzero(X[:, 2] > 0.5)
+    if airborne.size:
+        # After the first take-off and before the last landing began (the mode left GUIDED).
+        lo = airborne[0]
+        land = [i for i, r in enumerate(truth) if i > lo and r.get("mode") == "LAND"]
+        hi = land[0] if land else len(truth)
+        low = np.flatnonzero((X[lo:hi, 2] < GROUND_Z) & flying[lo:hi])
+        if low.size:
+            crashes.append(f"ground contact while flying, {X[lo + low[0], :2].round(2).tolist()}")
+        over = np.flatnonzero(tilt[lo:hi] > CRASH_TILT_DEG)
+        if over.size:
+            crashes.append(f"tilted past {CRASH_TILT_DEG:g} degrees")
+    for e in events:
+        if e.get("event") == "statustext" and "crash" in e.get("text", "").lower():
+            crashes.append(f"autopilot: {e['text']}")
+    res = {"crashes": crashes, "max_tilt_deg": float(tilt.max()) if tilt.size else None,
+           "max_speed": float(np.max(np.linalg.norm([r["v"] for r in truth], axis=1)))}
+    trees = head.get("trees") or []
+    if trees:
+        vr = float(head.get("vehicle_radius", 0.2))
+        air = X[:, 2] > 0.3
+        d = [min(math.hypot(p[0] - x, p[1] - y) - r - vr for x, y, r in trees) for p in X[air]]
+        res["min_clearance"] = float(min(d)) if d else None
+    return res
+
+
+def _timing(out: Path) -> dict:
+    """mppid's per-cycle timing from its commands in the LCM log (timing.py's definitions)."""
+    from . import logs, timing
+    log = out / "flight.lcmlog"
+    if not log.is_file():
+        return {}
+    msgs = logs.read_lcm_log(log, {"MPPI_COMMAND", "MPPI_STATUS"})
+    commands = [m for _, m in msgs.get("MPPI_COMMAND", [])]
+    t = timing.flight_timing([m for _, m in msgs.get("MPPI_STATUS", [])], commands)
+    t.pop("compute_samples_ms", None)
+    return t

@@ -1,0 +1,42 @@
+"""Campaigns through ArduCopter SITL side by side (e.g. mppid and ArduCopter's own GUIDED
+position controller over the same missions and seeds): one markdown row per mission and
+controller. Errors are the simulated truth's (ap_score.py), means over the successful
+flights (max: the largest of any); `estimate` is the same against the autopilot's own
+position estimate (what either controller saw)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from statistics import mean
+
+
+def _m(vals, fmt="{:.3f}", agg=mean):
+    vals = [v for v in vals if isinstance(v, (int, float))]
+    return fmt.format(agg(vals)) if vals else "-"
+
+
+def _leg_key(r):
+    return "tracking_rmse" if r.get("tracking_rmse") is not None else "hover_rmse"
+
+
+def table(folders: list[Path], labels: list[str]) -> str:
+    camps = [(label, json.loads((Path(f) / "summary.json").read_text())["runs"]) for f, label in zip(folders, labels)]
+    missions = []
+    for _, runs in camps:
+        missions += [r["scenario"] for r in runs if r["scenario"] not in missions]
+    lines = ["| mission | controller | flights | success | RMS error [m] | largest error [m] | RMS, estimate [m] "
+             "| largest tilt [deg] | failures |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    for m in missions:
+        for label, runs in camps:
+            rs = [r for r in runs if r["scenario"] == m]
+            if not rs:
+                continue
+            ok = [r for r in rs if r.get("success")]
+            legs = [leg for r in ok for k, leg in (r.get("legs") or {}).items() if not k.endswith("_hold")
+                    or r.get("tracking_rmse") is None]
+            fails = "; ".join(sorted({str(r.get("reason")) for r in rs if not r.get("success")})) or "-"
+            lines.append(f"| {m} | {label} | {len(rs)} | {len(ok)}/{len(rs)} | "
+                         f"{_m([r.get(_leg_key(r)) for r in ok])} | {_m([leg['max'] for leg in legs], agg=max)} | "
+                         f"{_m([leg['rmse_estimate'] for leg in legs])} | "
+                         f"{_m([r.get('max_tilt_deg') for r in rs], '{:.0f}', max)} | {fails} |")
+    return "\n".join(lines) + "\n"
