@@ -22,6 +22,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
 setup=(--flight)
+for a in "$@"; do [[ "$a" == "--view" ]] && setup+=(--view); done
 for a in "$@"; do [[ "$a" == "--build-all" ]] && setup=(); done
 # shellcheck disable=SC2086  # a list of words on purpose
 bash tools/setup.sh "${setup[@]}" --progress ${MPPID_SETUP_ARGS:-} >&2
@@ -56,7 +57,7 @@ if [[ -d "$out" ]]; then
   echo "log:   $out/flight.lcmlog (tools/lcm-spy, or lcm-logplayer)"
   [[ -f "$out/flight.rrd" ]] && echo "3D:    $out/flight.rrd (tools/view open $out/flight.rrd)"
 fi
-if [[ "${setup[*]}" == "--flight" ]]; then
+if [[ "${setup[0]:-}" == "--flight" ]]; then
   echo "built: what the flight needs; tools/setup.sh builds the rest (tests, benchmarks, tools), tools/test.sh too"
 fi
 exit "$rc"

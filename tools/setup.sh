@@ -11,6 +11,7 @@
 #   --flight     only what a SITL flight needs (tools/fly.sh): the venv's flight packages
 #                (requirements-flight.txt) and the targets mppid, mppid-sim and the LCM
 #                types; a later run without it adds the rest
+#   --view       with --flight: also the live view's packages (requirements-view.txt)
 #   --progress   one progress line instead of the compiler's output (kept in build/build.log;
 #                its end is shown if the build fails)
 #
@@ -24,7 +25,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-do_apt=1 do_venv=1 do_build=1 flight=0 progress=0
+do_apt=1 do_venv=1 do_build=1 flight=0 view=0 progress=0
 cmake_extra=()
 while (($#)); do
   case "$1" in
@@ -32,9 +33,10 @@ while (($#)); do
     --no-venv) do_venv=0 ;;
     --no-build) do_build=0 ;;
     --flight) flight=1 ;;
+    --view) view=1 ;;
     --progress) progress=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,23s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,24s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -105,15 +107,19 @@ PY_BASE=/usr/bin/python3
 VENV="$ROOT/.venv"
 STAMP="$VENV/.mppid-requirements.sha256"
 FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
+VIEW_STAMP="$VENV/.mppid-view-requirements.sha256"
+# requirements.txt includes both of these; its stamp covers all three.
+ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt)
 
 # The stamp of a requirements file: it and the interpreter, so a Python upgrade reinstalls.
 requirements_hash() {
   { cat "$@"; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
 }
-# pip install -r FILE unless STAMP says it is installed.
+# pip install -r FILE unless STAMP says it is installed (FILE and what it includes).
 pip_install() {
   local file="$1" stamp="$2" want
-  want="$(requirements_hash requirements-flight.txt "$file")"
+  if [[ "$file" == requirements.txt ]]; then want="$(requirements_hash "${ALL_REQUIREMENTS[@]}")"
+  else want="$(requirements_hash "$file")"; fi
   if [[ "$want" == "$(cat "$stamp" 2>/dev/null || true)" ]]; then
     log "venv: $file unchanged"
     return
@@ -129,16 +135,23 @@ if ((do_venv)); then
     rm -rf "$VENV"
     "$PY_BASE" -m venv "$VENV"
   fi
-  # A flight needs a few packages (requirements-flight.txt, ~20 s); the tests the rest
-  # (requirements.txt includes the flight's). The full set installed covers the flight's.
-  if ((flight)) && [[ "$(requirements_hash requirements-flight.txt requirements.txt)" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
+  # A flight needs a few packages (requirements-flight.txt, ~20 s), a viewed one rerun too
+  # (requirements-view.txt); the tests the rest (requirements.txt includes both). The full
+  # set installed covers the flight's.
+  if ((flight)) && [[ "$(requirements_hash "${ALL_REQUIREMENTS[@]}")" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
     pip_install requirements-flight.txt "$FLIGHT_STAMP"
+    ((view)) && pip_install requirements-view.txt "$VIEW_STAMP"
   elif ((!flight)); then
     pip_install requirements.txt "$STAMP"
   else
     log "venv: requirements unchanged"
   fi
 fi
+
+# An NVIDIA GPU this machine could fly the CUDA backend on.
+gpu_present() {
+  [[ -e /dev/nvidia0 ]] || nvidia-smi -L >/dev/null 2>&1
+}
 
 # cmake --build "$@", its output in $BUILD_DIR/build.log and one line of progress on stderr
 # (ninja's [done/total]); on failure the log's end.
@@ -148,7 +161,7 @@ build_with_progress() {
   [[ -t 2 ]] && tty=1
   set +o pipefail
   cmake --build "$@" 2>&1 | tee "$logf" | while IFS= read -r line; do
-    if [[ "$line" =~ ^\[([0-9]+)/([0-9]+)\] ]]; then
+    if [[ "$line" =~ ^\[([0-9]+)/([0-9]+)\]\ (Building|Linking|Generating) ]]; then
       pct=$((100 * BASH_REMATCH[1] / BASH_REMATCH[2]))
       if ((tty)); then
         printf '\r[setup] building: %s/%s (%d %%)' "${BASH_REMATCH[1]}" "${BASH_REMATCH[2]}" "$pct" >&2
@@ -179,6 +192,20 @@ if ((do_build)); then
   # it (override with: -- -DMPPID_LCM=OFF).
   if [[ -x "$VENV/bin/python" ]]; then args+=(-DMPPID_LCM=ON); fi
   [[ -n "${MPPID_CUDA:-}" ]] && args+=("-DMPPID_CUDA=$MPPID_CUDA")
+  # The first flight flies the CPU backend. On a machine with no GPU, a new build folder made
+  # for it (--flight) leaves the CUDA backend to the rest (its kernels are half the flight's
+  # compile time where nvcc is installed); the next set-up without --flight turns it back to
+  # the default and builds it.
+  no_cuda_mark="$BUILD_DIR/.mppid-flight-without-cuda"
+  if [[ -z "${MPPID_CUDA:-}" ]]; then
+    if ((flight)) && [[ ! -f "$BUILD_DIR/CMakeCache.txt" ]] && ! gpu_present; then
+      args+=(-DMPPID_CUDA=OFF)
+      mkdir -p "$BUILD_DIR" && touch "$no_cuda_mark"
+    elif ((!flight)) && [[ -f "$no_cuda_mark" ]]; then
+      args+=(-DMPPID_CUDA=AUTO)
+      rm -f "$no_cuda_mark"
+    fi
+  fi
   if command -v ccache >/dev/null; then
     args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_CUDA_COMPILER_LAUNCHER=ccache)
     # Paths under the checkout hash as relative ones: another clone of the same tree hits.

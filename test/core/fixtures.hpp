@@ -11,6 +11,7 @@
 #include "mppi/models/quadrotor_rate.hpp"
 #include "mppi/settings.hpp"
 #include "mppi/task.hpp"
+#include "mppi/tasks.hpp"
 
 namespace mppi::testing {
 
@@ -72,5 +73,24 @@ inline std::vector<float> rate_state(float qw = 1, float qx = 0, float qy = 0, f
 }
 
 using QuadrotorTeam3 = Task<Quadrotor, ForestCost<Quadrotor>, 3>;
+
+// The forest task's parameters with two trunks ahead, the goal 20 m on at 2 m up.
+inline QuadrotorForest::Params forest_with_two_trunks() {
+  QuadrotorForest::Params p{};
+  p.cost.goal[0][0] = 20.0f;
+  p.cost.goal[0][2] = 2.0f;
+  p.cost.obstacles.count = 2;
+  p.cost.obstacles.items[0] = Cylinder{4.0f, 0.5f, 0.5f, 0.0f, 0.0f};
+  p.cost.obstacles.items[1] = Cylinder{7.0f, -1.0f, 0.4f, 0.0f, 0.0f};
+  return p;
+}
+
+// The 16-state quadrotor z m up, flying 1 m/s forward, its motors at hover speed.
+inline std::vector<float> cruising_state(float z = 2.0f) {
+  std::vector<float> x = quad_hover_state(Quadrotor::Params{});
+  x[Quadrotor::PZ] = z;
+  x[Quadrotor::VX] = 1.0f;
+  return x;
+}
 
 }  // namespace mppi::testing

@@ -19,24 +19,6 @@
 namespace mppi {
 namespace {
 
-QuadrotorForest::Params forest_params() {
-  QuadrotorForest::Params p{};
-  p.cost.goal[0][0] = 20.0f;
-  p.cost.goal[0][2] = 2.0f;
-  p.cost.obstacles.count = 2;
-  p.cost.obstacles.items[0] = Cylinder{4.0f, 0.5f, 0.5f, 0.0f, 0.0f};
-  p.cost.obstacles.items[1] = Cylinder{7.0f, -1.0f, 0.4f, 0.0f, 0.0f};
-  return p;
-}
-
-std::vector<float> forest_state() {
-  std::vector<float> x(Quadrotor::kNx, 0.0f);
-  x[Quadrotor::PZ] = 2.0f;
-  x[Quadrotor::VX] = 1.0f;
-  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(Quadrotor::Params{});
-  return x;
-}
-
 MppiSettings settings(const char* simd, int k, Weighting w = Weighting::kCostToGo) {
   MppiSettings s = testing::quadrotor_settings(k, 30, 10.0f, 150.0f, 2);
   s.simd = simd;
@@ -83,8 +65,8 @@ TEST_P(Anytime, StoppedAfterChunksEqualsTheUpdateOfThatManyRollouts) {
       CpuBackend<QuadrotorForest> reference(small);
       ASSERT_STREQ(stopped.name(), reference.name());
 
-      const auto p = forest_params();
-      const auto x = forest_state();
+      const auto p = testing::forest_with_two_trunks();
+      const auto x = testing::cruising_state();
       std::vector<float> a = start_plan(full), b = a;
       UpdateStats sa, sb;
       stopped.update(x.data(), p, 5, a.data(), &sa);
@@ -121,8 +103,8 @@ TEST_P(Anytime, AFlagThatStaysClearRunsEveryChunk) {
   CpuBackend<QuadrotorForest> chunked(s), plain(s);
   std::atomic<bool> stop{false};
   chunked.set_stop_flag(&stop);
-  const auto p = forest_params();
-  const auto x = forest_state();
+  const auto p = testing::forest_with_two_trunks();
+  const auto x = testing::cruising_state();
   std::vector<float> a = start_plan(s), b = a;
   UpdateStats sa, sb;
   chunked.update(x.data(), p, 1, a.data(), &sa);
@@ -138,8 +120,8 @@ TEST_P(Anytime, BelowTheMinimumThePlanIsLeftAndTheHeldPlanGoesOut) {
   auto mppi = std::make_unique<Mppi<QuadrotorForest>>(s, std::make_unique<CpuBackend<QuadrotorForest>>(s));
   std::atomic<bool> stop{false};
   mppi->set_stop_flag(&stop);
-  const auto p = forest_params();
-  const auto x = forest_state();
+  const auto p = testing::forest_with_two_trunks();
+  const auto x = testing::cruising_state();
   const auto held = start_plan(s);
   float u[4];
   for (bool before : {true, false}) {
@@ -174,8 +156,8 @@ TEST_P(Anytime, BelowTheMinimumThePlanIsLeftAndTheHeldPlanGoesOut) {
 // (the deadline guard) whenever it comes. Whatever prefix K' the threads agreed on, the
 // update is bit for bit the update of a K'-sample backend (K' a whole number of chunks).
 TEST_P(Anytime, AStopFromAnotherThreadAnyTimeIsTheUpdateOfThePrefixFinished) {
-  const auto p = forest_params();
-  const auto x = forest_state();
+  const auto p = testing::forest_with_two_trunks();
+  const auto x = testing::cruising_state();
   int partial = 0;
   for (int delay_us : {0, 200, 500, 1000, 2000, 4000, 100000}) {
     const MppiSettings full = settings(GetParam(), 2048);

@@ -26,19 +26,12 @@ QuadrotorForest::Params forest_params() {
   return p;
 }
 
-std::vector<float> hover_state() {
-  std::vector<float> x(Quadrotor::kNx, 0.0f);
-  x[Quadrotor::PZ] = 2.0f;
-  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(Quadrotor::Params{});
-  return x;
-}
-
 std::vector<float> run_cycles(int threads, int cycles) {
   MppiSettings s = quad_settings();
   s.threads = threads;
   Mppi<QuadrotorForest> mppi(s, std::make_unique<CpuBackend<QuadrotorForest>>(s));
   const auto params = forest_params();
-  auto x = hover_state();
+  auto x = testing::quad_hover_state(Quadrotor::Params{});
   float u[4];
   for (int c = 0; c < cycles; ++c) mppi.iterate(x.data(), params, u);
   return mppi.plan();

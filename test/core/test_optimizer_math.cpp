@@ -65,24 +65,6 @@ std::vector<float> rate_state_at(float z) {
 
 MppiSettings forest_settings(int k = 128, int t = 30) { return testing::quadrotor_settings(k, t, 10.0f, 150.0f, 2); }
 
-QuadrotorForest::Params forest_params() {
-  QuadrotorForest::Params p{};
-  p.cost.goal[0][0] = 20.0f;
-  p.cost.goal[0][2] = 2.0f;
-  p.cost.obstacles.count = 2;
-  p.cost.obstacles.items[0] = Cylinder{4.0f, 0.5f, 0.5f, 0.0f, 0.0f};
-  p.cost.obstacles.items[1] = Cylinder{7.0f, -1.0f, 0.4f, 0.0f, 0.0f};
-  return p;
-}
-
-std::vector<float> forest_state(float z = 2.0f) {
-  std::vector<float> x(Quadrotor::kNx, 0.0f);
-  x[Quadrotor::PZ] = z;
-  x[Quadrotor::VX] = 1.0f;
-  for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(Quadrotor::Params{});
-  return x;
-}
-
 template <class T>
 std::unique_ptr<Mppi<T>> make_mppi(const MppiSettings& s) {
   return std::make_unique<Mppi<T>>(s, std::make_unique<CpuBackend<T>>(s));
@@ -374,8 +356,8 @@ TEST(UpdateLaw, EssMatchesWeightsOnForestTask) {
     MppiSettings s = forest_settings(200, 25);
     s.weighting = wt;
     auto mppi = make_mppi<QuadrotorForest>(s);
-    const auto p = forest_params();
-    const auto x = forest_state();
+    const auto p = testing::forest_with_two_trunks();
+    const auto x = testing::cruising_state();
     float u[4];
     for (int c = 0; c < 3; ++c) {
       const UpdateStats st = mppi->iterate(x.data(), p, u);
@@ -446,9 +428,9 @@ TEST(Robustness, EverySampleCrashesStillFinite) {
       MppiSettings s = forest_settings(64, 20);
       s.weighting = wt;
       auto mppi = make_mppi<QuadrotorForest>(s);
-      auto p = forest_params();
+      auto p = testing::forest_with_two_trunks();
       p.cost.w_crash = w_crash;
-      const auto x = forest_state(-1.0f);  // below ground_z = 0: every rollout crashes at once
+      const auto x = testing::cruising_state(-1.0f);  // below ground_z = 0: every rollout crashes at once
       float u[4];
       for (int c = 0; c < 3; ++c) {
         const UpdateStats st = mppi->iterate(x.data(), p, u);
@@ -481,8 +463,8 @@ std::vector<float> forest_plan_after(int threads, Weighting wt, std::uint64_t se
   s.weighting = wt;
   s.seed = seed;
   auto mppi = make_mppi<QuadrotorForest>(s);
-  const auto p = forest_params();
-  auto x = forest_state();
+  const auto p = testing::forest_with_two_trunks();
+  auto x = testing::cruising_state();
   float u[4];
   for (int c = 0; c < cycles; ++c) {
     mppi->iterate(x.data(), p, u);
@@ -521,8 +503,8 @@ TEST(Smoothing, PlanAtTheLimitsStaysInside) {
   std::vector<float> plan(static_cast<std::size_t>(s.horizon) * 4);
   for (std::size_t n = 0; n < plan.size(); ++n) plan[n] = ((n / 4) % 2 == 0) ? 6000.0f : 0.0f;
   mppi->set_plan(plan);
-  const auto p = forest_params();
-  const auto x = forest_state();
+  const auto p = testing::forest_with_two_trunks();
+  const auto x = testing::cruising_state();
   float u[4];
   for (int c = 0; c < 5; ++c) {
     mppi->iterate(x.data(), p, u);
@@ -552,7 +534,7 @@ TEST(Smoothing, CentredMovingAverageShrinkingAtTheEnds) {
     for (int j = 0; j < 4; ++j) plan[i * 4 + j] = 3000.0f + 10.0f * static_cast<float>(i) + static_cast<float>(j);
   mppi->set_plan(plan);
   float u[4];
-  mppi->iterate(forest_state().data(), forest_params(), u);
+  mppi->iterate(testing::cruising_state().data(), testing::forest_with_two_trunks(), u);
   // Channel offset j aside, the ramp 3000 + 10 i averages over [i-2, i+2] cut to [0, 9]:
   //   i = 0: mean(0,1,2) = 1 -> 3010; i = 1: mean(0..3) = 1.5 -> 3015; i = 2..7: i -> 3000 + 10 i;
   //   i = 8: mean(6..9) = 7.5 -> 3075; i = 9: mean(7,8,9) = 8 -> 3080.
@@ -577,9 +559,9 @@ TEST(Smoothing, ConstantPlanOnTheLimitStaysInside) {
   s.u_nominal = s.u_init;
   auto mppi = make_mppi<QuadrotorForest>(s);  // reset() fills the plan with u_init: on the limits
   float u[4];
-  const auto x = forest_state();
+  const auto x = testing::cruising_state();
   for (int c = 0; c < 3; ++c) {
-    mppi->iterate(x.data(), forest_params(), u);
+    mppi->iterate(x.data(), testing::forest_with_two_trunks(), u);
     expect_inside_limits(mppi->plan(), s);
     for (int j = 0; j < 4; ++j) {
       EXPECT_GE(u[j], s.u_min[j]) << j;
@@ -639,8 +621,8 @@ TEST(Weightings, BothFiniteAndDifferent) {
     MppiSettings s = forest_settings(128, 30);
     s.weighting = wt;
     auto mppi = make_mppi<QuadrotorForest>(s);
-    const auto p = forest_params();
-    const auto x = forest_state();
+    const auto p = testing::forest_with_two_trunks();
+    const auto x = testing::cruising_state();
     float u[4];
     for (int c = 0; c < 3; ++c) {
       const auto& st = mppi->iterate(x.data(), p, u);

@@ -11,9 +11,9 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::quad_hover_state;
 using Q = Quadrotor;
-using Team = QuadrotorTeam3;
+using Team = testing::QuadrotorTeam3;
 
 std::vector<float> team_state() {
   const Q::Params p;

@@ -161,7 +161,7 @@ PYEOF
   say "timing done"
 fi
 
-# ---- benchmarks: mppid-bench (README, Fig. 11) and the targets ---------------------
+# ---- benchmarks: mppid-bench (docs/gpu.md, Fig. 11) and the targets ---------------------
 if want bench; then
   it=1000 itbig=100
   ((QUICK)) && it=200 itbig=20

@@ -33,7 +33,7 @@ struct SamplerConstants {
 // the grouping). For a team with one group per vehicle, a sample moves one vehicle and the
 // others fly the plan, so a sample's cost differs from its group's others by what that
 // vehicle's variation did (its own terms and its pair terms): the weights no longer mix the
-// other vehicles' noise into each vehicle's update (README "Teams"). Every channel is then
+// other vehicles' noise into each vehicle's update (docs/sitl.md "Teams"). Every channel is then
 // perturbed by a 1/groups share of the samples, and the update, a weighted average over all
 // of them, moves a group by its share of the total weight.
 template <int NU, class S, class V>

@@ -117,7 +117,14 @@ class Bridge:
         self.mav = None
         self.conn_gen = 0
 
-        # Link.
+        self._init_link()
+        self._init_thrust(settings)
+        self._init_engagement()
+        self._init_state()
+        self._init_forwarding(settings)
+
+    def _init_link(self):
+        """The link to the autopilot and what it told us: heartbeat, mode, battery, answers."""
         self.target_system = 0
         self.autopilot_type = mavlink.MAV_AUTOPILOT_PX4 if self.dialect == "px4" else mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
         self.last_hb_mono = None
@@ -134,7 +141,8 @@ class Bridge:
         self.params = {}
         self.statustexts = []
 
-        # Thrust and flight refusal.
+    def _init_thrust(self, settings):
+        """The thrust map (from the settings or the autopilot's hover thrust) and the refusals to fly."""
         vh = settings["vehicle"]
         self.thrust = None
         self.hover_source = ""
@@ -147,15 +155,17 @@ class Bridge:
         self.state_rate = telemetry.StateRate(1.0)
         self.link_up_mono = None
 
-        # Engagement (module doc): PX4 is pre-streamed from the start, ArduPilot waits for
-        # `offboard`. engaged_mode: the custom mode `offboard` confirmed; leaving it ends it.
+    def _init_engagement(self):
+        """Engagement (module doc): PX4 is pre-streamed from the start, ArduPilot waits for
+        `offboard`. engaged_mode: the custom mode `offboard` confirmed; leaving it ends it."""
         self.engaged = self.dialect == "px4"
         self.engaged_mode = None
         self.disengaged_why = "" if self.engaged else "waiting for `offboard`"
         self.landed_state = None
         self.takeoff_in_progress = False
 
-        # State.
+    def _init_state(self):
+        """The state stream to mppid: sequence numbers, publish times, the latest odometry."""
         self.boot_clock = BootClock()
         self.state_seq = 0
         self.state_times = OrderedDict()   # seq -> (monotonic us when published, MAVLink time_usec)
@@ -163,7 +173,8 @@ class Bridge:
         self.last_lpn = None
         self.state_lock = threading.Lock()
 
-        # Forwarding.
+    def _init_forwarding(self, settings):
+        """The command forwarding: its timeouts, the last command and status, counters, the trace."""
         fw = settings["forwarding"]
         self.status_timeout_us = int(fw["status_timeout_s"] * 1e6)
         self.max_state_age_us = int(fw["max_state_age_s"] * 1e6)

@@ -14,9 +14,8 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
 using Q = Quadrotor;
-using Team = QuadrotorTeam3;
+using Team = testing::QuadrotorTeam3;
 
 ForestCost<Quadrotor>::Params forest_cost_params() {
   ForestCost<Quadrotor>::Params c{};

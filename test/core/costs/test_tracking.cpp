@@ -14,7 +14,7 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::rate_state;
 using Q = Quadrotor;
 using QR = QuadrotorRate;
 

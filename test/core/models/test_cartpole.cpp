@@ -13,7 +13,8 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::check_integrator;
+using testing::derivative_of;
 using CP = Cartpole;
 
 TEST(Cartpole, SpotValuesByHand) {

@@ -15,7 +15,10 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::check_integrator;
+using testing::derivative_of;
+using testing::quad_hover_state;
+using testing::state_with;
 using Q = Quadrotor;
 
 TEST(Quadrotor, HoverSpeedFromPaperConstants) {

@@ -14,7 +14,9 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::check_integrator;
+using testing::derivative_of;
+using testing::rate_state;
 using QR = QuadrotorRate;
 
 TEST(QuadrotorRate, HoverIsAnEquilibrium) {

@@ -13,7 +13,9 @@
 namespace mppi {
 namespace {
 
-using namespace mppi::testing;
+using testing::check_integrator;
+using testing::derivative_of;
+using testing::state_with;
 using RC = Racecar;
 
 TEST(Racecar, StraightDrivingHasNoLateralForce) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "mppi/hd.hpp"
+#include "mppi/models/euler.hpp"
 
 namespace mppi {
 
@@ -48,9 +49,7 @@ struct Cartpole {
 
   template <class V>
   MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
-    V dx[kNx];
-    derivative(p, x, u, dx);
-    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+    euler_step<Cartpole>(p, x, u, dt);
   }
 };
 

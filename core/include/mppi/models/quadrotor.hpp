@@ -3,6 +3,7 @@
 #pragma once
 
 #include "mppi/hd.hpp"
+#include "mppi/models/euler.hpp"
 
 namespace mppi {
 
@@ -85,9 +86,7 @@ struct Quadrotor {
   // Explicit Euler, as Algorithm 1.
   template <class V>
   MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
-    V dx[kNx];
-    derivative(p, x, u, dx);
-    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+    euler_step<Quadrotor>(p, x, u, dt);
   }
 
   template <class V>

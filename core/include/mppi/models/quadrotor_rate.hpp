@@ -5,6 +5,7 @@
 #pragma once
 
 #include "mppi/hd.hpp"
+#include "mppi/models/euler.hpp"
 
 namespace mppi {
 
@@ -65,9 +66,7 @@ struct QuadrotorRate {
   // Explicit Euler, then back onto the unit quaternions.
   template <class V>
   MPPI_HD static void step(const Params& p, V* x, const V* u, float dt) {
-    V dx[kNx];
-    derivative(p, x, u, dx);
-    for (int i = 0; i < kNx; ++i) x[i] += dt * dx[i];
+    euler_step<QuadrotorRate>(p, x, u, dt);
     project(x);
   }
 
