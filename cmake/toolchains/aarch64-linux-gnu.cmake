@@ -14,12 +14,13 @@ set(CMAKE_LIBRARY_ARCHITECTURE aarch64-linux-gnu)
 set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
 set(ENV{PKG_CONFIG_LIBDIR} /usr/lib/aarch64-linux-gnu/pkgconfig:/usr/share/pkgconfig)
 
-# ctest, gtest_discover_tests and try_run run target programs through qemu-user, with the
-# arm64 runtime of the multiarch packages (libc6, libstdc++6, libgomp1 :arm64), as a Debian
-# board would. (Not `-L /usr/aarch64-linux-gnu`, the cross toolchain's copy: under qemu 7.2
-# its pthread_create never returns.)
+# ctest, gtest_discover_tests and try_run run target programs through qemu-user, as a
+# Cortex-A76 (the Raspberry Pi 5's core; Jetson Orin's A78AE has the same Armv8.2-A features
+# Highway's NEON target uses), with the arm64 runtime of the multiarch packages (libc6,
+# libstdc++6, libgomp1 :arm64), as a Debian board would. (Not `-L /usr/aarch64-linux-gnu`, the
+# cross toolchain's copy: under qemu 7.2 its pthread_create never returns.)
 find_program(MPPID_QEMU_AARCH64 NAMES qemu-aarch64-static qemu-aarch64 REQUIRED)
-set(CMAKE_CROSSCOMPILING_EMULATOR ${MPPID_QEMU_AARCH64})
+set(CMAKE_CROSSCOMPILING_EMULATOR ${MPPID_QEMU_AARCH64} -cpu cortex-a76)
 
 # Debian 12's libyaml-cpp-dev is not Multi-Arch: same, so its arm64 package cannot sit beside
 # the amd64 one: the arm64 runtime library (libyaml-cpp0.7:arm64) with the amd64 package's
