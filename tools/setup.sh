@@ -14,6 +14,7 @@
 # Environment:
 #   CI            when set (CI=true), warnings are errors (-DMPPID_WERROR=ON)
 #   MPPID_CUDA    passed to CMake as -DMPPID_CUDA (ON, OFF, AUTO; default: the CMake default)
+#   MPPID_FUZZ_REPLAY  passed to CMake as -DMPPID_FUZZ_REPLAY (ON, OFF; tools/test.sh sets it)
 #   MPPID_BUILD_DIR  build folder (default: build)
 #   MPPID_JOBS    parallel build jobs (default: 2, the size of the project's machines)
 set -euo pipefail
@@ -30,7 +31,7 @@ while (($#)); do
     --no-build) do_build=0 ;;
     --aarch64) do_aarch64=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,21s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -161,6 +162,7 @@ if ((do_build)); then
   # it (override with: -- -DMPPID_LCM=OFF).
   if [[ -x "$VENV/bin/python" ]]; then args+=(-DMPPID_LCM=ON); fi
   [[ -n "${MPPID_CUDA:-}" ]] && args+=("-DMPPID_CUDA=$MPPID_CUDA")
+  [[ -n "${MPPID_FUZZ_REPLAY:-}" ]] && args+=("-DMPPID_FUZZ_REPLAY=$MPPID_FUZZ_REPLAY")
   if command -v ccache >/dev/null; then
     args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_CUDA_COMPILER_LAUNCHER=ccache)
     # Paths under the checkout hash as relative ones: another clone of the same tree hits.
