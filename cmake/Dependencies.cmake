@@ -60,6 +60,12 @@ if(MPPID_LCM)
     endif()
   endif()
   find_package(lcm 1.5 CONFIG REQUIRED)
+  if(CMAKE_CROSSCOMPILING)
+    # The target's lcm (the aarch64 wheel: headers, liblcm) generates code with this
+    # machine's lcm-gen, the same version from the host wheel in the venv.
+    find_program(MPPID_HOST_LCM_GEN lcm-gen PATHS ${CMAKE_SOURCE_DIR}/.venv/bin NO_DEFAULT_PATH REQUIRED)
+    set_target_properties(lcm-gen PROPERTIES IMPORTED_LOCATION_RELEASE ${MPPID_HOST_LCM_GEN})
+  endif()
   include(${LCM_USE_FILE})
   find_package(PkgConfig REQUIRED)
   pkg_check_modules(LIBSYSTEMD IMPORTED_TARGET libsystemd)

@@ -12,7 +12,9 @@ if(MPPID_SIMD AND CMAKE_SYSTEM_PROCESSOR MATCHES "^(x86_64|AMD64|amd64)$")
   set(_simd_flags_kAvx3 ${_simd_flags_kAvx2} -mavx512f -mavx512vl -mavx512dq -mavx512bw)
 elseif(MPPID_SIMD AND CMAKE_SYSTEM_PROCESSOR MATCHES "^(aarch64|arm64)$")
   set(MPPID_SIMD_TARGETS kNeon)
-  set(_simd_flags_kNeon "")
+  # Highway's NEON target is Armv8-A with the AES extension: with runtime dispatch (GCC on
+  # Linux) its functions carry target("+crypto"), so the kernels are compiled with it too.
+  set(_simd_flags_kNeon -march=armv8-a+crypto)
 endif()
 # Sanitizer builds compile every kernel twice (the backend's and the tests' libm variant) under
 # ASan; one target is enough there to check the vector code's memory use (CMakePresets.json).

@@ -63,7 +63,10 @@ if ((do_asan)); then
   #    models) as the kept ClosedLoop.CartpoleSwingsUpAndHolds and Forest seed 3 and the core
   #    tests; they run unsanitized in tools/test.sh.
   #  - CUDA tests: not built (sanitizer builds are CPU-only).
+  #  - the fuzz targets' corpus replays (<target>_corpus), when step 2 runs: libFuzzer runs the
+  #    same seed corpus and regressions, under the same sanitizers, before it mutates them.
   exclude='^(ClosedLoop\.RacecarLapsTheEllipse|ClosedLoop\.RateQuadrotorTracksCircle|Seeds/Forest\.QuadrotorCrossesWithoutCollision/[12])$'
+  ((do_fuzz)) && exclude="${exclude%)\$}|fuzz_[a-z_]+_corpus)\$"
   log "asan: ctest (excluded: $exclude)"
   ctest --test-dir build-asan --output-on-failure --no-tests=error -j"$jobs" -E "$exclude" || status=1
   log "asan: build $((t1 - t0)) s, tests $(($(stamp) - t1)) s"

@@ -2,7 +2,7 @@
 # Sets up a Debian 12 machine for mppid and builds it. Idempotent: a re-run on a set-up
 # machine touches neither apt nor pip (no network) and only rebuilds what changed.
 #
-#   tools/setup.sh [--no-apt] [--no-venv] [--no-build] [--flight] [--progress]
+#   tools/setup.sh [--no-apt] [--no-venv] [--no-build] [--flight] [--progress] [--aarch64]
 #                  [-- <extra cmake configure args>]
 #
 #   --no-apt     skip the Debian packages (e.g. no root and no sudo; you installed them)
@@ -14,10 +14,14 @@
 #   --view       with --flight: also the live view's packages (requirements-view.txt)
 #   --progress   one progress line instead of the compiler's output (kept in build/build.log;
 #                its end is shown if the build fails)
+#   --aarch64    also what the aarch64 cross build needs (tools/aarch64.sh, docs/aarch64.md):
+#                the arm64 architecture in dpkg, the cross compiler, qemu-user and the arm64
+#                libraries; the lcm wheel for aarch64 in .venv/aarch64
 #
 # Environment:
 #   CI            when set (CI=true), warnings are errors (-DMPPID_WERROR=ON)
 #   MPPID_CUDA    passed to CMake as -DMPPID_CUDA (ON, OFF, AUTO; default: the CMake default)
+#   MPPID_FUZZ_REPLAY  passed to CMake as -DMPPID_FUZZ_REPLAY (ON, OFF; tools/test.sh sets it)
 #   MPPID_BUILD_DIR  build folder (default: build)
 #   MPPID_JOBS    parallel build jobs (default: 2, the size of the project's machines)
 set -euo pipefail
@@ -25,7 +29,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 
-do_apt=1 do_venv=1 do_build=1 flight=0 view=0 progress=0
+do_apt=1 do_venv=1 do_build=1 flight=0 view=0 progress=0 do_aarch64=0
 cmake_extra=()
 while (($#)); do
   case "$1" in
@@ -35,8 +39,9 @@ while (($#)); do
     --flight) flight=1 ;;
     --view) view=1 ;;
     --progress) progress=1 ;;
+    --aarch64) do_aarch64=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,24s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,26s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -74,19 +79,31 @@ APT_PACKAGES=(
   # libFuzzer runtimes, its OpenMP (and Archer, which lets TSan see OpenMP), llvm-symbolizer
   clang-14 libclang-rt-14-dev libomp-14-dev llvm-14
 )
+# The aarch64 cross build (--aarch64): Debian's cross compiler, qemu-user to run its tests, and
+# the arm64 libraries beside the amd64 ones (multiarch; each the same version as its amd64
+# twin, so apt may upgrade that one). Header-only libraries (Eigen, Random123, CLI11) and
+# yaml-cpp's headers are the amd64 packages'; yaml-cpp and glib are linked as their arm64
+# runtime libraries (cmake/toolchains/aarch64-linux-gnu.cmake says why).
+APT_PACKAGES_AARCH64=(
+  g++-aarch64-linux-gnu qemu-user-static
+  libgomp1:arm64 libhwy-dev:arm64 libspdlog-dev:arm64 libgtest-dev:arm64 libgmock-dev:arm64
+  libyaml-cpp0.7:arm64 libglib2.0-0:arm64
+)
 
 missing_packages() {
   local pkg status
-  for pkg in "${APT_PACKAGES[@]}"; do
+  for pkg in "$@"; do
     status="$(dpkg-query -W -f='${db:Status-Abbrev}' "$pkg" 2>/dev/null || true)"
     [[ "$status" == ii* ]] || printf '%s\n' "$pkg"
   done
 }
 
 if ((do_apt)); then
-  mapfile -t missing < <(missing_packages)
+  wanted=("${APT_PACKAGES[@]}")
+  ((do_aarch64)) && wanted+=("${APT_PACKAGES_AARCH64[@]}")
+  mapfile -t missing < <(missing_packages "${wanted[@]}")
   if ((${#missing[@]} == 0)); then
-    log "Debian packages: all ${#APT_PACKAGES[@]} installed"
+    log "Debian packages: all ${#wanted[@]} installed"
   else
     log "Debian packages missing: ${missing[*]}"
     SUDO=()
@@ -95,6 +112,11 @@ if ((do_apt)); then
       SUDO=(sudo)
     fi
     export DEBIAN_FRONTEND=noninteractive
+    # arm64 packages need the architecture in dpkg before the index update below lists them.
+    if ((do_aarch64)) && ! dpkg --print-foreign-architectures | grep -qx arm64; then
+      log "dpkg --add-architecture arm64"
+      "${SUDO[@]}" dpkg --add-architecture arm64
+    fi
     # One index update per run, and only because something has to be installed.
     "${SUDO[@]}" apt-get update -q
     "${SUDO[@]}" apt-get install -y -q --no-install-recommends "${missing[@]}"
@@ -145,6 +167,23 @@ if ((do_venv)); then
     pip_install requirements.txt "$STAMP"
   else
     log "venv: requirements unchanged"
+  fi
+  # The aarch64 cross build links the lcm wheel for aarch64 (PyPI has it), of the same version
+  # as the venv's, unpacked into .venv/aarch64 (its lcm-gen is not run: the venv's generates).
+  if ((do_aarch64)); then
+    lcm_version="$("$VENV/bin/python" -c 'import importlib.metadata as m; print(m.version("lcm"))')"
+    have_aarch64="$(cat "$VENV/aarch64/.lcm-version" 2>/dev/null || true)"
+    if [[ "$have_aarch64" != "$lcm_version" ]]; then
+      log "lcm $lcm_version for aarch64 into $VENV/aarch64"
+      rm -rf "$VENV/aarch64"
+      py_version="$("$VENV/bin/python" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')"
+      "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --only-binary=:all: --upgrade \
+        --platform manylinux_2_28_aarch64 --python-version "$py_version" --implementation cp \
+        --target "$VENV/aarch64" "lcm==$lcm_version"
+      printf '%s\n' "$lcm_version" >"$VENV/aarch64/.lcm-version"
+    else
+      log "lcm for aarch64: $lcm_version present"
+    fi
   fi
 fi
 
@@ -206,6 +245,7 @@ if ((do_build)); then
       rm -f "$no_cuda_mark"
     fi
   fi
+  [[ -n "${MPPID_FUZZ_REPLAY:-}" ]] && args+=("-DMPPID_FUZZ_REPLAY=$MPPID_FUZZ_REPLAY")
   if command -v ccache >/dev/null; then
     args+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_CUDA_COMPILER_LAUNCHER=ccache)
     # Paths under the checkout hash as relative ones: another clone of the same tree hits.

@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
 # Sets up and builds (tools/setup.sh), then runs every test: ctest over the build, pytest
 # over test/ (a real-time forest flight among them), a short soak with scheduled faults
-# (tools/soak, every fault once), then the sanitizer and fuzzing stage (tools/sanitize.sh:
-# ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests).
+# (tools/soak, every fault once), the sanitizer and fuzzing stage (tools/sanitize.sh:
+# ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
+# then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user).
 # Exits non-zero when anything failed. This is what CI runs (.ci/run).
 #
 #   tools/test.sh [--quick] [setup.sh arguments]     e.g. tools/test.sh --no-apt
 #
-#   --quick   ctest and pytest only (no soak, no sanitizer builds, no fuzzing)
+#   --quick   ctest and pytest only (no soak, no sanitizer builds, no fuzzing, no aarch64)
 #
 # Environment: CTEST_ARGS adds ctest arguments (e.g. "-L lcm"), PYTEST_ARGS pytest ones,
 # MPPID_SOAK_MINUTES the soak's length (2.5: the schedule's seven faults once each).
@@ -19,7 +20,15 @@ BUILD_DIR="${MPPID_BUILD_DIR:-build}"
 quick=0
 if [[ "${1:-}" == "--quick" ]]; then quick=1; shift; fi
 
-bash tools/setup.sh "$@"
+# The fuzz targets' corpus replays (test/fuzz) run in the ASan build when the sanitizer stage
+# does; a quick run keeps them in this build.
+if ((quick)); then
+  export MPPID_FUZZ_REPLAY="${MPPID_FUZZ_REPLAY:-ON}"
+  bash tools/setup.sh "$@"
+else
+  export MPPID_FUZZ_REPLAY="${MPPID_FUZZ_REPLAY:-OFF}"
+  bash tools/setup.sh --aarch64 "$@"
+fi
 
 status=0
 
@@ -44,6 +53,8 @@ if ((!quick)); then
   tools/soak --minutes "${MPPID_SOAK_MINUTES:-2.5}" --out results/soak-test || status=1
   echo "[test] tools/sanitize.sh"
   tools/sanitize.sh || status=1
+  echo "[test] tools/aarch64.sh"
+  tools/aarch64.sh || status=1
 fi
 
 if ((status == 0)); then echo "[test] all passed"; else echo "[test] FAILED" >&2; fi

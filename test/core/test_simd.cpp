@@ -24,101 +24,25 @@
 #include "mppi/app/config.hpp"
 #include "mppi/controller.hpp"
 #include "mppi/cpu_backend.hpp"
-#include "mppi/offline/offline.hpp"
-#include "mppi/params.hpp"
 #include "simd_probe.hpp"
+#include "task_cases.hpp"
+#include "tolerances.hpp"
 
 namespace mppi {
 namespace {
 
+using testing::controller;
+using testing::divergent_fraction;
 using testing::for_each_simd_target;
-
-// Highway's sin, cos, exp, log, atan are within 2-3 ulp of the C library's; one Euler step
-// or one cost evaluation then differs by a few ulp of its terms.
-constexpr double kStepTolerance = 2e-5;   // relative to max(1, |value|)
-// The parity test's bounds (test/gpu/test_cuda_backend.cpp): an ulp apart, a rollout that
-// crosses a crash threshold at another step, or flips, takes another path.
-constexpr double kCostTolerance = 1e-5;   // relative to max(1, |S|), per rollout
-constexpr double kPlanTolerance = 1e-4;   // relative to max(1, |u|)
-constexpr double kDivergentFraction = 0.015;
-// Highway's transcendentals are 2-3 ulp from the C library's (CUDA's 1): measured, 2/256
-// single-vehicle rollouts, 12/1024 of team3's, 21/1024 of team9's take another path.
-template <class T>
-double divergent_fraction() {
-  return T::kVehicles > 3 ? 2 * kDivergentFraction : kDivergentFraction;
-}
-
-// The race car's temperature (lambda = 2, against costs of hundreds) turns its costs
-// differences of a few ulp into weights a few per mille apart, and the update averages a
-// few samples of steering noise 0.35 rad wide: its plan agrees to a few milliradians.
-template <class T>
-double plan_tolerance() {
-  return std::is_same_v<T, RacecarEllipse> ? 5e-3 : kPlanTolerance;
-}
-
-bool same_bits(float a, float b) { return std::memcmp(&a, &b, sizeof(float)) == 0; }
-
-double rel_error(double a, double b) { return std::fabs(a - b) / std::max(1.0, std::fabs(b)); }
-
-// ---------------------------------------------------------------------------------------
-// Tasks: settings and parameters from config/tasks/, the offline scenario's start.
-// ---------------------------------------------------------------------------------------
-
-struct TaskSetup {
-  app::AppConfig cfg;
-  offline::Scenario scenario;
-};
-
-TaskSetup setup(const std::string& task, int rollouts, int horizon, int threads = 2) {
-  TaskSetup s;
-  s.cfg = app::load_config(app::default_config_path(task),
-                           {"mppi.rollouts=" + std::to_string(rollouts), "mppi.horizon=" + std::to_string(horizon),
-                            "mppi.threads=" + std::to_string(threads), "mppi.simd=off", "backend=cpu"});
-  auto c = app::make_controller(s.cfg);
-  s.scenario = offline::default_scenario(*c, 4.0f, 1);
-  // The 48 obstacles nearest the start, as the daemon sends them.
-  auto forest = s.scenario.forest;
-  const float x0 = s.scenario.x0[0], y0 = s.scenario.x0[1];
-  std::sort(forest.begin(), forest.end(), [&](const Cylinder& a, const Cylinder& b) {
-    return std::hypot(a.x - x0, a.y - y0) - a.radius < std::hypot(b.x - x0, b.y - y0) - b.radius;
-  });
-  auto& obs = s.scenario.inputs.obstacles;
-  obs.count = std::min<int>(48, static_cast<int>(forest.size()));
-  for (int i = 0; i < obs.count; ++i) obs.items[i] = forest[static_cast<std::size_t>(i)];
-  return s;
-}
-
-template <class T>
-typename T::Params params_of(const TaskSetup& s) {
-  typename T::Params p{};
-  for (const auto& [key, value] : s.cfg.params) EXPECT_EQ(set_task_param<T>(p, key, value), "");
-  return p;
-}
-
-template <class T>
-std::unique_ptr<TaskController<T>> controller(const TaskSetup& s, std::unique_ptr<RolloutBackend<T>> backend) {
-  auto c = std::make_unique<TaskController<T>>(s.cfg.task, s.cfg.mppi, params_of<T>(s), std::move(backend));
-  c->set_inputs(s.scenario.inputs);
-  return c;
-}
-
-// Named tasks, as types, with their names.
-template <class T>
-struct Named {
-  using Task = T;
-  const char* name;
-};
-template <class F>
-void for_each_task(F&& f) {
-  f(Named<CartpoleSwingup>{"cartpole_swingup"});
-  f(Named<RacecarEllipse>{"racecar_ellipse"});
-  f(Named<QuadrotorForest>{"quadrotor_forest"});
-  f(Named<QuadrotorTrack>{"quadrotor_track"});
-  f(Named<RateQuadrotorForest>{"quadrotor_rate_forest"});
-  f(Named<RateQuadrotorTrack>{"quadrotor_rate_track"});
-  f(Named<Team3Forest>{"team3_forest"});
-  f(Named<Team9Forest>{"team9_forest"});
-}
+using testing::for_each_task;
+using testing::kCostTolerance;
+using testing::kStepTolerance;
+using testing::params_of;
+using testing::plan_tolerance;
+using testing::rel_error;
+using testing::same_bits;
+using testing::setup;
+using testing::TaskSetup;
 
 // ---------------------------------------------------------------------------------------
 // Noise
@@ -396,10 +320,14 @@ void check_update(const char* name) {
   }
 }
 
-TEST(SimdUpdate, EveryTaskBitIdenticalWithLibmAndWithinParityToleranceWithHighway) {
+// One test per task, so that ctest runs them side by side (under emulation each takes long).
+class SimdUpdate : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(SimdUpdate, BitIdenticalWithLibmAndWithinParityToleranceWithHighway) {
   int checked = 0;
   for_each_task([&](auto named) {
     using T = typename decltype(named)::Task;
+    if (GetParam() != named.name) return;
     for_each_simd_target([&](auto target) {
       check_update<T, decltype(target)::value>(named.name);
       ++checked;
@@ -407,6 +335,9 @@ TEST(SimdUpdate, EveryTaskBitIdenticalWithLibmAndWithinParityToleranceWithHighwa
   });
   if (checked == 0) GTEST_SKIP() << "no SIMD target on this machine";
 }
+
+INSTANTIATE_TEST_SUITE_P(EveryTask, SimdUpdate, ::testing::ValuesIn(testing::task_names()),
+                         [](const ::testing::TestParamInfo<std::string>& task) { return task.param; });
 
 // ---------------------------------------------------------------------------------------
 // Determinism and selection
