@@ -90,6 +90,11 @@ class RolloutBackend {
   // early (CUDA) ignores it.
   virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
 
+  // The control the control cost is measured from (MppiSettings::u_nominal, NU floats): the
+  // hover of the vehicle as the daemon estimates it (Controller::set_mass). Between updates
+  // only; rare (the CUDA backend captures its graph again).
+  virtual void set_nominal(const float* u_nominal) = 0;
+
   // Bytes allocated at start-up (host, device).
   virtual std::size_t host_bytes() const = 0;
   virtual std::size_t device_bytes() const { return 0; }

@@ -30,7 +30,8 @@ class Mppi {
         plan_(static_cast<std::size_t>(s.horizon) * kNu),
         scratch_(plan_.size()),
         path_(static_cast<std::size_t>(s.horizon + 1) * Task::kVehicles * 2),
-        work_(std::make_unique<Params>()) {
+        work_(std::make_unique<Params>()),
+        u_init_(s.u_init) {
     const std::string err = validate(s, kNu);
     if (!err.empty()) throw std::invalid_argument(err);
     if (!backend_) throw std::invalid_argument("backend: none given");
@@ -75,12 +76,21 @@ class Mppi {
     steps = std::clamp(steps, 0, t);
     if (steps == 0) return;
     std::copy(plan_.begin() + static_cast<std::ptrdiff_t>(steps) * kNu, plan_.end(), plan_.begin());
-    for (int i = t - steps; i < t; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
+    for (int i = t - steps; i < t; ++i) std::copy_n(u_init_.data(), kNu, plan_.data() + i * kNu);
   }
 
   void reset() {
-    for (int i = 0; i < settings_.horizon; ++i) std::copy_n(settings_.u_init.data(), kNu, plan_.data() + i * kNu);
+    for (int i = 0; i < settings_.horizon; ++i) std::copy_n(u_init_.data(), kNu, plan_.data() + i * kNu);
   }
+
+  // The hover of the vehicle as the daemon estimates it, in place of the settings' u_nominal
+  // (what the control cost is measured from) and u_init (what the warm start appends); the
+  // settings themselves stay as they were loaded. NU floats each; between updates only.
+  void set_nominal(const float* u_nominal, const float* u_init) {
+    backend_->set_nominal(u_nominal);
+    std::copy_n(u_init, kNu, u_init_.data());
+  }
+  const std::vector<float>& u_init() const { return u_init_; }
 
   // Replace the plan (tests; a restored plan). Values are clamped into the limits.
   void set_plan(const std::vector<float>& plan) { set_plan(plan.data()); }
@@ -127,6 +137,7 @@ class Mppi {
   std::vector<float> scratch_;
   std::vector<float> path_;       // the plan's noise-free path, xy per step and vehicle
   std::unique_ptr<Params> work_;  // the parameters as prepared for this cycle
+  std::vector<float> u_init_;     // the warm start's control: settings_.u_init, or set_nominal's
   UpdateStats stats_;
   std::uint32_t cycle_ = 0;
 };

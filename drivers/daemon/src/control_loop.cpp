@@ -47,7 +47,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       history_(nu_, controller->settings().u_init),
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
       x_pred_(static_cast<std::size_t>(controller->nx())),
-      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles()) {
+      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
@@ -232,7 +232,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       plan_timed_ = false;
       if (observe_) {
         observer_.reset();
-        c_->set_external_accel(observer_.estimate());
+        observer_.apply(*c_);
       }
     }
     stamp_timing(have_state ? age : 0, clock_->now_ns() - t0, 0);
@@ -253,7 +253,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     std::int64_t lead = 0;
     // A new state: the disturbance observer compares it with the last one predicted.
     if (observe_ && state_seq != last_state_seq_used_ && observer_.update(*c_, history_, x.x, t_state))
-      c_->set_external_accel(observer_.estimate());
+      observer_.apply(*c_);
     if (ls.compensate) {
       align_plan(t_act);
       std::copy_n(x.x, x_pred_.size(), x_pred_.data());
@@ -431,7 +431,13 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
   }
   if (key.rfind("mppi.", 0) == 0)
     return key + ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*";
-  return c_->set_param(key, v);
+  std::string err = c_->set_param(key, v);
+  // A new model.mass is the mass estimate's new nominal (else the next estimate overwrites it).
+  if (err.empty() && key == "model.mass" && observer_.estimates_mass()) {
+    observer_.set_nominal_mass(static_cast<float>(v));
+    observer_.apply(*c_);
+  }
+  return err;
 }
 
 void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed) {
@@ -600,6 +606,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.lead_ms_mean = f(w.lead.mean_ms);
   status_.lead_ms_p99 = f(w.lead.p99_ms);
   std::copy_n(observer_.estimate(), 3, status_.disturbance_accel);
+  status_.model_mass = c_->mass();
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;

@@ -173,11 +173,22 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   }
   if (const YAML::Node n = section["disturbance"]) {
     if (!n.IsMap()) fail("disturbance", "expected a map");
-    check_known(n, "disturbance.", {"estimate", "time_constant_s", "limit"});
+    check_known(n, "disturbance.", {"estimate", "time_constant_s", "limit", "mass"});
     DisturbanceSettings& ds = l.disturbance;
     if (n["estimate"]) ds.estimate = scalar<bool>(n["estimate"], "disturbance.estimate");
     ds.time_constant_s = number(n, "time_constant_s", ds.time_constant_s, 0.02, 100.0, "disturbance.");
     ds.limit = static_cast<float>(number(n, "limit", ds.limit, 0.0, 50.0, "disturbance."));
+    if (const YAML::Node m = n["mass"]) {
+      if (!m.IsMap()) fail("disturbance.mass", "expected a map");
+      check_known(m, "disturbance.mass.", {"estimate", "time_constant_s", "prior_std", "max_change", "accel_noise"});
+      MassEstimateSettings& ms = ds.mass;
+      const std::string p = "disturbance.mass.";
+      if (m["estimate"]) ms.estimate = scalar<bool>(m["estimate"], p + "estimate");
+      ms.time_constant_s = number(m, "time_constant_s", ms.time_constant_s, 0.02, 100.0, p);
+      ms.prior_std = number(m, "prior_std", ms.prior_std, 1e-3, 1.0, p);
+      ms.max_change = number(m, "max_change", ms.max_change, 0.01, 0.9, p);
+      ms.accel_noise = number(m, "accel_noise", ms.accel_noise, 1e-3, 100.0, p);
+    }
   }
   if (const YAML::Node n = section["live"]) {
     if (!n.IsMap()) fail("live", "expected a map");
