@@ -85,9 +85,16 @@ class Mppi {
 
   // The hover of the vehicle as the daemon estimates it, in place of the settings' u_nominal
   // (what the control cost is measured from) and u_init (what the warm start appends); the
-  // settings themselves stay as they were loaded. NU floats each; between updates only.
+  // settings themselves stay as they were loaded. The plan moves with u_init (inside the
+  // limits): it was planned around the old hover, and a plan that kept a lighter vehicle's
+  // thrust would take the optimizer many cycles to raise while the vehicle sinks. NU floats
+  // each; between updates only.
   void set_nominal(const float* u_nominal, const float* u_init) {
     backend_->set_nominal(u_nominal);
+    for (std::size_t n = 0; n < plan_.size(); ++n) {
+      const std::size_t j = n % kNu;
+      plan_[n] = std::clamp(plan_[n] + u_init[j] - u_init_[j], settings_.u_min[j], settings_.u_max[j]);
+    }
     std::copy_n(u_init, kNu, u_init_.data());
   }
   const std::vector<float>& u_init() const { return u_init_; }

@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <thread>
 
@@ -55,12 +56,13 @@ int main(int argc, char** argv) {
     ::execv("/proc/self/exe", argv);  // returns only on failure: then run on as we are
   }
   CLI::App app{"mppid: deterministic fixed-rate MPPI controller daemon"};
-  std::string config_path, backend, controller_kind, lcm_url, log_level = "info";
+  std::string config_path, vehicle_path, backend, controller_kind, lcm_url, log_level = "info";
   std::vector<std::string> sets;
   bool lockstep = false, realtime = false, require_realtime = false, stats = false;
   double duration_s = 0.0;
   app.add_option("--config", config_path, "Settings file (YAML)")->required();
   app.add_option("--set", sets, "Override a setting: key.path=value (repeatable)");
+  app.add_option("--vehicle", vehicle_path, "Vehicle file (config/vehicles/*.yaml; overrides the settings' vehicle:)");
   app.add_option("--backend", backend, "cpu | cuda | auto");
   app.add_option("--controller", controller_kind,
                  "mppi (default) | ddp: the MPC-DDP baseline (iLQR, the settings file's ddp: section)")
@@ -99,6 +101,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> overrides = sets;
   if (!backend.empty()) overrides.push_back("backend=" + backend);
   if (!controller_kind.empty()) overrides.push_back("controller=" + controller_kind);
+  // Relative to where mppid was started (a `vehicle:` in the file is relative to the file).
+  if (!vehicle_path.empty()) overrides.push_back("vehicle=" + std::filesystem::absolute(vehicle_path).string());
   mppi::app::AppConfig cfg;
   mppi::daemon::DaemonSettings ds;
   try {
@@ -119,6 +123,7 @@ int main(int argc, char** argv) {
     const mppi::app::AppConfig* variant = cfg.variant(mppi::app::resolve_backend(cfg.backend), &section);
     const auto& flying = variant != nullptr ? *variant : cfg;
     if (variant != nullptr) spdlog::info("settings: the file's {} section applies on this machine", section);
+    if (cfg.vehicle) spdlog::info("vehicle {} from {}", cfg.vehicle->name, cfg.vehicle->path);
     ds = mppi::daemon::parse_daemon_settings(flying.root["daemon"], cfg.task, nu);
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: {}", e.what());

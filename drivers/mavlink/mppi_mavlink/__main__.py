@@ -21,6 +21,7 @@ def main(argv=None) -> int:
     r.add_argument("--config", help="settings YAML (config/bridge/*.yaml)")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.add_argument("--url", help="MAVLink connection string (overrides mavlink.url)")
+    r.add_argument("--vehicle", help="vehicle file (config/vehicles/*.yaml; overrides vehicle.file): mppid's --vehicle")
     r.add_argument("--lcm-url", help="LCM URL (overrides lcm.url)")
     r.add_argument("--log-level", default="info")
     for c in CONTROL_CMDS:
@@ -46,6 +47,8 @@ def main(argv=None) -> int:
     sets = list(a.set)
     if a.url:
         sets.append(f"mavlink.url={a.url}")
+    if a.vehicle:
+        sets.append(f"vehicle.file={a.vehicle}")
     try:
         s = settings_mod.load(a.config, sets)
     except (settings_mod.SettingsError, OSError) as e:

@@ -35,6 +35,10 @@ struct Quadrotor {
     return fsqrt(p.mass * p.gravity / (4.0f * p.k_force));
   }
 
+  // The control that holds the vehicle level where it is (one vehicle's kNu floats).
+  static void hover_control(const Params& p, float* u) {
+    for (int i = 0; i < kNu; ++i) u[i] = hover_speed(p);
+  }
   // Controls u (one vehicle's motor speeds) made to hold a vehicle `ratio` times as heavy.
   static void scale_hover(float ratio, float* u) {
     const float k = fsqrt(ratio);

@@ -31,6 +31,11 @@ struct QuadrotorRate {
   };
 
   MPPI_HD static float hover_thrust(const Params& p) { return p.mass * p.gravity; }
+  // The control that holds the vehicle level where it is (one vehicle's kNu floats).
+  static void hover_control(const Params& p, float* u) {
+    u[THRUST] = hover_thrust(p);
+    u[RATE_X] = u[RATE_Y] = u[RATE_Z] = 0.0f;
+  }
   // Controls u (one vehicle's) made to hold a vehicle `ratio` times as heavy: the thrust.
   static void scale_hover(float ratio, float* u) { u[THRUST] *= ratio; }
 
