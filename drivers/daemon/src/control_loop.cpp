@@ -17,6 +17,8 @@ namespace mppi::daemon {
 using transport::Mode;
 
 namespace {
+constexpr std::int8_t kThrustRates = 2;  // command_t::KIND_THRUST_RATES
+
 std::int64_t every(double rate_hz, double sub_hz) {
   if (sub_hz <= 0.0) return 0;
   return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
@@ -47,7 +49,8 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       history_(nu_, controller->settings().u_init),
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
       x_pred_(static_cast<std::size_t>(controller->nx())),
-      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()) {
+      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
+      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
   inputs_.vehicle_count = controller->vehicles();
@@ -345,6 +348,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       held_ = c_->plan();  // same size: copies, no allocation
     } else {
       consecutive_bad_updates_ = 0;
+      manoeuvre_.excite(x.x, now_state_ns, u_.data());
       const std::int64_t compute = clock_->now_ns() - t0;
       stamp_timing(age, compute, lead);
       published = publish(Mode::kNormal, u_.data(), state_seq) ? Mode::kNormal : Mode::kFailsafe;
@@ -415,6 +419,11 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
   const double v = p.value;
   if (!std::isfinite(v)) return key + ": must be finite";
   if (is_loop_param(key)) {
+    if (key == "daemon.identify") {
+      if (s_.command_kind != kThrustRates) return key + ": the identification manoeuvre is for the rate-controlled tasks";
+      manoeuvre_.request(v != 0.0);
+      return {};
+    }
     if (key == "daemon.state_timeout_ms") {
       if (v <= 0.0 || v * 1e6 >= static_cast<double>(s_.failsafe_timeout_ns))
         return key + ": must be > 0 and below daemon.failsafe_timeout_ms";
@@ -427,7 +436,7 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
       s_.failsafe_timeout_ns = std::llround(v * 1e6);
       return {};
     }
-    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms)";
+    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify)";
   }
   if (key.rfind("mppi.", 0) == 0)
     return key + ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*";

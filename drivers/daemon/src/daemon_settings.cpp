@@ -89,7 +89,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
               {"rate_hz", "state_timeout_ms", "failsafe_timeout_ms", "status_hz", "plan_hz", "lcm_url",
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
-               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger"});
+               "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "identification"});
   LoopSettings& l = d.loop;
   l.rate_hz = number(section, "rate_hz", l.rate_hz, 0.1, 2000.0);
   const double state_ms = number(section, "state_timeout_ms", 100.0, 1.0, 60000.0);
@@ -189,6 +189,21 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
       ms.max_change = number(m, "max_change", ms.max_change, 0.01, 0.9, p);
       ms.accel_noise = number(m, "accel_noise", ms.accel_noise, 1e-3, 100.0, p);
     }
+  }
+  if (const YAML::Node n = section["identification"]) {
+    if (!n.IsMap()) fail("identification", "expected a map");
+    check_known(n, "identification.", {"rate_amplitude", "yaw_amplitude", "thrust_step", "pulse_s", "gap_s", "box_m",
+                                       "max_tilt_deg", "repeats"});
+    IdentificationSettings& is = l.identification;
+    const std::string p = "identification.";
+    is.rate_amplitude = number(n, "rate_amplitude", is.rate_amplitude, 0.0, 10.0, p);
+    is.yaw_amplitude = number(n, "yaw_amplitude", is.yaw_amplitude, 0.0, 10.0, p);
+    is.thrust_step = number(n, "thrust_step", is.thrust_step, 0.0, 0.5, p);
+    is.pulse_s = number(n, "pulse_s", is.pulse_s, 0.02, 5.0, p);
+    is.gap_s = number(n, "gap_s", is.gap_s, 0.0, 10.0, p);
+    is.box_m = number(n, "box_m", is.box_m, 0.1, 100.0, p);
+    is.max_tilt_deg = number(n, "max_tilt_deg", is.max_tilt_deg, 1.0, 80.0, p);
+    is.repeats = static_cast<int>(number(n, "repeats", is.repeats, 1, 100, p));
   }
   if (const YAML::Node n = section["live"]) {
     if (!n.IsMap()) fail("live", "expected a map");

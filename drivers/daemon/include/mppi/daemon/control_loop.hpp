@@ -18,6 +18,7 @@
 
 #include "mppi/controller.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
+#include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
@@ -80,6 +81,7 @@ struct LoopSettings {
   int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
   LatencySettings latency;
   DisturbanceSettings disturbance;
+  IdentificationSettings identification;  // the manoeuvre `daemon.identify` starts (rate tasks)
   // Anytime cycle (with the deadline guard): this long before the deadline the guard asks
   // the optimizer to stop its rollouts (Controller::set_stop_flag), which then updates from
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
@@ -267,6 +269,7 @@ class ControlLoop {
   std::int64_t dt_ns_;
   std::vector<float> x_pred_;
   DisturbanceObserver observer_;
+  IdentificationManoeuvre manoeuvre_;
   bool observe_ = false;  // the model takes an external acceleration and estimation is on
   std::atomic<std::int64_t> latency_estimate_ns_{0};
 

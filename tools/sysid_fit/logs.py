@@ -1,0 +1,173 @@
+"""Flight logs as the fit needs them: the rate model's states and the commands, on one clock.
+
+* An LCM log of vehicle_state_t (MPPI_STATE) and command_t (MPPI_COMMAND), as tools/record,
+  the SITL harness or a flight through the MAVLink bridge writes it. In real time a command
+  takes effect from its publish time (command_t.utime) on, on the clock of the states'
+  sample_utime (the same host's wall clock: the bridge and mppid-sim stamp it so). A
+  lock-step log (it holds MPPI_SIM_CLOCK ticks) has states on the simulated clock: a command
+  then counts from its state's tick, plus the latency the simulator charged (measured: the
+  command's utime less the tick's, both wall clock; or the fixed --lockstep-latency).
+  The bridge's hover thrust in use (mavlink_link_t on MPPI_MAVLINK_LINK), when logged.
+* An ArduPilot dataflash log (.BIN, pymavlink's DFReader): RATE (desired and achieved body
+  rates), CTUN (throttle out), ATT and the EKF's position and velocity (XKF1, NKF1), turned
+  into the same arrays (NED/FRD -> ENU/FLU; throttle -> newtons through the vehicle's mass and
+  hover throttle).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "drivers" / "mavlink"))
+
+STATE_CHANNEL, COMMAND_CHANNEL, CLOCK_CHANNEL, LINK_CHANNEL = "MPPI_STATE", "MPPI_COMMAND", "MPPI_SIM_CLOCK", "MPPI_MAVLINK_LINK"
+RATE_MODEL, THRUST_RATES, MODE_FAILSAFE = 2, 2, 2
+
+
+class LogError(ValueError):
+    pass
+
+
+@dataclass
+class FlightData:
+    t: np.ndarray                 # state times [s] from the first state
+    x: np.ndarray                 # (N, 13) rate-model states: p, v, q (w x y z), w (body rates)
+    tc: np.ndarray                # when each command takes effect at the earliest (before any delay) [s]
+    u: np.ndarray                 # (M, 4) thrust [N], body rates [rad/s]
+    source: str
+    clock: str                    # realtime | lockstep | dataflash
+    hover_thrust: float | None = None   # the bridge's hover throttle in use, when logged
+    notes: list[str] = field(default_factory=list)
+
+    def between(self, t0: float, t1: float) -> "FlightData":
+        """The states in [t0, t1) with every command (the fit needs those before t0 too)."""
+        k = (self.t >= t0) & (self.t < t1)
+        return FlightData(self.t[k], self.x[k], self.tc, self.u, self.source, self.clock, self.hover_thrust, self.notes)
+
+
+def read_lcm(path: str | Path, lockstep_latency: float | None = None) -> FlightData:
+    from mppi_mavlink import lcm_types
+    lcm_types.import_mppi_lcm()
+    import lcm
+    from mppi_lcm import command_t, sim_clock_t, vehicle_state_t
+    try:
+        link_t = lcm_types.import_link_type()
+    except Exception:  # noqa: BLE001 - the link type is optional (no bridge in the flight)
+        link_t = None
+
+    states, commands, ticks, hover = {}, [], {}, []
+    log = lcm.EventLog(str(path), "r")
+    for ev in log:
+        try:
+            if ev.channel == STATE_CHANNEL:
+                m = vehicle_state_t.decode(ev.data)
+                if m.model == RATE_MODEL and m.vehicle_count == 1 and m.nx == 13 and all(map(math.isfinite, m.x)):
+                    states[m.seq] = (m.sample_utime, list(m.x))
+            elif ev.channel == COMMAND_CHANNEL:
+                m = command_t.decode(ev.data)
+                if m.kind == THRUST_RATES and m.n == 4 and m.mode != MODE_FAILSAFE and all(map(math.isfinite, m.u)):
+                    commands.append((m.utime, m.state_seq, list(m.u)))
+            elif ev.channel == CLOCK_CHANNEL:
+                m = sim_clock_t.decode(ev.data)
+                ticks.setdefault(m.seq, (m.sim_utime, m.utime))
+            elif ev.channel == LINK_CHANNEL and link_t is not None:
+                m = link_t.decode(ev.data)
+                if m.hover_thrust > 0 and math.isfinite(m.hover_thrust):
+                    hover.append(m.hover_thrust)
+        except ValueError:
+            continue  # a message that does not decode is not data
+    log.close()
+    if len(states) < 50:
+        raise LogError(f"{path}: {len(states)} rate-model states (MPPI_STATE, model quadrotor_rate): too few to fit")
+    if len(commands) < 50:
+        raise LogError(f"{path}: {len(commands)} thrust-rate commands (MPPI_COMMAND): too few to fit")
+    seqs = sorted(states)
+    ts = np.array([states[s][0] for s in seqs], dtype=np.float64)
+    order = np.argsort(ts, kind="stable")
+    ts, x = ts[order], np.array([states[s][1] for s in seqs], dtype=np.float64)[order]
+    keep = np.concatenate([[True], np.diff(ts) > 0])
+    ts, x = ts[keep], x[keep]
+
+    clock = "lockstep" if ticks else "realtime"
+    tc = []
+    for utime, state_seq, _ in commands:
+        if clock == "realtime":
+            tc.append(utime)
+        else:
+            tick = ticks.get(state_seq)
+            if tick is None:
+                tc.append(np.nan)
+                continue
+            sim_us, wall_us = tick
+            charged = lockstep_latency * 1e6 if lockstep_latency is not None else max(0.0, utime - wall_us)
+            tc.append(sim_us + charged)
+    tc = np.array(tc, dtype=np.float64)
+    u = np.array([c[2] for c in commands], dtype=np.float64)
+    ok = np.isfinite(tc)
+    tc, u = tc[ok], u[ok]
+    order = np.argsort(tc, kind="stable")
+    t0 = ts[0]
+    data = FlightData((ts - t0) * 1e-6, x, (tc[order] - t0) * 1e-6, u[order], str(path), clock,
+                      float(np.median(hover)) if hover else None)
+    if clock == "lockstep" and lockstep_latency is None:
+        data.notes.append("lock-step log: each command counted from its tick plus the measured latency")
+    return data
+
+
+# ---- ArduPilot dataflash -------------------------------------------------------------------
+
+def _q_from_euler_ned(roll, pitch, yaw):
+    cr, sr, cp, sp, cy, sy = (np.cos(roll / 2), np.sin(roll / 2), np.cos(pitch / 2), np.sin(pitch / 2),
+                              np.cos(yaw / 2), np.sin(yaw / 2))
+    return np.stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy], axis=1)
+
+
+def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle: float | None) -> FlightData:
+    """ArduCopter's log: the rate loop's input is RATE's desired rate (what GUIDED's rate target
+    asks for), its output the achieved rate; thrust is CTUN.ThO (0..1) through the vehicle's
+    mass and hover throttle (CTUN.ThH, MOT_THST_HOVER, when the vehicle file has none)."""
+    from mppi_mavlink import frames
+    from pymavlink import DFReader
+
+    log = DFReader.DFReader_binary(str(path), zero_time_base=True)
+    rate, ctun, att, pos = [], [], [], []
+    while True:
+        m = log.recv_match(type=["RATE", "CTUN", "ATT", "XKF1", "NKF1"])
+        if m is None:
+            break
+        t = m.TimeUS * 1e-6
+        kind = m.get_type()
+        if kind == "RATE":
+            rate.append((t, m.RDes, m.R, m.PDes, m.P, m.YDes, m.Y))
+        elif kind == "CTUN":
+            ctun.append((t, m.ThO, getattr(m, "ThH", float("nan"))))
+        elif kind == "ATT":
+            att.append((t, m.Roll, m.Pitch, m.Yaw))
+        elif getattr(m, "C", 0) == 0:  # the first EKF core
+            pos.append((t, m.PN, m.PE, m.PD, m.VN, m.VE, m.VD))
+    if len(rate) < 50 or len(ctun) < 50 or len(att) < 50 or len(pos) < 50:
+        raise LogError(f"{path}: RATE/CTUN/ATT/XKF1 messages: {len(rate)}/{len(ctun)}/{len(att)}/{len(pos)}, too few to fit")
+    rate, ctun, att, pos = (np.array(a, dtype=np.float64) for a in (rate, ctun, att, pos))
+    if hover_throttle is None:
+        hover_throttle = float(np.nanmedian(ctun[:, 2]))
+        if not 0.01 < hover_throttle < 0.99:
+            raise LogError(f"{path}: no hover throttle (CTUN.ThH) in the log and none in the vehicle file")
+    t = rate[:, 0]
+    d2r = np.pi / 180.0
+    interp = lambda src, col: np.interp(t, src[:, 0], src[:, col])  # noqa: E731
+    q_ned = _q_from_euler_ned(interp(att, 1) * d2r, interp(att, 2) * d2r, interp(att, 3) * d2r)
+    q = np.array([frames.q_ned_frd_to_enu_flu(tuple(r)) for r in q_ned])
+    p = np.stack([interp(pos, 2), interp(pos, 1), -interp(pos, 3)], axis=1)   # NED -> ENU
+    v = np.stack([interp(pos, 5), interp(pos, 4), -interp(pos, 6)], axis=1)
+    w = np.stack([rate[:, 2], -rate[:, 4], -rate[:, 6]], axis=1) * d2r          # FRD -> FLU
+    x = np.concatenate([p, v, q, w], axis=1)
+    thrust = np.interp(t, ctun[:, 0], ctun[:, 1]) * mass * gravity / hover_throttle
+    u = np.stack([thrust, rate[:, 1] * d2r, -rate[:, 3] * d2r, -rate[:, 5] * d2r], axis=1)
+    return FlightData(t - t[0], x, t - t[0], u, str(path), "dataflash", hover_throttle,
+                      ["dataflash: the rate loop's input is RATE's desired rate, thrust CTUN.ThO"])
