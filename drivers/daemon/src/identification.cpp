@@ -77,8 +77,10 @@ bool IdentificationManoeuvre::excite(const float* x, std::int64_t t_ns, float* u
     paused_ = true;
     return false;
   }
-  paused_ = false;
-  clock_s_ += dt;
+  if (paused_)
+    paused_ = false;  // the time paused does not count
+  else
+    clock_s_ += dt;
   if (clock_s_ >= duration_s()) {
     on_ = false;
     spdlog::info("identification manoeuvre done ({} pauses)", pauses_);
