@@ -58,7 +58,9 @@ class ThrustFit:
 
 
 class Grid:
-    """The commands on a fine grid, shifted by a delay."""
+    """The commands as the plant sees them, delayed: their exact running integral, and their
+    average over each cell of a fine grid (a command switching inside a cell counts for the
+    part of the cell it acts in, so the fitted delay is not rounded to the grid)."""
 
     def __init__(self, data: FlightData):
         self.t0 = min(data.t[0], data.tc[0]) - 0.2
@@ -66,10 +68,20 @@ class Grid:
         self.t = self.t0 + GRID_H * np.arange(self.n)
         self.data = data
 
-    def input(self, channel: int, delay: float) -> np.ndarray:
-        return self.data.u[command_index(self.data.tc, self.t, delay), channel]
+    def integral(self, channel: int, delay: float, t: np.ndarray) -> np.ndarray:
+        """int u(s - delay) ds from the first command's switch to t (held before it)."""
+        switch = self.data.tc + delay
+        u = self.data.u[:, channel]
+        before = np.concatenate([[0.0], np.cumsum(u[:-1] * np.diff(switch))])
+        k = np.clip(np.searchsorted(switch, t, side="right") - 1, 0, len(switch) - 1)
+        return before[k] + u[k] * (t - switch[k])
 
-    def at(self, values: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def input(self, channel: int, delay: float) -> np.ndarray:
+        """The average of u(t - delay) over each cell [t_n, t_n + h)."""
+        f = self.integral(channel, delay, np.append(self.t, self.t[-1] + GRID_H))
+        return np.diff(f) / GRID_H
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Grid index at or before t, and the time past it."""
         i = np.clip(((t - self.t0) / GRID_H).astype(np.int64), 0, self.n - 2)
         return i, t - self.t[i]
@@ -79,7 +91,7 @@ def _rate_cost(grid: Grid, data: FlightData, axis: int, delay: float, tau: float
     u = grid.input(1 + axis, delay)
     a = np.exp(-GRID_H / tau)
     y = lfilter([0.0, 1.0 - a], [1.0, -a], u)
-    i, f = grid.at(y, data.t)
+    i, f = grid.at(data.t)
     yt = np.exp(-f / tau) * y[i] + (1.0 - np.exp(-f / tau)) * u[i]   # exact between grid points
     w = data.x[:, 10 + axis]
     num = den = 0.0
@@ -161,12 +173,7 @@ def fit_thrust(data: FlightData, grid: Grid | None = None, delay: float | None =
     iv = 0.5 * (x[k0, 3:6] + x[k1, 3:6]) * dt[:, None]
 
     def solve(d):
-        thrust = grid.input(0, d)
-        cum = np.concatenate([[0.0], np.cumsum(thrust * GRID_H)])  # int T dt on the grid
-        def integral(tt):
-            i, f = grid.at(cum, tt)
-            return cum[i] + f * thrust[i]
-        it = integral(t[k1]) - integral(t[k0])
+        it = grid.integral(0, d, t[k1]) - grid.integral(0, d, t[k0])
         rows, rhs = [], []
         g = np.array([0.0, 0.0, gravity])
         for c in range(3):
