@@ -11,7 +11,7 @@ import threading
 
 from . import settings as settings_mod
 
-CONTROL_CMDS = ("arm", "disarm", "takeoff", "offboard", "land", "hold", "status")
+CONTROL_CMDS = ("arm", "disarm", "takeoff", "offboard", "land", "hold", "identify", "status")
 
 
 def main(argv=None) -> int:
@@ -30,10 +30,14 @@ def main(argv=None) -> int:
         p.add_argument("--timeout", type=float, default=30.0)
         if c == "takeoff":
             p.add_argument("altitude", nargs="?", type=float)
+        if c == "identify":
+            p.add_argument("on", nargs="?", type=int, choices=(0, 1), default=1,
+                           help="1 (default): start mppid's identification manoeuvre; 0: stop it")
     a = ap.parse_args(argv)
     if a.cmd != "run":
         from .control import request
         line = a.cmd + (f" {a.altitude}" if getattr(a, "altitude", None) is not None else "")
+        line += f" {a.on}" if a.cmd == "identify" else ""
         try:
             reply = request(a.socket, line, a.timeout)
         except OSError as e:

@@ -38,6 +38,8 @@ DEFAULTS = {
         "state_channel": "MPPI_STATE",
         "command_channel": "MPPI_COMMAND",
         "status_channel": "MPPI_STATUS",
+        "params_channel": "MPPI_PARAMS",          # `identify`: the request to mppid ...
+        "param_result_channel": "MPPI_PARAM_RESULT",  # ... and its answer
         "link_channel": "MPPI_MAVLINK_LINK",
         "link_hz": 2.0,
     },
