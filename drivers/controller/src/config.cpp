@@ -231,13 +231,16 @@ void resolve_hover(YAML::Node root, const std::string& task) {
   }
 }
 
-// The settings file's vehicle (`vehicle: FILE`, relative to the settings file's folder).
-std::shared_ptr<const VehicleFile> vehicle_of(const YAML::Node& root, const std::string& dir) {
+// The settings' vehicle: `vehicle: FILE` relative to the settings file's folder; given by an
+// override (--set vehicle=FILE), relative to the working folder, as a command line's paths are.
+std::shared_ptr<const VehicleFile> vehicle_of(const YAML::Node& root, const YAML::Node& file, const std::string& dir) {
   const YAML::Node n = root["vehicle"];
   if (!n || n.IsNull()) return nullptr;
   std::string path = scalar<std::string>(n, "vehicle");
   if (path.empty()) fail("vehicle", "expected a file name");
-  if (path[0] != '/' && !dir.empty()) path = dir + "/" + path;
+  const YAML::Node own = file["vehicle"];
+  const bool from_file = own && own.IsScalar() && own.Scalar() == path;
+  if (path[0] != '/' && from_file && !dir.empty()) path = dir + "/" + path;
   return std::make_shared<const VehicleFile>(load_vehicle(path));
 }
 
@@ -300,7 +303,7 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   c.root = root;
   if (!root["task"]) fail("task", "missing");
   c.task = scalar<std::string>(root["task"], "task");
-  c.vehicle = vehicle_of(root, src.dir);
+  c.vehicle = vehicle_of(root, file, src.dir);
   if (c.vehicle) merge_vehicle(*c.vehicle, root, file, c.task, src.label);
   resolve_hover(root, c.task);
   if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");

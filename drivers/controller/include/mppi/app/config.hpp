@@ -72,7 +72,8 @@ struct AppConfig {
 };
 
 // Loads FILE and applies overrides "dotted.key=value" (YAML scalars or flow sequences, e.g.
-// "mppi.rollouts=512", "mppi.sigma=[100,100,100,100]", "vehicle=FILE") before validating.
+// "mppi.rollouts=512", "mppi.sigma=[100,100,100,100]", "vehicle=FILE") before validating. The
+// file's `vehicle:` is relative to the file; one given by an override, to the working folder.
 // `hover` in mppi.u_init / u_nominal stands for that channel of the model's hover control.
 AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {});
 // The same from a tree; a relative vehicle file is looked up in `dir` (else the working folder).
