@@ -99,6 +99,12 @@ def fit_command(a) -> int:
         "vehicle": {k: v for k, v in fitted.items() if k != "path"},
         "held_out": {"prior": prediction_errors(prior_model, held), "fitted": prediction_errors(model, held)},
     }
+    if a.structure:
+        from .structure import fit_second_order
+        second = [fit_second_order(train, i, grid) for i in range(3)]
+        report["structure"] = {AXES[i]: {"first_order_rmse_rad_s": axes[i].rmse, "second_order_rmse_rad_s": second[i].rmse,
+                                         "gain": second[i].gain, "wn_rad_s": second[i].wn, "zeta": second[i].zeta,
+                                         "delay_s": second[i].delay} for i in range(3)}
     if a.truth:
         truth = truth_of(Path(a.truth))
         got = {"mass": thrust.mass, "drag": thrust.drag, "delay": delay}
@@ -131,6 +137,10 @@ def print_report(r: dict):
         print(f"  held-out {e['horizon_s']} s prediction, {k:6s}: position {e['position_m']:.3f} m, velocity "
               f"{e['velocity_m_s']:.3f} m/s, attitude {e['attitude_deg']:.2f} deg, rates {e['rate_rad_s']:.3f} rad/s "
               f"({e['starts']} starts)")
+    for ax, v in (r.get("structure") or {}).items():
+        print(f"  rate {ax} as a second-order response: rmse {v['second_order_rmse_rad_s']:.3f} rad/s (first-order "
+              f"{v['first_order_rmse_rad_s']:.3f}): wn {v['wn_rad_s']:.1f} rad/s, zeta {v['zeta']:.2f}, gain "
+              f"{v['gain']:.3f}, delay {1e3 * v['delay_s']:.0f} ms")
     for k, v in (r.get("truth") or {}).items():
         err = "" if v["error_pct"] is None else f"  {v['error_pct']:+.1f} %"
         print(f"  truth {k}: {v['truth']:.4f}  fitted {v['fitted']:.4f}{err}")
@@ -152,6 +162,8 @@ def main(argv=None) -> int:
                    help="the daemon's daemon.latency.transport_ms (subtracted from the delay written)")
     f.add_argument("--dataflash", action="store_true", help="LOG is an ArduPilot dataflash log (.BIN)")
     f.add_argument("--truth", type=Path, help="a mppid-sim scenario: compare the fit with its plant")
+    f.add_argument("--structure", action="store_true",
+                   help="also fit a second-order rate response per axis: does the first-order model express it?")
     a = ap.parse_args(argv)
     if not 0.05 <= a.holdout <= 0.8:
         ap.error("--holdout must be in [0.05, 0.8]")
