@@ -58,8 +58,10 @@ def fitted_vehicle(prior: dict, data: logs.FlightData, thrust, delay: float, axe
     v["drag"] = round(max(0.0, thrust.drag * v["mass"] / thrust.mass), 4)
     v["rate_response"] = {"tau": [round(f.tau, 4) for f in axes], "gain": [round(f.gain, 4) for f in axes],
                           "delay": round(max(0.0, delay - transport_s), 4)}
-    v["description"] = (f"Fitted by tools/sysid from {source} on {datetime.date.today().isoformat()} "
-                        f"(prior: {prior.get('path', prior['name'])}).")
+    prior_path = Path(prior.get("path", prior["name"])).resolve()
+    if prior_path.is_relative_to(logs.ROOT):
+        prior_path = prior_path.relative_to(logs.ROOT)
+    v["description"] = f"Fitted by tools/sysid from {source} on {datetime.date.today().isoformat()} (prior: {prior_path})."
     model = RateModel(thrust.mass, v["gravity"], thrust.drag, [f.tau for f in axes], [f.gain for f in axes], delay)
     return v, model
 
