@@ -68,6 +68,7 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger) {
   daemon::LoopSettings s;
   s.trigger = trigger;
   s.status_hz = 5;  // several status messages inside the counted window
+  s.disturbance.mass.estimate = true;  // the mass estimate and the hover it moves, as the task files fly
   daemon::ControlLoop loop(controller.get(), &clock, &tx, &inbox, s);
   std::atomic<bool> stop{false};
   auto offer_state = [&](std::int64_t seq) {
