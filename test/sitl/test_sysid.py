@@ -47,7 +47,7 @@ def synthetic_flight(truth: RateModel, seconds=12.0, seed=3) -> FlightData:
     x = np.zeros((len(t), 13))
     x[0, 2], x[0, 6] = 5.0, 1.0
     for k in range(1, len(t)):
-        x[k] = predict(truth, x[k - 1:k], t[k - 1:k], 0.02, tc, u, h=0.0005)[0]
+        x[k] = predict(truth, x[k - 1:k], t[k - 1:k], 0.02, tc, u, h=0.001)[0]
     noisy = x + rng.normal(0.0, 1.0, x.shape) * np.r_[[0.002] * 3, [0.005] * 3, [0.0] * 4, [0.005] * 3]
     return FlightData(t, noisy, tc, u, "synthetic", "realtime")
 
@@ -121,3 +121,72 @@ def test_a_log_without_rate_model_states_is_refused(tmp_path):
     log.close()
     p = sysid("fit", tmp_path / "empty.lcmlog", check=1)
     assert "too few to fit" in p.stderr
+
+
+# ---- ArduPilot dataflash ----------------------------------------------------------------------
+
+def write_dataflash(path: Path, messages: dict):
+    """A dataflash log as ArduPilot writes it (0xA3 0x95 header, FMT records first): for each
+    name, (type id, format, columns, rows of values), the rows interleaved by time (first value)."""
+    import struct
+
+    from pymavlink import DFReader
+
+    out = bytearray()
+    fmt_len = 3 + struct.calcsize("<BB4s16s64s")
+    out += bytes([0xA3, 0x95, 128]) + struct.pack("<BB4s16s64s", 128, fmt_len, b"FMT", b"BBnNZ",
+                                                  b"Type,Length,Name,Format,Columns")
+    packers = {}
+    for name, (tid, fmt, cols, _) in messages.items():
+        st = "<" + "".join(DFReader.FORMAT_TO_STRUCT[c][0] for c in fmt)
+        packers[name] = (tid, struct.Struct(st))
+        out += bytes([0xA3, 0x95, 128]) + struct.pack("<BB4s16s64s", tid, 3 + struct.calcsize(st), name.encode(),
+                                                      fmt.encode(), cols.encode())
+    records = sorted((row[0], name, row) for name, (_, _, _, rows) in messages.items() for row in rows)
+    for _, name, row in records:
+        tid, st = packers[name]
+        out += bytes([0xA3, 0x95, tid]) + st.pack(*row)
+    path.write_bytes(bytes(out))
+
+
+def euler_ned(q):
+    """ZYX roll, pitch, yaw [rad] of a NED/FRD quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return (np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)), np.arcsin(np.clip(2 * (w * y - z * x), -1, 1)),
+            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+def test_an_ardupilot_dataflash_log_reads_as_the_same_flight(tmp_path):
+    from mppi_mavlink import frames
+    from sysid_fit.logs import read_dataflash
+
+    truth = RateModel(mass=1.0, tau=[0.05, 0.06, 0.09], gain=[1.1, 0.9, 0.8], delay=0.012)
+    data = synthetic_flight(truth, seconds=10.0, seed=5)
+    hover, deg = 0.4, 180.0 / np.pi
+    us = lambda t: int(round(t * 1e6)) + 1000000  # noqa: E731
+    rate, att, ekf, ctun = [], [], [], []
+    for t, x in zip(data.t, data.x):
+        r, p, y = euler_ned(frames.q_enu_flu_to_ned_frd(tuple(x[6:10])))
+        rate.append((us(t), 0.0, x[10] * deg, 0.0, -x[11] * deg, 0.0, -x[12] * deg))
+        att.append((us(t), r * deg, p * deg, y * deg))
+        ekf.append((us(t), 0, x[1], x[0], -x[2], x[4], x[3], -x[5]))
+        ctun.append((us(t), 0.5, hover))
+    guia = [(us(t), 1, 0.0, 0.0, 0.0, u[1] * deg, -u[2] * deg, -u[3] * deg, u[0] * hover / 9.81, 0.0)
+            for t, u in zip(data.tc, data.u)]
+    write_dataflash(tmp_path / "flight.BIN", {
+        "RATE": (129, "Qffffff", "TimeUS,RDes,R,PDes,P,YDes,Y", rate),
+        "ATT": (130, "Qfff", "TimeUS,Roll,Pitch,Yaw", att),
+        "XKF1": (131, "QBffffff", "TimeUS,C,PN,PE,PD,VN,VE,VD", ekf),
+        "CTUN": (132, "Qff", "TimeUS,ThO,ThH", ctun),
+        "GUIA": (133, "QBffffffff", "TimeUS,Type,Roll,Pitch,Yaw,RollRt,PitchRt,YawRt,Thrust,ClimbRt", guia)})
+    back = read_dataflash(tmp_path / "flight.BIN", mass=1.0, gravity=9.81, hover_throttle=None)
+    assert back.hover_thrust == pytest.approx(hover)
+    np.testing.assert_allclose(back.x[:, 0:6], data.x[:, 0:6], atol=2e-3)
+    np.testing.assert_allclose(np.abs(np.sum(back.x[:, 6:10] * data.x[:, 6:10], axis=1)), 1.0, atol=1e-5)
+    np.testing.assert_allclose(back.x[:, 10:13], data.x[:, 10:13], atol=1e-5)
+    np.testing.assert_allclose(back.u, data.u, rtol=1e-5, atol=1e-5)
+    grid = sysid_fit.Grid(back)
+    delay, axes = sysid_fit.fit_common_delay(back, grid)
+    assert delay == pytest.approx(truth.delay, abs=0.0005)
+    for a in range(3):
+        assert axes[a].gain == pytest.approx(truth.gain[a], rel=0.02)

@@ -129,45 +129,63 @@ def _q_from_euler_ned(roll, pitch, yaw):
 
 
 def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle: float | None) -> FlightData:
-    """ArduCopter's log: the rate loop's input is RATE's desired rate (what GUIDED's rate target
-    asks for), its output the achieved rate; thrust is CTUN.ThO (0..1) through the vehicle's
-    mass and hover throttle (CTUN.ThH, MOT_THST_HOVER, when the vehicle file has none)."""
+    """ArduCopter's log. The input is what mppid asked for through the bridge: GUIA, GUIDED's
+    attitude target (body rates in deg/s, FRD; thrust 0..1, with GUID_OPTIONS bit 3), logged
+    as each target arrives; without GUIA, RATE's desired rates and CTUN.ThO, which are the rate
+    loop's input after ArduCopter's own input shaping (the fit then leaves the shaping out: a
+    note says so). The output: RATE's achieved rates, ATT, the first EKF core's position and
+    velocity (XKF1, or NKF1 in older logs). Thrust in newtons through the vehicle's mass and
+    hover throttle (CTUN.ThH when the vehicle file has none)."""
     from mppi_mavlink import frames
     from pymavlink import DFReader
 
     log = DFReader.DFReader_binary(str(path), zero_time_base=True)
-    rate, ctun, att, pos = [], [], [], []
+    rows = {k: [] for k in ("RATE", "CTUN", "ATT", "EKF", "GUIA")}
     while True:
-        m = log.recv_match(type=["RATE", "CTUN", "ATT", "XKF1", "NKF1"])
+        m = log.recv_match(type=["RATE", "CTUN", "ATT", "XKF1", "NKF1", "GUIA"])
         if m is None:
             break
         t = m.TimeUS * 1e-6
         kind = m.get_type()
         if kind == "RATE":
-            rate.append((t, m.RDes, m.R, m.PDes, m.P, m.YDes, m.Y))
+            rows["RATE"].append((t, m.RDes, m.R, m.PDes, m.P, m.YDes, m.Y))
         elif kind == "CTUN":
-            ctun.append((t, m.ThO, getattr(m, "ThH", float("nan"))))
+            rows["CTUN"].append((t, m.ThO, getattr(m, "ThH", float("nan"))))
         elif kind == "ATT":
-            att.append((t, m.Roll, m.Pitch, m.Yaw))
+            rows["ATT"].append((t, m.Roll, m.Pitch, m.Yaw))
+        elif kind == "GUIA":
+            rows["GUIA"].append((t, m.RollRt, m.PitchRt, m.YawRt, m.Thrust))
         elif getattr(m, "C", 0) == 0:  # the first EKF core
-            pos.append((t, m.PN, m.PE, m.PD, m.VN, m.VE, m.VD))
-    if len(rate) < 50 or len(ctun) < 50 or len(att) < 50 or len(pos) < 50:
-        raise LogError(f"{path}: RATE/CTUN/ATT/XKF1 messages: {len(rate)}/{len(ctun)}/{len(att)}/{len(pos)}, too few to fit")
-    rate, ctun, att, pos = (np.array(a, dtype=np.float64) for a in (rate, ctun, att, pos))
+            rows["EKF"].append((t, m.PN, m.PE, m.PD, m.VN, m.VE, m.VD))
+    counts = {k: len(v) for k, v in rows.items()}
+    if min(counts["RATE"], counts["CTUN"], counts["ATT"], counts["EKF"]) < 50:
+        raise LogError(f"{path}: RATE/CTUN/ATT/XKF1 messages {counts}: too few to fit")
+    rate, ctun, att, ekf = (np.array(rows[k], dtype=np.float64) for k in ("RATE", "CTUN", "ATT", "EKF"))
     if hover_throttle is None:
         hover_throttle = float(np.nanmedian(ctun[:, 2]))
         if not 0.01 < hover_throttle < 0.99:
             raise LogError(f"{path}: no hover throttle (CTUN.ThH) in the log and none in the vehicle file")
-    t = rate[:, 0]
+    newtons = mass * gravity / hover_throttle
     d2r = np.pi / 180.0
+    t = rate[:, 0]
     interp = lambda src, col: np.interp(t, src[:, 0], src[:, col])  # noqa: E731
     q_ned = _q_from_euler_ned(interp(att, 1) * d2r, interp(att, 2) * d2r, interp(att, 3) * d2r)
     q = np.array([frames.q_ned_frd_to_enu_flu(tuple(r)) for r in q_ned])
-    p = np.stack([interp(pos, 2), interp(pos, 1), -interp(pos, 3)], axis=1)   # NED -> ENU
-    v = np.stack([interp(pos, 5), interp(pos, 4), -interp(pos, 6)], axis=1)
+    p = np.stack([interp(ekf, 2), interp(ekf, 1), -interp(ekf, 3)], axis=1)   # NED -> ENU
+    v = np.stack([interp(ekf, 5), interp(ekf, 4), -interp(ekf, 6)], axis=1)
     w = np.stack([rate[:, 2], -rate[:, 4], -rate[:, 6]], axis=1) * d2r          # FRD -> FLU
     x = np.concatenate([p, v, q, w], axis=1)
-    thrust = np.interp(t, ctun[:, 0], ctun[:, 1]) * mass * gravity / hover_throttle
-    u = np.stack([thrust, rate[:, 1] * d2r, -rate[:, 3] * d2r, -rate[:, 5] * d2r], axis=1)
-    return FlightData(t - t[0], x, t - t[0], u, str(path), "dataflash", hover_throttle,
-                      ["dataflash: the rate loop's input is RATE's desired rate, thrust CTUN.ThO"])
+    notes = []
+    if counts["GUIA"] >= 50:
+        g = np.array(rows["GUIA"], dtype=np.float64)
+        tc = g[:, 0]
+        u = np.stack([g[:, 4] * newtons, g[:, 1] * d2r, -g[:, 2] * d2r, -g[:, 3] * d2r], axis=1)
+        notes.append("dataflash: GUIDED's attitude targets (GUIA) as the input")
+    else:
+        tc = t
+        u = np.stack([np.interp(t, ctun[:, 0], ctun[:, 1]) * newtons, rate[:, 1] * d2r, -rate[:, 3] * d2r,
+                      -rate[:, 5] * d2r], axis=1)
+        notes.append("dataflash without GUIA: RATE's desired rates and CTUN.ThO as the input, after ArduCopter's "
+                     "input shaping (the fit leaves the shaping out)")
+    t0 = min(t[0], tc[0])
+    return FlightData(t - t0, x, tc - t0, u, str(path), "dataflash", hover_throttle, notes)
