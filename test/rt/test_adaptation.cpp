@@ -14,6 +14,7 @@
 #include "fakes.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/delay_estimator.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/state_predictor.hpp"
@@ -134,6 +135,55 @@ TEST(MassEstimate, TheMotorModelFindsItsMassTooAndStaysInItsBounds) {
   EXPECT_NEAR(motor_model_mass_estimate(obs, *model, 0.275f, 5.8045e-8f), 0.25f * 1.1f / 0.95f, 0.003f);
   // Twice as heavy: the estimate stops at max_change (+50 %), never beyond.
   EXPECT_NEAR(motor_model_mass_estimate(obs, *model, 0.5f, 6.11e-8f), 0.25f * 1.5f, 1e-4f);
+}
+
+// ---- the actuation delay estimate -----------------------------------------------------------
+
+namespace {
+// The plant takes every command `true_ms` later than the loop's history says; the commands
+// change every state (random steps around `u0`, `spread` wide). The estimator's delay after
+// `seconds` of states (0 while it has not moved).
+double estimated_delay_ms(const char* task, const std::vector<float>& u0, const std::vector<float>& spread,
+                          double true_ms, double seconds) {
+  auto model = controller(task, {});
+  const int nx = model->nx(), nu = model->nu();
+  std::vector<int> act;
+  for (int i = nx == 16 ? 12 : 10; i < (nx == 16 ? 16 : 13); ++i) act.push_back(i);
+  daemon::DelayEstimateSettings s;
+  s.estimate = true;
+  daemon::DelayEstimator est(s, nx, act);
+  daemon::CommandHistory loop_history(nu, u0), plant_history(nu, u0);
+  std::vector<float> x(static_cast<std::size_t>(nx), 0.0f), u(u0);
+  x[2] = 2.0f;
+  if (nx == 13) x[6] = 1.0f;
+  for (int i = 12; nx == 16 && i < 16; ++i) x[static_cast<std::size_t>(i)] = u0[0];
+  std::uint32_t seed = 12345;
+  double delay_ms = 0.0;
+  const auto lag = static_cast<std::int64_t>(true_ms * 1e6);
+  for (std::int64_t k = 0, t = 0; static_cast<double>(k) * 0.02 < seconds; ++k, t += 20 * kMs) {
+    if (est.update(*model, loop_history, x.data(), t, 0)) delay_ms = static_cast<double>(est.delay_ns()) * 1e-6;
+    for (int j = 0; j < nu; ++j) {
+      seed = seed * 1664525u + 1013904223u;
+      u[static_cast<std::size_t>(j)] = u0[static_cast<std::size_t>(j)] +
+                                       spread[static_cast<std::size_t>(j)] * (static_cast<float>(seed >> 8) / 16777216.0f - 0.5f);
+    }
+    loop_history.add(t + 5 * kMs, u.data());  // what the loop believes: acting 5 ms after this state
+    plant_history.add(t + 5 * kMs + lag, u.data());
+    plant_history.predict(*model, x.data(), t, t + 20 * kMs);
+  }
+  return delay_ms;
+}
+}  // namespace
+
+TEST(DelayEstimate, FindsTheDelayTheVehicleReallyHas) {
+  // The rate model's body rates and the 16-state model's motor speeds both show it.
+  const std::vector<float> thrust_rates = {9.81f, 0.0f, 0.0f, 0.0f}, rate_spread = {1.0f, 2.0f, 2.0f, 1.0f};
+  EXPECT_NEAR(estimated_delay_ms("quadrotor_rate_track", thrust_rates, rate_spread, 20.0, 1.2), 20.0, 1.0);
+  EXPECT_NEAR(estimated_delay_ms("quadrotor_rate_track", thrust_rates, rate_spread, 8.0, 1.2), 8.0, 1.0);
+  const std::vector<float> motors(4, 3168.4f), motor_spread(4, 200.0f);
+  EXPECT_NEAR(estimated_delay_ms("quadrotor_forest", motors, motor_spread, 14.0, 1.2), 14.0, 1.0);
+  // None to find: the estimate does not move.
+  EXPECT_EQ(estimated_delay_ms("quadrotor_rate_track", thrust_rates, rate_spread, 0.0, 3.0), 0.0);
 }
 
 // ---- the identification manoeuvre -----------------------------------------------------------

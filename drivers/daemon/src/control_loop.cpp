@@ -17,7 +17,22 @@ namespace mppi::daemon {
 using transport::Mode;
 
 namespace {
-constexpr std::int8_t kThrustRates = 2;  // command_t::KIND_THRUST_RATES
+constexpr std::int8_t kMotorSpeeds = 1, kThrustRates = 2;  // command_t::KIND_*
+
+// The states that answer a command first, for the actuation delay estimate: the motors'
+// speeds (16-state quadrotor, at 12..15 of each vehicle) or the body rates the autopilot's
+// rate loop tracks (rate model, 10..12); none for the other models.
+std::vector<int> actuator_states(const LoopSettings& s, const Controller& c) {
+  const std::int8_t kind = s.command_kind >= 0 ? s.command_kind : command_kind_for(c.task());
+  const int first = kind == kMotorSpeeds ? 12 : kind == kThrustRates ? 10 : -1;
+  const int count = kind == kMotorSpeeds ? 4 : 3;
+  const int vnx = c.nx() / c.vehicles();
+  std::vector<int> out;
+  if (first < 0 || first + count > vnx) return out;
+  for (int j = 0; j < c.vehicles(); ++j)
+    for (int i = 0; i < count; ++i) out.push_back(j * vnx + first + i);
+  return out;
+}
 
 std::int64_t every(double rate_hz, double sub_hz) {
   if (sub_hz <= 0.0) return 0;
@@ -50,9 +65,11 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
       x_pred_(static_cast<std::size_t>(controller->nx())),
       observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
+      delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
+  counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
   inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();
@@ -205,6 +222,15 @@ void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
+void ControlLoop::adapt_to(const float* x, std::int64_t t_state_ns) {
+  // The disturbance observer compares the state with the last one predicted.
+  if (observe_ && observer_.update(*c_, history_, x, t_state_ns)) observer_.apply(*c_);
+  if (delays_.active() && delays_.update(*c_, history_, x, t_state_ns, s_.latency.actuation_delay_ns)) {
+    s_.latency.actuation_delay_ns = delays_.delay_ns();
+    counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
+  }
+}
+
 void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
   const std::int64_t t0 = lockstep ? clock_->now_ns() : start_ns;
   apply_between_cycles(now_state_ns);
@@ -237,6 +263,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
         observer_.reset();
         observer_.apply(*c_);
       }
+      delays_.reset();
     }
     stamp_timing(have_state ? age : 0, clock_->now_ns() - t0, 0);
     if (publish_failsafe(state_seq)) remember(sent_ns(now_state_ns, t0), failsafe_.data());
@@ -254,9 +281,7 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
     // Latency compensation: optimise from the state as it will be when this command acts.
     const float* x0 = x.x;
     std::int64_t lead = 0;
-    // A new state: the disturbance observer compares it with the last one predicted.
-    if (observe_ && state_seq != last_state_seq_used_ && observer_.update(*c_, history_, x.x, t_state))
-      observer_.apply(*c_);
+    if (state_seq != last_state_seq_used_) adapt_to(x.x, t_state);
     if (ls.compensate) {
       align_plan(t_act);
       std::copy_n(x.x, x_pred_.size(), x_pred_.data());

@@ -154,7 +154,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     if (!n.IsMap()) fail("latency", "expected a map");
     check_known(n, "latency.",
                 {"compensate", "quantile", "window", "floor_ms", "ceiling_ms", "transport_ms", "actuation_delay_ms",
-                 "state_time", "future_tolerance_ms"});
+                 "state_time", "future_tolerance_ms", "delay_estimate"});
     const std::string p = "latency.";
     if (n["compensate"]) lat.compensate = scalar<bool>(n["compensate"], p + "compensate");
     lat.estimator.quantile = number(n, "quantile", lat.estimator.quantile, 0.01, 1.0, p);
@@ -170,6 +170,17 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     const std::string st = text(n, "state_time", "sample", p);
     if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
     lat.use_sample_time = st == "sample";
+    if (const YAML::Node e = n["delay_estimate"]) {
+      if (!e.IsMap()) fail("latency.delay_estimate", "expected a map");
+      const std::string q = "latency.delay_estimate.";
+      check_known(e, q, {"estimate", "max_ms", "step_ms", "window", "min_gain"});
+      DelayEstimateSettings& de = lat.delay_estimate;
+      if (e["estimate"]) de.estimate = scalar<bool>(e["estimate"], q + "estimate");
+      de.max_ms = number(e, "max_ms", de.max_ms, 1.0, 500.0, q);
+      de.step_ms = number(e, "step_ms", de.step_ms, 0.1, de.max_ms, q);
+      de.window = static_cast<int>(number(e, "window", de.window, 5, 1000, q));
+      de.min_gain = number(e, "min_gain", de.min_gain, 0.0, 0.9, q);
+    }
   }
   if (const YAML::Node n = section["disturbance"]) {
     if (!n.IsMap()) fail("disturbance", "expected a map");
