@@ -69,6 +69,7 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger) {
   s.trigger = trigger;
   s.status_hz = 5;  // several status messages inside the counted window
   s.disturbance.mass.estimate = true;  // the mass estimate and the hover it moves, as the task files fly
+  s.latency.delay_estimate.estimate = true;  // and the actuation delay estimate (its window is scored here)
   daemon::ControlLoop loop(controller.get(), &clock, &tx, &inbox, s);
   std::atomic<bool> stop{false};
   auto offer_state = [&](std::int64_t seq) {

@@ -163,7 +163,8 @@ def run_map(bases: list[str], seeds: list[int], out: Path, realtime: bool, sets=
     total_k = sum(k for k, _ in totals.values())
     total_n = sum(n for _, n in totals.values())
     clock = "real time" if realtime else data["summary"]["clock"]
-    text = (f"# Robustness map\n\n`{' '.join(sys.argv) if sys.argv else 'tools/sitl robustness'}`\n\n"
+    command = " ".join(["tools/sitl"] + sys.argv[1:])
+    text = (f"# Robustness map\n\n`{command}`\n\n"
             f"{clock}; seeds {data['summary']['seeds'][0]}-{data['summary']['seeds'][-1]} "
             f"({len(seeds)} per cell); {total_n} flights; {started:%Y-%m-%d %H:%M} UTC; "
             f"load average {load0[0]:.1f} at the start, {load1[0]:.1f} at the end.\n\nMachine: {machine()}\n\n"
