@@ -641,6 +641,7 @@ void ControlLoop::maybe_status(bool force, std::int64_t now_ns) {
   status_.lead_ms_p99 = f(w.lead.p99_ms);
   std::copy_n(observer_.estimate(), 3, status_.disturbance_accel);
   status_.model_mass = c_->mass();
+  status_.actuation_delay_ms = static_cast<float>(static_cast<double>(s_.latency.actuation_delay_ns) * 1e-6);
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;
