@@ -254,29 +254,18 @@ class CudaBackend final : public RolloutBackend<T> {
     if (const char* v = std::getenv("MPPID_CUDA_PDL")) pdl_ = std::string(v) != "0";
     const char* env = std::getenv("MPPID_CUDA_GRAPH");
     use_graph_ = env == nullptr || std::string(env) != "0";
-    if (use_graph_) {
-      check(cudaStreamBeginCapture(stream_.get(), cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
-      try {
-        enqueue();
-      } catch (...) {
-        cudaGraph_t g = nullptr;
-        cudaStreamEndCapture(stream_.get(), &g);
-        if (g != nullptr) cudaGraphDestroy(g);
-        throw;
-      }
-      cudaGraph_t graph = nullptr;
-      check(cudaStreamEndCapture(stream_.get(), &graph), "cudaStreamEndCapture (capturing the update graph)");
-      graph_.reset(graph);
-      cudaGraphExec_t exec = nullptr;
-      check(cudaGraphInstantiate(&exec, graph_.get(), 0), "cudaGraphInstantiate (the update graph)");
-      exec_.reset(exec);
-      check(cudaGraphUpload(exec_.get(), stream_.get()), "cudaGraphUpload");
-      check(cudaStreamSynchronize(stream_.get()), "cudaStreamSynchronize after the graph upload");
-    }
+    if (use_graph_) capture_graph();
   }
 
   const char* name() const override { return "cuda"; }
   bool prepares_params() const override { return device_grid_; }
+
+  // The kernels take the sampler constants by value: the graph holds them, so it is captured
+  // again (rare: the daemon moves the nominal only when its hover estimate moved).
+  void set_nominal(const float* u_nominal) override {
+    std::copy_n(u_nominal, kNu, c_.u_nominal);
+    if (use_graph_) capture_graph();
+  }
 
   void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan, UpdateStats* stats) override {
     auto* in = h_in_.as<Input<T>>();
@@ -336,6 +325,27 @@ class CudaBackend final : public RolloutBackend<T> {
   }
 
  private:
+  // The update (enqueue()) as a graph, launched each update as one.
+  void capture_graph() {
+    check(cudaStreamBeginCapture(stream_.get(), cudaStreamCaptureModeThreadLocal), "cudaStreamBeginCapture");
+    try {
+      enqueue();
+    } catch (...) {
+      cudaGraph_t g = nullptr;
+      cudaStreamEndCapture(stream_.get(), &g);
+      if (g != nullptr) cudaGraphDestroy(g);
+      throw;
+    }
+    cudaGraph_t graph = nullptr;
+    check(cudaStreamEndCapture(stream_.get(), &graph), "cudaStreamEndCapture (capturing the update graph)");
+    graph_.reset(graph);
+    cudaGraphExec_t exec = nullptr;
+    check(cudaGraphInstantiate(&exec, graph_.get(), 0), "cudaGraphInstantiate (the update graph)");
+    exec_.reset(exec);
+    check(cudaGraphUpload(exec_.get(), stream_.get()), "cudaGraphUpload");
+    check(cudaStreamSynchronize(stream_.get()), "cudaStreamSynchronize after the graph upload");
+  }
+
   // At most this much device memory for the stored controls (and at most 1/4 of the free).
   static constexpr std::size_t kNoiseBudgetMax = std::size_t{16} << 30;
   static constexpr int kReduceBlock = 256;

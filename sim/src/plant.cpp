@@ -153,7 +153,7 @@ template <> int ModelPlant<QuadrotorRate>::wind_accel(const double* wind, float*
   return QuadrotorRate::VX;
 }
 template <> void ModelPlant<QuadrotorRate>::clamp(float* u) const {
-  u[0] = clampf(u[0], 0.0f, static_cast<float>(s_.max_thrust));
+  u[0] = clampf(u[0] * static_cast<float>(s_.thrust_gain), 0.0f, static_cast<float>(s_.max_thrust));
   const auto r = static_cast<float>(s_.max_body_rate);
   for (int i = 1; i < 4; ++i) u[i] = clampf(u[i], -r, r);
 }
@@ -314,7 +314,7 @@ class RateBodyPlant : public Plant {
     const auto r = static_cast<float>(s_.max_body_rate);
     for (int v = 0; v < vehicles_; ++v) {
       float* uv = u + v * QuadrotorRate::kNu;
-      uv[0] = clampf(uv[0], 0.0f, static_cast<float>(s_.max_thrust));
+      uv[0] = clampf(uv[0] * static_cast<float>(s_.thrust_gain), 0.0f, static_cast<float>(s_.max_thrust));
       for (int i = 1; i < 4; ++i) uv[i] = clampf(uv[i], -r, r);
     }
     return true;

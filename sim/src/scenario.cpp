@@ -112,7 +112,7 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   if (!plant) c.fail("plant", "required");
   check_keys(c, plant, "plant",
              {"model", "vehicles", "params", "initial_state", "max_motor_speed", "max_thrust", "max_body_rate",
-              "rate_gain"});
+              "rate_gain", "thrust_gain"});
   read(c, plant, "plant", "model", s.model);
   read(c, plant, "plant", "vehicles", s.vehicles);
   read(c, plant, "plant", "initial_state", s.initial_state);
@@ -121,6 +121,8 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   read(c, plant, "plant", "max_body_rate", s.max_body_rate);
   read(c, plant, "plant", "rate_gain", s.rate_gain);
   if (!(s.rate_gain > 0.0)) c.fail("plant.rate_gain", "must be > 0");
+  read(c, plant, "plant", "thrust_gain", s.thrust_gain);
+  if (!(s.thrust_gain > 0.0 && s.thrust_gain <= 10.0)) c.fail("plant.thrust_gain", "must be in (0, 10]");
   if (plant["params"]) {
     if (!plant["params"].IsMap()) c.fail("plant.params", "expected a mapping");
     for (const auto& kv : plant["params"]) {

@@ -164,3 +164,25 @@ TEST(RateBodyPlant, TracksARateSetpointAndTiltsTheThrust) {
 }
 
 }  // namespace
+
+namespace {
+
+// plant.thrust_gain: the rate plants produce that much of the thrust commanded (a motor
+// constant the controller is not told), so their own hover command no longer holds them.
+TEST(RatePlants, ThrustGainScalesTheThrustTheyProduce) {
+  for (const char* name : {"rate_track_circle", "rate_forest_4m_body"}) {
+    sim::Scenario s = sim::load_scenario(scenario(name), 1);
+    s.forest.enabled = false;
+    s.obstacles.clear();
+    s.thrust_gain = 0.9;
+    auto plant = sim::make_plant(s);
+    auto u = plant->hover();
+    ASSERT_TRUE(plant->saturate(u.data()));
+    EXPECT_NEAR(u[0], 0.9 * plant->hover()[0], 1e-4) << name;
+    const double wind[3] = {0, 0, 0};
+    for (int i = 0; i < 500; ++i) plant->step(u.data(), wind, 1e-3);
+    EXPECT_NEAR(plant->state()[5], -0.1 * 9.81 * 0.5, 0.05) << name;  // 0.5 s at -0.1 g
+  }
+}
+
+}  // namespace

@@ -59,6 +59,8 @@ std::size_t allocations_over_cycles(Controller& c) {
       finite = finite && st.finite;
     }
     if (n % 25 == 0) c.set_inputs(in);
+    // The daemon's mass estimate: a new mass moves the nominal, the warm start and the plan.
+    if (n % 20 == 10) c.set_mass(c.mass() * (n % 40 == 10 ? 1.1f : 1.0f / 1.1f));
     Quadrotor::step(model, x.data(), u.data(), c.dt());
   }
   const std::size_t after = testing::allocation_count();

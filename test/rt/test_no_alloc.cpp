@@ -76,6 +76,8 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts
   s.trigger = trigger;
   s.status_hz = 5;  // several status messages inside the counted window
   if (rollouts) s.rollouts = daemon::FanSettings{10.0, 8, 8};  // every fifth cycle: tools/view's fan
+  s.disturbance.mass.estimate = true;  // the mass estimate and the hover it moves, as the task files fly
+  s.latency.delay_estimate.estimate = true;  // and the actuation delay estimate (its window is scored here)
   daemon::ControlLoop loop(controller.get(), &clock, &tx, &inbox, s);
   std::atomic<bool> stop{false};
   auto offer_state = [&](std::int64_t seq) {

@@ -38,10 +38,12 @@ IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
 # mppid's settings through ArduCopter, over the task file (argued there), then the mission's
 # own (its `mppid.set`), then --set.
 OVERLAY = paths.ROOT / "config" / "ardupilot" / "mppid_overlay.yaml"
-BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout as ArduPilot's documentation says "
-              "(https://ardupilot.org/dev/docs/building-setup-linux.html: `./waf configure --board sitl` then "
-              "`./waf copter`), then pass --ardupilot-bin <checkout>/build/sitl/bin/arducopter or set "
-              "MPPID_ARDUPILOT_BIN")
+# The airframe both mppid and the bridge are given; `--set vehicle=FILE` (e.g. one tools/sysid
+# identified) replaces it for both.
+VEHICLE = paths.ROOT / "config" / "vehicles" / "arducopter_sitl.yaml"
+BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout (tools/ardupilot/build-sitl.sh CHECKOUT: "
+              "`./waf configure --board sitl` then `./waf copter`, as ArduPilot's documentation says), then pass "
+              "--ardupilot-bin <checkout>/build/sitl/bin/arducopter or set MPPID_ARDUPILOT_BIN")
 
 
 def ardupilot_binary(explicit: str | None = None) -> Path:
@@ -148,14 +150,18 @@ class ArduPilotFlight(Flight):
             raise FlightError("mppid not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
         task = mission.get("task", "quadrotor_rate_track")
         cfg = paths.TASKS / f"{task}.yaml"
-        ctrl = [str(mppid), "--config", str(cfg), "--lcm-url", spec.lcm_url, "--backend", spec.backend,
-                "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
+        sets = [str(kv) for kv in spec.sets if not str(kv).startswith("vehicle=")]
+        vehicles = [Path(str(kv)[len("vehicle="):]) for kv in spec.sets if str(kv).startswith("vehicle=")]
+        vehicle = (vehicles[-1].expanduser().resolve() if vehicles else VEHICLE)
+        ctrl = [str(mppid), "--config", str(cfg), "--vehicle", str(vehicle), "--lcm-url", spec.lcm_url,
+                "--backend", spec.backend, "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
         from .overlay import load_sets
-        for kv in load_sets(OVERLAY) + list((mission.get("mppid") or {}).get("set", [])) + list(spec.sets):
+        for kv in load_sets(OVERLAY) + list((mission.get("mppid") or {}).get("set", [])) + sets:
             ctrl += ["--set", str(kv)]
         sock = self.out / "bridge.sock"
         bridge = [str(paths.ROOT / "drivers" / "mavlink" / "mppid-mavlink-bridge"), "run", "--config",
-                  str(BRIDGE_CONFIG), "--lcm-url", spec.lcm_url, "--set", f"control.socket={sock}"]
+                  str(BRIDGE_CONFIG), "--lcm-url", spec.lcm_url, "--set", f"control.socket={sock}",
+                  "--set", f"vehicle.file={vehicle}"]
         if fifo:
             bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge
         cmds.update(controller=ctrl, bridge=bridge, mission=mission_cmd + ["--bridge", str(sock)])

@@ -104,6 +104,16 @@ def main(argv=None) -> int:
     apt.add_argument("folders", type=Path, nargs="+")
     apt.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
 
+    rb = sub.add_parser("robustness", help="the robustness map: mass, motor constant, wind, delay, noise "
+                                           "(docs/robustness.md)")
+    rb.add_argument("--scenarios", default="forest_4m,rate_track_circle_fast",
+                    help="comma-separated base scenarios (quadrotor plants)")
+    rb.add_argument("--seeds", default="51-55", help="seeds per cell: 51-55, 1,4,9-12, or a count from 1")
+    rb.add_argument("--out", type=Path, required=True)
+    rb.add_argument("--realtime", action="store_true", help="real time (the map's figures); default lock-step")
+    rb.add_argument("--latency", type=float, default=None, metavar="SECONDS", help="lock-step: a fixed latency")
+    rb.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
+
     o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
     o.add_argument("file", type=Path)
 
@@ -210,6 +220,23 @@ def main(argv=None) -> int:
             print(f"sitl: {e}", file=sys.stderr)
             return 2
         print((Path(a.out) / "summary.md").read_text())
+        return 0
+    if a.cmd == "robustness":
+        from .campaign import parse_seeds
+        from .robustness import run_map
+        if a.realtime and a.latency is not None:
+            print("sitl: --latency is a lock-step option", file=sys.stderr)
+            return 2
+        try:
+            md = run_map([s.strip() for s in a.scenarios.split(",") if s.strip()], parse_seeds(a.seeds), a.out,
+                         a.realtime, sets=a.set, latency=a.latency)
+        except (FileNotFoundError, ValueError) as e:
+            print(f"sitl: {e}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("\nsitl: robustness map interrupted", file=sys.stderr)
+            return 130
+        print(md.read_text())
         return 0
     if a.cmd == "compare":
         from .campaign import compare_campaigns

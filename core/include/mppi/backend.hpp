@@ -102,6 +102,12 @@ class RolloutBackend {
   // from x0 and the plan it is given). The optimizer then skips Task::prepare and passes the
   // parameters as they are; any grid in them is ignored.
   virtual bool prepares_params() const { return false; }
+
+  // The control the control cost is measured from (MppiSettings::u_nominal, NU floats): the
+  // hover of the vehicle as the daemon estimates it (Controller::set_mass). Between updates
+  // only; rare (the CUDA backend captures its graph again).
+  virtual void set_nominal(const float* u_nominal) = 0;
+
   // Bytes allocated at start-up (host, device).
   virtual std::size_t host_bytes() const = 0;
   virtual std::size_t device_bytes() const { return 0; }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <cstdint>
 #include <cstring>
@@ -68,6 +69,11 @@ class Controller {
   // The external acceleration (world frame, m/s^2) the model adds to every vehicle: the
   // disturbance observer's estimate. False (and nothing set) for a model without one.
   virtual bool set_external_accel(const float accel[3]) { (void)accel; return false; }
+  // The mass the model flies with (kg; every vehicle of a team) and setting it: the daemon's
+  // mass estimate (a payload, weaker motors: the thrust each command buys). 0 and false for a
+  // model without one (the quadrotors have one).
+  virtual float mass() const { return 0.0f; }
+  virtual bool set_mass(float kg) { (void)kg; return false; }
 
   // Positions along `plan` (horizon x nu) from x0, rolled out without noise: horizon + 1
   // per vehicle, vehicle-major, xyz, at most `capacity` of them. Returns how many.
@@ -111,6 +117,37 @@ template <class P, class = void>
 constexpr bool has_external_accel = false;
 template <class P>
 constexpr bool has_external_accel<P, std::void_t<decltype(P::accel_z)>> = true;
+
+// The daemon's estimates into a vehicle's parameters (every controller of a task uses these):
+// the external acceleration and the mass, for the models that have them (the quadrotors).
+template <class P>
+bool set_vehicle_accel(P& p, const float accel[3]) {
+  if constexpr (has_external_accel<P>) {
+    p.accel_x = accel[0];
+    p.accel_y = accel[1];
+    p.accel_z = accel[2];
+    return true;
+  } else {
+    (void)p, (void)accel;
+    return false;
+  }
+}
+template <class P>
+float vehicle_mass(const P& p) {
+  if constexpr (has_external_accel<P>) return p.mass;
+  (void)p;
+  return 0.0f;
+}
+template <class P>
+bool set_vehicle_mass(P& p, float kg) {
+  if constexpr (has_external_accel<P>) {
+    p.mass = kg;
+    return true;
+  } else {
+    (void)p, (void)kg;
+    return false;
+  }
+}
 
 // What the world says between cycles, into a task's parameters: goals and obstacles for the
 // forest costs, the reference for the tracking costs (every controller of a task uses this).
@@ -161,7 +198,7 @@ class TaskController final : public Controller {
  public:
   TaskController(std::string name, const MppiSettings& s, typename T::Params params,
                  std::unique_ptr<RolloutBackend<T>> backend)
-      : name_(std::move(name)), params_(params), mppi_(s, std::move(backend)) {}
+      : name_(std::move(name)), params_(params), mppi_(s, std::move(backend)), mass0_(vehicle_mass(params.vehicle)) {}
 
   const std::string& task() const override { return name_; }
   const char* backend() const override { return mppi_.backend().name(); }
@@ -184,16 +221,13 @@ class TaskController final : public Controller {
   void set_plan(const float* plan) override { mppi_.set_plan(plan); }
   void shift(int steps) override { mppi_.shift(steps); }
   void propagate(float* x, const float* u, float seconds) const override { rk4_task<T>(params_, x, u, seconds); }
-  bool set_external_accel(const float accel[3]) override {
-    if constexpr (has_external_accel<typename T::Vehicle::Params>) {
-      params_.vehicle.accel_x = accel[0];
-      params_.vehicle.accel_y = accel[1];
-      params_.vehicle.accel_z = accel[2];
-      return true;
-    } else {
-      (void)accel;
-      return false;
-    }
+  bool set_external_accel(const float accel[3]) override { return set_vehicle_accel(params_.vehicle, accel); }
+  float mass() const override { return vehicle_mass(params_.vehicle); }
+  // The control cost's nominal and the warm start follow the hover of the new mass.
+  bool set_mass(float kg) override {
+    if (!set_vehicle_mass(params_.vehicle, kg)) return false;
+    follow_hover();
+    return true;
   }
 
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
@@ -208,6 +242,8 @@ class TaskController final : public Controller {
     if (o == nullptr || o->name_ != name_) return false;
     params_ = o->params_;
     mppi_.set_cycle(o->mppi_.cycle());
+    mass0_ = o->mass0_;
+    follow_hover();
     return true;
   }
   std::uint32_t noise_cycle() const override { return mppi_.cycle(); }
@@ -224,9 +260,36 @@ class TaskController final : public Controller {
   Mppi<T>& optimizer() { return mppi_; }
 
  private:
+  // Each vehicle's share of u_nominal and u_init scaled to hold the mass the model flies with
+  // (m / m0 of the mass it started with): the control cost then pulls towards the hover of
+  // the vehicle as estimated, not of the nominal one (a payload's extra thrust would pay for
+  // itself every cycle). In steps of kHoverStep, so that the CUDA backend captures its graph
+  // again rarely.
+  void follow_hover() {
+    if constexpr (has_external_accel<typename T::Vehicle::Params>) {
+      constexpr float kHoverStep = 0.005f;
+      const float ratio = vehicle_mass(params_.vehicle) / mass0_;
+      if (!(mass0_ > 0.0f) || std::fabs(ratio - hover_ratio_) < kHoverStep * hover_ratio_) return;
+      hover_ratio_ = ratio;
+      const MppiSettings& s = mppi_.settings();
+      float nominal[T::kNu], init[T::kNu];
+      for (int i = 0; i < T::kNu; ++i) {
+        nominal[i] = s.u_nominal.empty() ? 0.0f : s.u_nominal[static_cast<std::size_t>(i)];
+        init[i] = s.u_init[static_cast<std::size_t>(i)];
+      }
+      for (int j = 0; j < T::kVehicles; ++j) {
+        T::Vehicle::scale_hover(ratio, nominal + j * T::kVehicleNu);
+        T::Vehicle::scale_hover(ratio, init + j * T::kVehicleNu);
+      }
+      mppi_.set_nominal(nominal, init);
+    }
+  }
+
   std::string name_;
   typename T::Params params_;
   Mppi<T> mppi_;
+  float mass0_;              // the model's mass when built (0: none)
+  float hover_ratio_ = 1.0f; // the mass ratio u_nominal and u_init were last scaled for
 };
 
 }  // namespace mppi

@@ -116,6 +116,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   simd::Target target() const { return target_; }
 
   void set_stop_flag(const std::atomic<bool>* stop) override { stop_ = stop; }
+  void set_nominal(const float* u_nominal) override { std::copy_n(u_nominal, kNu, c_.u_nominal); }
 
   // Test hook: called between chunks (on one of the threads, the others waiting at a barrier)
   // with the number of rollouts finished, so a test stops at an exact chunk. Only when a stop

@@ -39,6 +39,10 @@ class HeldPlan {
 
   void reset() { fill_from(0); }
 
+  // What a shift appends from now on (nu floats; the values held stay as they are).
+  void set_u_init(const float* u) { std::copy_n(u, u_init_.size(), u_init_.data()); }
+  const std::vector<float>& u_init() const { return u_init_; }
+
   // A plan of the same length (copies, no allocation).
   void assign(const std::vector<float>& plan) { std::copy_n(plan.data(), values_.size(), values_.data()); }
   // Trade buffers with `other`: a plan of another horizon (a live update), or a scratch

@@ -99,6 +99,24 @@ class Mppi {
 
   void reset() { plan_.reset(); }
 
+  // The hover of the vehicle as the daemon estimates it, in place of the settings' u_nominal
+  // (what the control cost is measured from) and u_init (what the warm start appends); the
+  // settings themselves stay as they were loaded. The plan moves with u_init (inside the
+  // limits): it was planned around the old hover, and a plan that kept a lighter vehicle's
+  // thrust would take the optimizer many cycles to raise while the vehicle sinks. NU floats
+  // each; between updates only.
+  void set_nominal(const float* u_nominal, const float* u_init) {
+    backend_->set_nominal(u_nominal);
+    float* plan = plan_.data();
+    const std::vector<float>& was = plan_.u_init();
+    for (std::size_t n = 0; n < plan_.size(); ++n) {
+      const std::size_t j = n % kNu;
+      plan[n] = std::clamp(plan[n] + u_init[j] - was[j], settings_.u_min[j], settings_.u_max[j]);
+    }
+    plan_.set_u_init(u_init);
+  }
+  const std::vector<float>& u_init() const { return plan_.u_init(); }
+
   // Replace the plan (tests; a restored plan). Values are clamped into the limits.
   void set_plan(const std::vector<float>& plan) { set_plan(plan.data()); }
   void set_plan(const float* plan) {

@@ -32,7 +32,12 @@ template <class V>
 void visit_fields(QuadrotorRate::Params& p, V&& v) {
   v("mass", p.mass, 1e-3f, 100.0f);
   v("gravity", p.gravity, 0.0f, 20.0f);
-  v("rate_tau", p.rate_tau, 1e-3f, 10.0f);
+  v("rate_tau_x", p.rate_tau_x, 1e-3f, 10.0f);
+  v("rate_tau_y", p.rate_tau_y, 1e-3f, 10.0f);
+  v("rate_tau_z", p.rate_tau_z, 1e-3f, 10.0f);
+  v("rate_gain_x", p.rate_gain_x, 0.05f, 20.0f);
+  v("rate_gain_y", p.rate_gain_y, 0.05f, 20.0f);
+  v("rate_gain_z", p.rate_gain_z, 0.05f, 20.0f);
   v("drag", p.drag, 0.0f, 100.0f);
   v("accel_x", p.accel_x, -50.0f, 50.0f);
   v("accel_y", p.accel_y, -50.0f, 50.0f);

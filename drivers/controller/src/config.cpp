@@ -6,6 +6,7 @@
 #include <set>
 #include <utility>
 
+#include "mppi/app/vehicle.hpp"
 #include "mppi/params.hpp"
 #include "mppi/simd.hpp"
 #include "mppi/tasks.hpp"
@@ -187,6 +188,62 @@ void read_params(const YAML::Node& root, const char* section, AppConfig& c) {
   }
 }
 
+// The task's hover control (one vehicle's channels; zeros for a model without one), from its
+// model parameters as the tree gives them (the vehicle's merged in). Bad values are reported
+// later, by the parameter check.
+std::vector<float> hover_of(const std::string& task, const YAML::Node& root) {
+  std::vector<float> hover;
+  visit_task(task, [&](auto tag) {
+    using T = typename decltype(tag)::type;
+    typename T::Params p{};
+    if (const YAML::Node m = root["model"]; m && m.IsMap())
+      for (const auto& kv : m)
+        if (kv.first.IsScalar() && kv.second.IsScalar()) {
+          try {
+            set_task_param<T>(p, "model." + kv.first.Scalar(), kv.second.as<double>());
+          } catch (const YAML::Exception&) {
+          }
+        }
+    hover.assign(static_cast<std::size_t>(T::kVehicleNu), 0.0f);
+    if constexpr (has_external_accel<typename T::Vehicle::Params>) T::Vehicle::hover_control(p.vehicle, hover.data());
+  });
+  return hover;
+}
+
+// `hover` in mppi.u_init and mppi.u_nominal: that channel of the model's hover control (for a
+// team, of each vehicle's), so a task file need not repeat its vehicle's mass.
+void resolve_hover(YAML::Node root, const std::string& task) {
+  const YAML::Node m = root["mppi"];
+  if (!m || !m.IsMap()) return;
+  std::vector<float> hover;
+  for (const char* list : {"u_init", "u_nominal"}) {
+    YAML::Node u = m[list];
+    if (!u || !u.IsSequence()) continue;
+    for (std::size_t i = 0; i < u.size(); ++i) {
+      if (!u[i].IsScalar() || u[i].Scalar() != "hover") continue;
+      if (hover.empty()) hover = hover_of(task, root);
+      const std::size_t j = hover.empty() ? 0 : i % hover.size();
+      if (hover.empty() || hover[j] == 0.0f)
+        fail(std::string("mppi.") + list + "[" + std::to_string(i) + "]",
+             "`hover` names a thrust or motor channel of a quadrotor task");
+      u[i] = hover[j];
+    }
+  }
+}
+
+// The settings' vehicle: `vehicle: FILE` relative to the settings file's folder; given by an
+// override (--set vehicle=FILE), relative to the working folder, as a command line's paths are.
+std::shared_ptr<const VehicleFile> vehicle_of(const YAML::Node& root, const YAML::Node& file, const std::string& dir) {
+  const YAML::Node n = root["vehicle"];
+  if (!n || n.IsNull()) return nullptr;
+  std::string path = scalar<std::string>(n, "vehicle");
+  if (path.empty()) fail("vehicle", "expected a file name");
+  const YAML::Node own = file["vehicle"];
+  const bool from_file = own && own.IsScalar() && own.Scalar() == path;
+  if (path[0] != '/' && from_file && !dir.empty()) path = dir + "/" + path;
+  return std::make_shared<const VehicleFile>(load_vehicle(path));
+}
+
 }  // namespace
 
 std::string default_config_path(const std::string& task) {
@@ -216,11 +273,27 @@ YAML::Node merged_with(const YAML::Node& root, const YAML::Node& section) {
   return out;
 }
 
-AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant);
+// Where a settings tree came from: its name in messages and the folder its paths are relative to.
+struct Source {
+  std::string label = "the settings";
+  std::string dir;
+};
+
+// The vehicle's limits and hover against the parsed settings (for a team, every vehicle's).
+void check_vehicle(const AppConfig& c, const YAML::Node& root, const Source& src) {
+  int vehicles = 1;
+  visit_task(c.task, [&](auto tag) { vehicles = decltype(tag)::type::kVehicles; });
+  const std::vector<float> one = hover_of(c.task, root);
+  std::vector<float> hover;
+  for (int j = 0; j < vehicles; ++j) hover.insert(hover.end(), one.begin(), one.end());
+  check_vehicle_fits(*c.vehicle, hover, c.mppi.u_min, c.mppi.u_max, c.mppi.u_init, c.mppi.u_nominal, src.label);
+}
+
+AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant, const Source& src);
 
 // The task's per-channel lists spread over a team, its model and cost parameters checked,
 // the optimizer and DDP settings validated against its control size.
-void check_against_task(AppConfig& c) {
+void check_against_task(AppConfig& c, const YAML::Node& root, const Source& src) {
   int nu = -1;
   std::string param_error;
   const bool known = visit_task(c.task, [&](auto tag) {
@@ -243,6 +316,7 @@ void check_against_task(AppConfig& c) {
   if (!param_error.empty()) throw ConfigError(param_error);
   const std::string err = validate(c.mppi, nu);
   if (!err.empty()) throw ConfigError("mppi." + err);
+  if (c.vehicle) check_vehicle(c, root, src);
   if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
 }
 
@@ -252,13 +326,14 @@ void check_against_task(AppConfig& c) {
 // machine; after the file itself, so an error of the file (or of an override both share) is
 // reported as the file's.
 void parse_variants(const YAML::Node& root, const YAML::Node& file, const std::vector<std::string>& overrides,
-                    AppConfig* c) {
+                    const Source& src, AppConfig* c) {
   std::vector<std::string> rest;
   for (const auto& o : overrides)
     if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
   // Errors name the variant: "cuda.sim: unknown section" (its own keys), "cuda: mppi.rollouts:
   // must be >= 1" (the merged settings).
   const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
+    const Source vsrc{src.label + " (" + name + ")", src.dir};
     if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
     YAML::Node merged;
     try {
@@ -267,7 +342,7 @@ void parse_variants(const YAML::Node& root, const YAML::Node& file, const std::v
       throw ConfigError(name + "." + e.what());
     }
     try {
-      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true));
+      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true, vsrc));
     } catch (const ConfigError& e) {
       throw ConfigError(name + ": " + e.what());
     }
@@ -286,12 +361,12 @@ void parse_variants(const YAML::Node& root, const YAML::Node& file, const std::v
   }
 }
 
-AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant) {
+AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides, bool variant, const Source& src) {
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
   const YAML::Node file = YAML::Clone(root);
   for (const auto& o : overrides) apply_override(root, o);
   static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
-                                                 "description", "cuda", "cpu_targets", "controller", "ddp"};
+                                                 "description", "cuda", "cpu_targets", "controller", "ddp", "vehicle"};
   for (const auto& kv : root) {
     const auto name = key_name(kv.first, "(file)");
     if (!sections.count(name)) fail(name, "unknown section");
@@ -300,6 +375,9 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   c.root = root;
   if (!root["task"]) fail("task", "missing");
   c.task = scalar<std::string>(root["task"], "task");
+  c.vehicle = vehicle_of(root, file, src.dir);
+  if (c.vehicle) merge_vehicle(*c.vehicle, root, file, c.task, src.label);
+  resolve_hover(root, c.task);
   if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");
   if (c.backend != "cpu" && c.backend != "cuda" && c.backend != "auto") fail("backend", "must be cpu, cuda or auto");
   read_mppi(root["mppi"], c.mppi);
@@ -311,8 +389,8 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   }
   read_params(root, "model", c);
   read_params(root, "cost", c);
-  check_against_task(c);
-  if (!variant) parse_variants(root, file, overrides, &c);
+  check_against_task(c, root, src);
+  if (!variant) parse_variants(root, file, overrides, src, &c);
   return c;
 }
 
@@ -350,8 +428,8 @@ const AppConfig& AppConfig::for_backend(const std::string& resolved) const {
   return v != nullptr ? *v : *this;
 }
 
-AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides) {
-  return parse_impl(root, overrides, false);
+AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides, const std::string& dir) {
+  return parse_impl(root, overrides, false, Source{"the settings", dir});
 }
 
 AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides) {
@@ -363,7 +441,8 @@ AppConfig load_config(const std::string& file, const std::vector<std::string>& o
   } catch (const YAML::Exception& e) {
     throw ConfigError(file + ": " + e.what());
   }
-  AppConfig c = parse_config(root, overrides);
+  const auto slash = file.rfind('/');
+  AppConfig c = parse_impl(root, overrides, false, Source{file, slash == std::string::npos ? "" : file.substr(0, slash)});
   c.path = file;
   return c;
 }

@@ -17,6 +17,23 @@ namespace mppi::daemon {
 using transport::Mode;
 
 namespace {
+constexpr std::int8_t kMotorSpeeds = 1, kThrustRates = 2;  // command_t::KIND_*
+
+// The states that answer a command first, for the actuation delay estimate: the motors'
+// speeds (16-state quadrotor, at 12..15 of each vehicle) or the body rates the autopilot's
+// rate loop tracks (rate model, 10..12); none for the other models.
+std::vector<int> actuator_states(const LoopSettings& s, const Controller& c) {
+  const std::int8_t kind = s.command_kind >= 0 ? s.command_kind : command_kind_for(c.task());
+  const int first = kind == kMotorSpeeds ? 12 : kind == kThrustRates ? 10 : -1;
+  const int count = kind == kMotorSpeeds ? 4 : 3;
+  const int vnx = c.nx() / c.vehicles();
+  std::vector<int> out;
+  if (first < 0 || first + count > vnx) return out;
+  for (int j = 0; j < c.vehicles(); ++j)
+    for (int i = 0; i < count; ++i) out.push_back(j * vnx + first + i);
+  return out;
+}
+
 std::int64_t every(double rate_hz, double sub_hz) {
   if (sub_hz <= 0.0) return 0;
   return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
@@ -48,10 +65,13 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       history_(nu_, controller->settings().u_init),
       dt_ns_(std::llround(static_cast<double>(controller->dt()) * 1e9)),
       x_pred_(static_cast<std::size_t>(controller->nx())),
-      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles()) {
+      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
+      delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
+      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
   held_.assign(c_->plan());
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
+  counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
   inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();
@@ -202,6 +222,15 @@ void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
+void ControlLoop::adapt_to(const float* x, std::int64_t t_state_ns) {
+  // The disturbance observer compares the state with the last one predicted.
+  if (observe_ && observer_.update(*c_, history_, x, t_state_ns)) observer_.apply(*c_);
+  if (delays_.active() && delays_.update(*c_, history_, x, t_state_ns, s_.latency.actuation_delay_ns)) {
+    s_.latency.actuation_delay_ns = delays_.delay_ns();
+    counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
+  }
+}
+
 // One control cycle, as it runs: check the state; optimise from a fresh one; publish what
 // came of it; then the bookkeeping (timing, health, status, plan).
 void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
@@ -277,8 +306,9 @@ Outcome ControlLoop::enter_failsafe() {
   plan_timed_ = false;
   if (observe_) {
     observer_.reset();
-    c_->set_external_accel(observer_.estimate());
+    observer_.apply(*c_);
   }
+  delays_.reset();
   return Outcome::kFailsafe;
 }
 
@@ -312,12 +342,11 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, boo
   return o;
 }
 
-// The state to optimise from. A new sample first tells the disturbance observer how the
-// last prediction did. Latency compensation: the state as it will be when this command
-// acts, predicted through the commands already sent.
+// The state to optimise from. A new sample first teaches the loop what the last prediction
+// missed (adapt_to). Latency compensation: the state as it will be when this command acts,
+// predicted through the commands already sent.
 const float* ControlLoop::predict_to_act(const CycleState& s) {
-  if (observe_ && s.new_sample && observer_.update(*c_, history_, s.x->x, s.t_state_ns))
-    c_->set_external_accel(observer_.estimate());
+  if (s.new_sample) adapt_to(s.x->x, s.t_state_ns);
   if (!s_.latency.compensate) {
     plan_timed_ = false;
     return s.x->x;
@@ -403,6 +432,7 @@ Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
 }
 
 Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep) {
+  manoeuvre_.excite(s.x->x, s.now_ns, u_.data());  // the identification manoeuvre, when asked for
   stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
   const Mode m = publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
   const std::int64_t sent = sent_ns(s.now_ns, t0);
@@ -470,6 +500,11 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
   const double v = p.value;
   if (!std::isfinite(v)) return key + ": must be finite";
   if (is_loop_param(key)) {
+    if (key == "daemon.identify") {
+      if (s_.command_kind != kThrustRates) return key + ": the identification manoeuvre is for the rate-controlled tasks";
+      manoeuvre_.request(v != 0.0);
+      return {};
+    }
     if (key == "daemon.state_timeout_ms") {
       if (v <= 0.0 || v * 1e6 >= static_cast<double>(s_.failsafe_timeout_ns))
         return key + ": must be > 0 and below daemon.failsafe_timeout_ms";
@@ -482,11 +517,17 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
       s_.failsafe_timeout_ns = std::llround(v * 1e6);
       return {};
     }
-    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms)";
+    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify)";
   }
   if (key.rfind("mppi.", 0) == 0)
     return key + ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*";
-  return c_->set_param(key, v);
+  std::string err = c_->set_param(key, v);
+  // A new model.mass is the mass estimate's new nominal (else the next estimate overwrites it).
+  if (err.empty() && key == "model.mass" && observer_.estimates_mass()) {
+    observer_.set_nominal_mass(static_cast<float>(v));
+    observer_.apply(*c_);
+  }
+  return err;
 }
 
 void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed) {
@@ -650,6 +691,8 @@ void ControlLoop::maybe_status(bool force) {
   status_.lead_ms_mean = f(w.lead.mean_ms);
   status_.lead_ms_p99 = f(w.lead.p99_ms);
   std::copy_n(observer_.estimate(), 3, status_.disturbance_accel);
+  status_.model_mass = c_->mass();
+  status_.actuation_delay_ms = static_cast<float>(static_cast<double>(s_.latency.actuation_delay_ns) * 1e-6);
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;

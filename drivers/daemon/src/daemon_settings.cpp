@@ -64,11 +64,12 @@ void check_known(const YAML::Node& map, const std::string& prefix, const std::se
 }
 
 // A sub-section: absent (a null node), or a map of known fields.
-YAML::Node subsection(const YAML::Node& parent, const std::string& name, const std::set<std::string>& known) {
+YAML::Node subsection(const YAML::Node& parent, const std::string& name, const std::set<std::string>& known,
+                      const std::string& prefix = "") {
   const YAML::Node n = parent[name];
   if (!n) return n;
-  if (!n.IsMap()) fail(name, "expected a map");
-  check_known(n, name + ".", known);
+  if (!n.IsMap()) fail(prefix + name, "expected a map");
+  check_known(n, prefix + name + ".", known);
   return n;
 }
 
@@ -145,6 +146,16 @@ void parse_rollouts(const YAML::Node& n, double rate_hz, FanSettings* f) {
     fail("rollouts.random", "top + random must be at most " + std::to_string(FanSettings::kMaxRollouts));
 }
 
+// The actuation delay estimated in flight (DelayEstimator).
+void parse_delay_estimate(const YAML::Node& e, DelayEstimateSettings* de) {
+  const std::string q = "latency.delay_estimate.";
+  de->estimate = flag(e, "estimate", de->estimate, q);
+  de->max_ms = number(e, "max_ms", de->max_ms, 1.0, 500.0, q);
+  de->step_ms = number(e, "step_ms", de->step_ms, 0.1, de->max_ms, q);
+  de->window = static_cast<int>(number(e, "window", de->window, 5, 1000, q));
+  de->min_gain = number(e, "min_gain", de->min_gain, 0.0, 0.9, q);
+}
+
 void parse_latency(const YAML::Node& n, double rate_hz, LatencySettings* lat) {
   const std::string p = "latency.";
   lat->compensate = flag(n, "compensate", lat->compensate, p);
@@ -161,12 +172,41 @@ void parse_latency(const YAML::Node& n, double rate_hz, LatencySettings* lat) {
   const std::string st = text(n, "state_time", "sample", p);
   if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
   lat->use_sample_time = st == "sample";
+  if (const YAML::Node e = subsection(n, "delay_estimate", {"estimate", "max_ms", "step_ms", "window", "min_gain"},
+                                      "latency."))
+    parse_delay_estimate(e, &lat->delay_estimate);
+}
+
+// The mass (hover thrust) estimate beside the disturbance observer.
+void parse_mass_estimate(const YAML::Node& m, MassEstimateSettings* ms) {
+  const std::string p = "disturbance.mass.";
+  ms->estimate = flag(m, "estimate", ms->estimate, p);
+  ms->time_constant_s = number(m, "time_constant_s", ms->time_constant_s, 0.02, 100.0, p);
+  ms->prior_std = number(m, "prior_std", ms->prior_std, 1e-3, 1.0, p);
+  ms->max_change = number(m, "max_change", ms->max_change, 0.01, 0.9, p);
+  ms->accel_noise = number(m, "accel_noise", ms->accel_noise, 1e-3, 100.0, p);
 }
 
 void parse_disturbance(const YAML::Node& n, DisturbanceSettings* ds) {
   ds->estimate = flag(n, "estimate", ds->estimate, "disturbance.");
   ds->time_constant_s = number(n, "time_constant_s", ds->time_constant_s, 0.02, 100.0, "disturbance.");
   ds->limit = static_cast<float>(number(n, "limit", ds->limit, 0.0, 50.0, "disturbance."));
+  if (const YAML::Node m = subsection(n, "mass", {"estimate", "time_constant_s", "prior_std", "max_change",
+                                                  "accel_noise"}, "disturbance."))
+    parse_mass_estimate(m, &ds->mass);
+}
+
+// The identification manoeuvre (daemon.identify: rate doublets and thrust steps in a box).
+void parse_identification(const YAML::Node& n, IdentificationSettings* is) {
+  const std::string p = "identification.";
+  is->rate_amplitude = number(n, "rate_amplitude", is->rate_amplitude, 0.0, 10.0, p);
+  is->yaw_amplitude = number(n, "yaw_amplitude", is->yaw_amplitude, 0.0, 10.0, p);
+  is->thrust_step = number(n, "thrust_step", is->thrust_step, 0.0, 0.5, p);
+  is->pulse_s = number(n, "pulse_s", is->pulse_s, 0.02, 5.0, p);
+  is->gap_s = number(n, "gap_s", is->gap_s, 0.0, 10.0, p);
+  is->box_m = number(n, "box_m", is->box_m, 0.1, 100.0, p);
+  is->max_tilt_deg = number(n, "max_tilt_deg", is->max_tilt_deg, 1.0, 80.0, p);
+  is->repeats = static_cast<int>(number(n, "repeats", is->repeats, 1, 100, p));
 }
 
 void parse_live(const YAML::Node& n, LiveSettings* lv) {
@@ -221,7 +261,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
                "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts",
-               "spin"});
+               "spin", "identification"});
   parse_timing(section, &d.loop);
   parse_triggers(section, &d);
   d.spin = flag(section, "spin", d.spin);
@@ -237,10 +277,14 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.loop.latency.estimator.ceiling_ns = std::llround(1e9 / d.loop.rate_hz);
   if (const YAML::Node n = subsection(section, "latency", {"compensate", "quantile", "window", "floor_ms", "ceiling_ms",
                                                            "transport_ms", "actuation_delay_ms", "state_time",
-                                                           "future_tolerance_ms"}))
+                                                           "future_tolerance_ms", "delay_estimate"}))
     parse_latency(n, d.loop.rate_hz, &d.loop.latency);
-  if (const YAML::Node n = subsection(section, "disturbance", {"estimate", "time_constant_s", "limit"}))
+  if (const YAML::Node n = subsection(section, "disturbance", {"estimate", "time_constant_s", "limit", "mass"}))
     parse_disturbance(n, &d.loop.disturbance);
+  if (const YAML::Node n = subsection(section, "identification", {"rate_amplitude", "yaw_amplitude", "thrust_step",
+                                                                  "pulse_s", "gap_s", "box_m", "max_tilt_deg",
+                                                                  "repeats"}))
+    parse_identification(n, &d.loop.identification);
   if (const YAML::Node n = subsection(section, "live", {"enabled", "max_horizon", "max_rollouts", "max_threads"}))
     parse_live(n, &d.live);
   if (const YAML::Node n = subsection(section, "rollouts", {"hz", "top", "random"}))

@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <optional>
 #include <thread>
@@ -37,7 +38,7 @@ constexpr int kExitConfig = 2;
 constexpr int kExitRuntime = 1;
 
 struct Options {
-  std::string config_path, backend, controller_kind, lcm_url, log_level = "info";
+  std::string config_path, vehicle_path, backend, controller_kind, lcm_url, log_level = "info";
   std::vector<std::string> sets;
   bool lockstep = false, realtime = false, require_realtime = false, stats = false;
   double duration_s = 0.0;
@@ -48,6 +49,7 @@ std::optional<int> parse_options(int argc, char** argv, Options* o) {
   CLI::App app{"mppid: deterministic fixed-rate MPPI controller daemon"};
   app.add_option("--config", o->config_path, "Settings file (YAML)")->required();
   app.add_option("--set", o->sets, "Override a setting: key.path=value (repeatable)");
+  app.add_option("--vehicle", o->vehicle_path, "Vehicle file (config/vehicles/*.yaml; overrides the settings' vehicle:)");
   app.add_option("--backend", o->backend, "cpu | cuda | auto");
   app.add_option("--controller", o->controller_kind,
                  "mppi (default) | ddp: the MPC-DDP baseline (iLQR, the settings file's ddp: section)")
@@ -87,6 +89,8 @@ void load_settings(const Options& o, mppi::app::AppConfig* cfg, DaemonSettings* 
   std::vector<std::string> overrides = o.sets;
   if (!o.backend.empty()) overrides.push_back("backend=" + o.backend);
   if (!o.controller_kind.empty()) overrides.push_back("controller=" + o.controller_kind);
+  // Relative to where mppid was started (a `vehicle:` in the file is relative to the file).
+  if (!o.vehicle_path.empty()) overrides.push_back("vehicle=" + std::filesystem::absolute(o.vehicle_path).string());
   *cfg = mppi::app::load_config(o.config_path, overrides);
   const int nu = static_cast<int>(cfg->mppi.u_init.size());
   const auto check_daemon = [&](const mppi::app::AppConfig& v, const std::string& name) {
@@ -102,6 +106,7 @@ void load_settings(const Options& o, mppi::app::AppConfig* cfg, DaemonSettings* 
   const mppi::app::AppConfig* variant = cfg->variant(mppi::app::resolve_backend(cfg->backend), &section);
   const auto& flying = variant != nullptr ? *variant : *cfg;
   if (variant != nullptr) spdlog::info("settings: the file's {} section applies on this machine", section);
+  if (cfg->vehicle) spdlog::info("vehicle {} from {}", cfg->vehicle->name, cfg->vehicle->path);
   *ds = mppi::daemon::parse_daemon_settings(flying.root["daemon"], cfg->task, nu);
 }
 

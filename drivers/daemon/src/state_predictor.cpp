@@ -35,19 +35,20 @@ void CommandHistory::add(std::int64_t t_ns, const float* u) {
   ++count_;
 }
 
-const float* CommandHistory::at(std::int64_t t_ns) const {
+const float* CommandHistory::at(std::int64_t t_ns, std::int64_t later_ns) const {
   const float* u = base_.data();
-  for (int i = 0; i < count_ && time(i) <= t_ns; ++i) u = slot(i);
+  for (int i = 0; i < count_ && time(i) + later_ns <= t_ns; ++i) u = slot(i);
   return u;
 }
 
-int CommandHistory::predict(const Controller& c, float* x, std::int64_t t0_ns, std::int64_t t1_ns) const {
+int CommandHistory::predict(const Controller& c, float* x, std::int64_t t0_ns, std::int64_t t1_ns,
+                            std::int64_t later_ns) const {
   if (t1_ns <= t0_ns) return 0;
   int segments = 0;
   std::int64_t t = t0_ns;
-  const float* u = at(t0_ns);
+  const float* u = at(t0_ns, later_ns);
   for (int i = 0; i < count_ && t < t1_ns; ++i) {
-    const std::int64_t ti = time(i);
+    const std::int64_t ti = time(i) + later_ns;
     if (ti <= t) continue;
     const std::int64_t end = std::min(ti, t1_ns);
     c.propagate(x, u, static_cast<float>(static_cast<double>(end - t) * 1e-9));

@@ -42,6 +42,7 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
     out += fmt::format("  trigger state: cycles started by a state={}, by the grace running out={}\n",
                        v(c.state_triggered), v(c.clock_triggered));
   if (v(c.holds_without_goal) > 0) out += "  held where the first state was until a goal or reference came\n";
+  out += fmt::format("  actuation delay flown with at the end={:.1f} ms\n", static_cast<double>(v(c.actuation_delay_ns)) * 1e-6);
   out += fmt::format("  commands normal={} hold_plan={} failsafe={} blocked={} send_failures={} (failsafe entries {})\n",
                      v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
                      v(c.publish_failures), v(c.failsafe_entries));

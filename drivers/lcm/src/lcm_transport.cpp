@@ -151,6 +151,8 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.lead_ms_mean = s.lead_ms_mean;
   m.lead_ms_p99 = s.lead_ms_p99;
   for (int i = 0; i < 3; ++i) m.disturbance_accel[i] = s.disturbance_accel[i];
+  m.model_mass = s.model_mass;
+  m.actuation_delay_ms = s.actuation_delay_ms;
   m.partial_updates = s.partial_updates;
   m.anytime_holds = s.anytime_holds;
   m.ess = s.ess;

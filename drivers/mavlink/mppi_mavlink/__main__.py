@@ -11,7 +11,7 @@ import threading
 
 from . import settings as settings_mod
 
-CONTROL_CMDS = ("arm", "disarm", "takeoff", "offboard", "land", "hold", "status")
+CONTROL_CMDS = ("arm", "disarm", "takeoff", "offboard", "land", "hold", "identify", "status")
 
 
 def main(argv=None) -> int:
@@ -21,6 +21,7 @@ def main(argv=None) -> int:
     r.add_argument("--config", help="settings YAML (config/bridge/*.yaml)")
     r.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE")
     r.add_argument("--url", help="MAVLink connection string (overrides mavlink.url)")
+    r.add_argument("--vehicle", help="vehicle file (config/vehicles/*.yaml; overrides vehicle.file): mppid's --vehicle")
     r.add_argument("--lcm-url", help="LCM URL (overrides lcm.url)")
     r.add_argument("--log-level", default="info")
     for c in CONTROL_CMDS:
@@ -29,10 +30,14 @@ def main(argv=None) -> int:
         p.add_argument("--timeout", type=float, default=30.0)
         if c == "takeoff":
             p.add_argument("altitude", nargs="?", type=float)
+        if c == "identify":
+            p.add_argument("on", nargs="?", type=int, choices=(0, 1), default=1,
+                           help="1 (default): start mppid's identification manoeuvre; 0: stop it")
     a = ap.parse_args(argv)
     if a.cmd != "run":
         from .control import request
         line = a.cmd + (f" {a.altitude}" if getattr(a, "altitude", None) is not None else "")
+        line += f" {a.on}" if a.cmd == "identify" else ""
         try:
             reply = request(a.socket, line, a.timeout)
         except OSError as e:
@@ -46,6 +51,8 @@ def main(argv=None) -> int:
     sets = list(a.set)
     if a.url:
         sets.append(f"mavlink.url={a.url}")
+    if a.vehicle:
+        sets.append(f"vehicle.file={a.vehicle}")
     try:
         s = settings_mod.load(a.config, sets)
     except (settings_mod.SettingsError, OSError) as e:

@@ -110,6 +110,9 @@ class Bridge:
         self.lc = _lcm.LCM(self.lcm_url)
         self.lc.subscribe(l["command_channel"], self._on_command)
         self.lc.subscribe(l["status_channel"], self._on_status)
+        self.lc.subscribe(l["param_result_channel"], self._on_param_result)
+        self.param_seq = 0
+        self.param_results = {}  # update seq -> param_result_t, mppid's answers to our requests
 
         self.stop = threading.Event()
         self.send_lock = threading.Lock()   # pymavlink's encoder is not thread-safe
@@ -403,6 +406,15 @@ class Bridge:
             return
         self.last_status_mono = mono_us()
         self.last_status_healthy = bool(st.healthy) and st.mode != 2
+
+    def _on_param_result(self, channel, data):
+        try:
+            r = self.mppi_lcm.param_result_t.decode(data)
+        except (ValueError, struct.error):
+            return
+        with self.cond:
+            self.param_results[r.update_seq] = r
+            self.cond.notify_all()
 
     def _on_command(self, channel, data):
         now = mono_us()
@@ -827,6 +839,32 @@ class Bridge:
                               [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, APM_COPTER_LOITER], "mode LOITER")
         return "holding"
 
+    def do_identify(self, on=1.0):
+        """The identification manoeuvre (docs/sysid.md): asks mppid for it (daemon.identify on
+        MPPI_PARAMS) and relays its answer. Only while mppid flies the vehicle: armed, its
+        setpoints streaming. `identify 0` stops it, at any time."""
+        start = on != 0
+        if start:
+            self._require_fly("identify")
+            if not (self.armed and self.streaming):
+                raise CommandError("identify refused: mppid is not flying the vehicle (armed, its setpoints streaming)")
+        msg = self.mppi_lcm.param_update_t()
+        with self.cond:
+            self.param_seq += 1
+            msg.seq = self.param_seq
+        msg.utime, msg.key, msg.value = int(time.time() * 1e6), "daemon.identify", 1.0 if start else 0.0
+        self.lc.publish(self.s["lcm"]["params_channel"], msg.encode())
+        deadline = time.monotonic() + self.s["mavlink"]["command_timeout_s"]
+        with self.cond:
+            while msg.seq not in self.param_results and time.monotonic() < deadline:
+                self.cond.wait(max(0.0, deadline - time.monotonic()))
+            r = self.param_results.pop(msg.seq, None)
+        if r is None:
+            raise CommandError("identify: mppid did not answer (is it running on this LCM bus?)")
+        if r.status != self.mppi_lcm.param_result_t.STATUS_APPLIED:
+            raise CommandError(f"identify refused by mppid: {r.reason}")
+        return "identification manoeuvre started (mppid: doublets and thrust steps)" if start else "identification stopped"
+
     def signing_counters(self) -> dict:
         """Messages the signature check dropped, since start (0 on an unsigned link)."""
         out = dict(self.signing_dropped)
@@ -855,12 +893,12 @@ class Bridge:
             return {"ok": False, "message": "empty command"}
         name, args = parts[0], parts[1:]
         table = {"arm": self.do_arm, "disarm": self.do_disarm, "takeoff": self.do_takeoff,
-                 "offboard": self.do_offboard, "land": self.do_land, "hold": self.do_hold}
+                 "offboard": self.do_offboard, "land": self.do_land, "hold": self.do_hold, "identify": self.do_identify}
         if name == "status":
             return {"ok": True, "message": "status", "status": self.status()}
         if name not in table:
             return {"ok": False, "message": f"unknown command {name!r} (arm, disarm, takeoff [m], offboard, land, "
-                                            f"hold, status)"}
+                                            f"hold, identify [0|1], status)"}
         try:
             msg = table[name](*[float(a) for a in args])
             log.info("%s: %s", name, msg)

@@ -1,5 +1,9 @@
 """The bridge's settings: one YAML file (config/bridge/*.yaml), `--set section.key=value`
-overrides, validated into one frozen snapshot at start-up. Unknown keys are errors."""
+overrides, validated into one frozen snapshot at start-up. Unknown keys are errors.
+
+`vehicle.file` names the vehicle file (config/vehicles/*.yaml, relative to the settings
+file) that mppid flies with too: the thrust map's mass, gravity and hover thrust come from
+it, and a value the settings also give differently is refused, naming both files."""
 from __future__ import annotations
 
 import copy
@@ -8,6 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
+
+from . import vehicle as vehicle_file
 
 DEFAULTS = {
     "mavlink": {
@@ -32,11 +38,15 @@ DEFAULTS = {
         "state_channel": "MPPI_STATE",
         "command_channel": "MPPI_COMMAND",
         "status_channel": "MPPI_STATUS",
+        "params_channel": "MPPI_PARAMS",          # `identify`: the request to mppid ...
+        "param_result_channel": "MPPI_PARAM_RESULT",  # ... and its answer
         "link_channel": "MPPI_MAVLINK_LINK",
         "link_hz": 2.0,
     },
     "vehicle": {
-        "mass": 1.0,                      # kg: must match the controller's model.mass
+        "file": None,                     # the vehicle file (mass, gravity, hover_thrust from it)
+        "name": None,                     # the vehicle file's name (set from it)
+        "mass": 1.0,                      # kg: the controller's model.mass (from vehicle.file when given)
         "gravity": 9.81,
         "hover_thrust": None,             # 0..1; None: read MPC_THR_HOVER / MOT_THST_HOVER
         "state_source": "auto",           # odometry | split | auto
@@ -97,12 +107,16 @@ class Settings:
 
 def load(path: str | Path | None = None, sets: list[str] | None = None) -> Settings:
     s = copy.deepcopy(DEFAULTS)
+    given: dict[str, str] = {}  # vehicle.* keys given explicitly -> where
+    folder = Path(".")
     if path:
         doc = yaml.safe_load(Path(path).read_text()) or {}
         if not isinstance(doc, dict):
             raise SettingsError(f"{path}: expected a map")
         doc.pop("description", None)
         _merge(s, doc)
+        given.update({k: str(path) for k in (doc.get("vehicle") or {})})
+        folder = Path(path).parent
     for kv in sets or []:
         if "=" not in kv:
             raise SettingsError(f"--set {kv}: expected section.key=value")
@@ -111,8 +125,34 @@ def load(path: str | Path | None = None, sets: list[str] | None = None) -> Setti
         if len(parts) != 2:
             raise SettingsError(f"--set {key}: expected section.key")
         _merge(s, {parts[0]: {parts[1]: _parse_scalar(val)}})
+        if parts[0] == "vehicle":
+            given[parts[1]] = f"--set {key}"
+            if parts[1] == "file":
+                folder = Path(".")
     validate(s)
+    if s["vehicle"]["file"] is not None:
+        _take_vehicle_file(s, given, folder)
     return Settings(s)
+
+
+def _take_vehicle_file(s: dict, given: dict[str, str], folder: Path):
+    """mass, gravity and hover_thrust from the vehicle file; refuses a different explicit value."""
+    f = s["vehicle"]["file"]
+    if not isinstance(f, str) or not f:
+        raise SettingsError(f"vehicle.file: must be a file name or null, got {f!r}")
+    p = Path(f) if Path(f).is_absolute() else folder / f
+    try:
+        v = vehicle_file.load(p)
+    except vehicle_file.VehicleError as e:
+        raise SettingsError(str(e)) from None
+    for key in ("mass", "gravity", "hover_thrust"):
+        if key in given and s["vehicle"][key] != v[key]:
+            raise SettingsError(f"vehicle.{key}: {given[key]} gives {s['vehicle'][key]!r} but the vehicle file {p} "
+                                f"gives {v[key]!r} (mppid flies the vehicle file's: keep it there only)")
+        s["vehicle"][key] = v[key]
+    s["vehicle"]["file"] = str(p)
+    s["vehicle"]["name"] = v["name"]
+    validate(s)
 
 
 def validate(s: dict):

@@ -70,6 +70,9 @@ struct Scenario {
   double max_thrust = 40.0;              // N, quadrotor_rate saturation
   double max_body_rate = 10.0;           // rad/s, quadrotor_rate saturation
   double rate_gain = 20.0;               // 1/s, quadrotor_rate_body: the autopilot's P rate loop
+  // The rate-controlled plants: the thrust produced per newton commanded (motors or a thrust
+  // map off by this factor, which the controller is not told; 1: as commanded).
+  double thrust_gain = 1.0;
 
   // Timing.
   double physics_hz = 1000.0;

@@ -64,11 +64,11 @@ TEST(QuadrotorRate, PureYawRateRotatesAboutZ) {
 }
 
 TEST(QuadrotorRate, RateLoopIsFirstOrderWithTimeConstantTau) {
-  const QR::Params p;  // rate_tau = 0.05 s
+  const QR::Params p;  // rate_tau_x/y/z = 0.05 s, gains 1
   auto x = rate_state();
   const std::vector<float> u = {9.81f, 1.0f, -2.0f, 0.5f};
   const double dt = 1e-5;
-  const int n = static_cast<int>(std::lround(p.rate_tau / dt));
+  const int n = static_cast<int>(std::lround(p.rate_tau_x / dt));
   for (int i = 0; i < n; ++i) QR::step(p, x.data(), u.data(), static_cast<float>(dt));
   // After one time constant, 1 - e^-1 = 63.2 % of the step (Euler at dt = tau / 5000 is
   // within 1e-4 relative of the exponential).

@@ -196,17 +196,9 @@ class DdpController final : public Controller {
     to_float();
   }
   void propagate(float* x, const float* u, float seconds) const override { rk4_task<T>(*params_, x, u, seconds); }
-  bool set_external_accel(const float accel[3]) override {
-    if constexpr (has_external_accel<typename T::Vehicle::Params>) {
-      params_->vehicle.accel_x = accel[0];
-      params_->vehicle.accel_y = accel[1];
-      params_->vehicle.accel_z = accel[2];
-      return true;
-    } else {
-      (void)accel;
-      return false;
-    }
-  }
+  bool set_external_accel(const float accel[3]) override { return set_vehicle_accel(params_->vehicle, accel); }
+  float mass() const override { return vehicle_mass(params_->vehicle); }
+  bool set_mass(float kg) override { return set_vehicle_mass(params_->vehicle, kg); }
   int predict(const float* x0, const float* plan, float* xyz, int capacity) const override {
     return predict_positions<T>(*params_, settings_, x0, plan, xyz, capacity);
   }

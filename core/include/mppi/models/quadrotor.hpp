@@ -36,6 +36,16 @@ struct Quadrotor {
     return fsqrt(p.mass * p.gravity / (4.0f * p.k_force));
   }
 
+  // The control that holds the vehicle level where it is (one vehicle's kNu floats).
+  static void hover_control(const Params& p, float* u) {
+    for (int i = 0; i < kNu; ++i) u[i] = hover_speed(p);
+  }
+  // Controls u (one vehicle's motor speeds) made to hold a vehicle `ratio` times as heavy.
+  static void scale_hover(float ratio, float* u) {
+    const float k = fsqrt(ratio);
+    for (int i = 0; i < kNu; ++i) u[i] *= k;
+  }
+
   template <class V>
   MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
     V sphi, cphi_raw, sth, cth, spsi, cpsi;

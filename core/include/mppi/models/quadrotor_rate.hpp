@@ -1,7 +1,9 @@
 // Rate-controlled quadrotor (13 states): what the controller flies through an autopilot,
 // which takes collective thrust and body-rate setpoints. State: position, velocity,
 // attitude quaternion (w, x, y, z; body to world), body rates. Controls: thrust (N) and
-// body-rate setpoints (rad/s), tracked by the autopilot's rate loop as a first-order lag.
+// body-rate setpoints (rad/s), tracked by the autopilot's rate loop as a first-order lag
+// per axis, w' = (K u - w) / tau (gain K and time constant tau per axis: tools/sysid fits
+// them; a pure delay of the whole response is the daemon's daemon.latency.actuation_delay_ms).
 #pragma once
 
 #include "mppi/hd.hpp"
@@ -20,13 +22,23 @@ struct QuadrotorRate {
   struct Params {
     float mass = 1.0f;        // kg
     float gravity = 9.81f;    // m/s^2
-    float rate_tau = 0.05f;   // s, first-order time constant of the autopilot's rate loop
+    // The autopilot's rate loop per body axis (x roll, y pitch, z yaw): time constant (s)
+    // and steady-state gain of the first-order response to the rate setpoint.
+    float rate_tau_x = 0.05f, rate_tau_y = 0.05f, rate_tau_z = 0.05f;
+    float rate_gain_x = 1.0f, rate_gain_y = 1.0f, rate_gain_z = 1.0f;
     float drag = 0.0f;        // linear drag, N s/m
     // External acceleration, world frame, m/s^2 (the daemon's disturbance observer).
     float accel_x = 0.0f, accel_y = 0.0f, accel_z = 0.0f;
   };
 
   MPPI_HD static float hover_thrust(const Params& p) { return p.mass * p.gravity; }
+  // The control that holds the vehicle level where it is (one vehicle's kNu floats).
+  static void hover_control(const Params& p, float* u) {
+    u[THRUST] = hover_thrust(p);
+    u[RATE_X] = u[RATE_Y] = u[RATE_Z] = 0.0f;
+  }
+  // Controls u (one vehicle's) made to hold a vehicle `ratio` times as heavy: the thrust.
+  static void scale_hover(float ratio, float* u) { u[THRUST] *= ratio; }
 
   template <class V>
   MPPI_HD static void derivative(const Params& p, const V* x, const V* u, V* dx) {
@@ -49,10 +61,9 @@ struct QuadrotorRate {
     dx[QX] = 0.5f * (qw * wx + qy * wz - qz * wy);
     dx[QY] = 0.5f * (qw * wy - qx * wz + qz * wx);
     dx[QZ] = 0.5f * (qw * wz + qx * wy - qy * wx);
-    const float k = 1.0f / p.rate_tau;
-    dx[WX] = k * (u[RATE_X] - wx);
-    dx[WY] = k * (u[RATE_Y] - wy);
-    dx[WZ] = k * (u[RATE_Z] - wz);
+    dx[WX] = (1.0f / p.rate_tau_x) * (p.rate_gain_x * u[RATE_X] - wx);
+    dx[WY] = (1.0f / p.rate_tau_y) * (p.rate_gain_y * u[RATE_Y] - wy);
+    dx[WZ] = (1.0f / p.rate_tau_z) * (p.rate_gain_z * u[RATE_Z] - wz);
   }
 
   // Back onto the unit quaternions after an integration step.

@@ -12,6 +12,7 @@
 #include <utility>
 #include <vector>
 
+#include "mppi/app/vehicle.hpp"
 #include "mppi/controller.hpp"
 #include "mppi/ddp/settings.hpp"
 #include "mppi/settings.hpp"
@@ -34,6 +35,9 @@ struct AppConfig {
   bool has_ddp = false;                              // the file has a `ddp:` section
   std::vector<std::pair<std::string, double>> params;  // "model.NAME" / "cost.NAME" overrides
   YAML::Node root;                                   // the whole document (programs read their own section)
+  // The vehicle file (`vehicle:` or --vehicle): merged into model and daemon settings, its
+  // limits and hover checked (mppi/app/vehicle.hpp); null if none.
+  std::shared_ptr<const VehicleFile> vehicle;
   // The settings file's `cuda:` section (mppi, model, cost overrides: what the CUDA backend
   // flies with instead, e.g. more rollouts), merged and validated at load; null if none.
   std::shared_ptr<const AppConfig> cuda;
@@ -68,9 +72,12 @@ struct AppConfig {
 };
 
 // Loads FILE and applies overrides "dotted.key=value" (YAML scalars or flow sequences, e.g.
-// "mppi.rollouts=512", "mppi.sigma=[100,100,100,100]") before validating.
+// "mppi.rollouts=512", "mppi.sigma=[100,100,100,100]", "vehicle=FILE") before validating. The
+// file's `vehicle:` is relative to the file; one given by an override, to the working folder.
+// `hover` in mppi.u_init / u_nominal stands for that channel of the model's hover control.
 AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {});
-AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides = {});
+// The same from a tree; a relative vehicle file is looked up in `dir` (else the working folder).
+AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides = {}, const std::string& dir = "");
 
 // The default settings file of a task, config/tasks/<task>.yaml in the source tree.
 std::string default_config_path(const std::string& task);

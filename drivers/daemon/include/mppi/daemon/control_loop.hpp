@@ -18,7 +18,9 @@
 
 #include "mppi/controller.hpp"
 #include "mppi/daemon/cycle_outcome.hpp"
+#include "mppi/daemon/delay_estimator.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
+#include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
@@ -47,6 +49,8 @@ struct LatencySettings {
   // is not ours; the transport delay is then not seen).
   bool use_sample_time = true;
   std::int64_t future_tolerance_ns = 2'000'000;  // a sample time further ahead is refused
+  // The actuation delay estimated in flight (delay_estimator.hpp): replaces actuation_delay_ns.
+  DelayEstimateSettings delay_estimate;
 };
 
 // Real time: what starts a cycle.
@@ -83,6 +87,7 @@ struct LoopSettings {
   int guard_fifo_priority = 0;  // SCHED_FIFO priority of the guard thread; 0 = inherit
   LatencySettings latency;
   DisturbanceSettings disturbance;
+  IdentificationSettings identification;  // the manoeuvre `daemon.identify` starts (rate tasks)
   // Anytime cycle (with the deadline guard): this long before the deadline the guard asks
   // the optimizer to stop its rollouts (Controller::set_stop_flag), which then updates from
   // the rollouts done, or, below mppi.min_rollouts, sends the held plan; the command goes
@@ -120,6 +125,7 @@ struct LoopCounters {
   std::atomic<std::int64_t> state_triggered{0};   // trigger state: cycles a state started
   std::atomic<std::int64_t> clock_triggered{0};   // trigger state: cycles started without one (grace ran out)
   std::atomic<std::int64_t> holds_without_goal{0};  // no goal or reference yet: held where the first state was
+  std::atomic<std::int64_t> actuation_delay_ns{0};  // the actuation delay flown with (estimated, when on)
 };
 
 class ControlLoop {
@@ -225,6 +231,9 @@ class ControlLoop {
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void remember(std::int64_t sent_ns, const float* u);
+  // What a new state teaches the loop: the external acceleration and the mass (the
+  // disturbance observer), and the actuation delay the vehicle really has.
+  void adapt_to(const float* x, std::int64_t t_state_ns);
   void apply_between_cycles();
   std::string apply_param(const transport::ParamUpdate& p);
   // Live updates (control_loop_live.cpp): the answer to one update on the reply channel;
@@ -299,6 +308,8 @@ class ControlLoop {
   std::int64_t dt_ns_;
   std::vector<float> x_pred_;
   DisturbanceObserver observer_;
+  DelayEstimator delays_;
+  IdentificationManoeuvre manoeuvre_;
   bool observe_ = false;  // the model takes an external acceleration and estimation is on
   std::atomic<std::int64_t> latency_estimate_ns_{0};
 

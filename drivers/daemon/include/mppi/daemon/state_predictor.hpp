@@ -27,11 +27,13 @@ class CommandHistory {
 
   // x (the state sampled at t0_ns) advanced in place to t1_ns through the commands in
   // effect over [t0, t1]; nothing happens when t1 <= t0. Returns the number of segments.
-  int predict(const Controller& c, float* x, std::int64_t t0_ns, std::int64_t t1_ns) const;
+  // `later_ns`: every command taken to act that much later than it was recorded (the
+  // actuation delay estimate's candidates; may be negative).
+  int predict(const Controller& c, float* x, std::int64_t t0_ns, std::int64_t t1_ns, std::int64_t later_ns = 0) const;
 
   int size() const { return count_; }
   // The control in effect at t_ns (the latest command that acts at or before it).
-  const float* at(std::int64_t t_ns) const;
+  const float* at(std::int64_t t_ns, std::int64_t later_ns = 0) const;
 
  private:
   const float* slot(int i) const { return &u_[static_cast<std::size_t>((head_ + i) % kCapacity) * nu_]; }

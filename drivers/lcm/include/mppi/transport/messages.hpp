@@ -118,6 +118,8 @@ struct StatusReport {
   float state_to_command_ms_p99 = 0, state_age_ms_p99 = 0, latency_expected_ms = 0, lead_ms_mean = 0,
         lead_ms_p99 = 0;
   float disturbance_accel[3] = {0, 0, 0};
+  float model_mass = 0.0f;  // kg, the mass the model flies with (the estimate, when on)
+  float actuation_delay_ms = 0.0f;  // the delay predicted over (the estimate, when on)
   std::int64_t partial_updates = 0, anytime_holds = 0;
   float ess = 0, min_cost = 0;
   std::int64_t rejected_nan = 0, rejected_stale = 0, rejected_out_of_order = 0, rejected_undecodable = 0,

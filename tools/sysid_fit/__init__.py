@@ -1,0 +1,1 @@
+"""tools/sysid: system identification of the rate model (docs/sysid.md)."""
