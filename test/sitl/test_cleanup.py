@@ -74,3 +74,22 @@ def test_campaign_ctrl_c(tmp_path):
     assert p.returncode == 130
     for f in pid_files():
         _assert_all_gone(f.parent)
+
+
+def test_a_namespace_that_cannot_be_set_up_is_a_clear_error(tmp_path):
+    """No `ip` to bring up lo in the flight's namespace: the flight fails saying so (it once
+    failed again in its clean-up, on a process group that never existed)."""
+    import os
+    import shutil
+    tools = tmp_path / "bin"
+    tools.mkdir()
+    for t in ("sh", "dirname", "unshare"):
+        (tools / t).symlink_to(shutil.which(t))
+    env = dict(os.environ, PATH=str(tools))
+    p = subprocess.run([str(SITL), "run", "--scenario", "forest_4m", "--seed", "1", "--out", str(tmp_path / "o")],
+                       env=env, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 1, p.stderr
+    assert "Traceback" not in p.stderr, p.stderr
+    score = json.loads((tmp_path / "o" / "score.json").read_text())
+    assert score["success"] is False
+    assert "network namespace set-up failed" in score["reason"] and "ip: not found" in score["reason"], score

@@ -208,7 +208,10 @@ class Flight:
         self._stop_view()  # after: its hold ends on Ctrl-C / SIGTERM
 
     def _signal_group(self, sig, wait_s: float) -> bool:
-        """sig to the flight's process group, then up to wait_s for it to be gone; True if gone."""
+        """sig to the flight's process group, then up to wait_s for it to be gone; True if gone
+        (or never started: the namespace's set-up failed before the group existed)."""
+        if getattr(self, "pgid", None) is None:
+            return True
         try:
             os.killpg(self.pgid, sig)
         except ProcessLookupError:
