@@ -34,15 +34,16 @@ def sysid(*args, check=0):
     return p
 
 
-def synthetic_flight(truth: RateModel, seconds=12.0, seed=3) -> FlightData:
+def synthetic_flight(truth: RateModel, seconds=12.0, seed=3, yaw=True) -> FlightData:
     """The numpy model flies random rate steps and thrust around hover, commands at 50 Hz
-    from a random phase, states at 50 Hz with a little noise."""
+    from a random phase, states at 50 Hz with a little noise (yaw=False: no yaw command)."""
     rng = np.random.default_rng(seed)
     tc = 0.007 + 0.02 * np.arange(int(seconds / 0.02))
     u = np.zeros((len(tc), 4))
     u[:, 0] = truth.mass * 9.81 * (1.0 + 0.15 * np.repeat(rng.uniform(-1, 1, len(tc) // 10 + 1), 10)[:len(tc)])
     for a in range(3):
         u[:, 1 + a] = np.repeat(rng.uniform(-1.5, 1.5, len(tc) // 8 + 1), 8)[:len(tc)]
+    u[:, 3] *= float(yaw)
     t = 0.02 * np.arange(int(seconds / 0.02) - 1)
     x = np.zeros((len(t), 13))
     x[0, 2], x[0, 6] = 5.0, 1.0
@@ -121,6 +122,93 @@ def test_a_log_without_rate_model_states_is_refused(tmp_path):
     log.close()
     p = sysid("fit", tmp_path / "empty.lcmlog", check=1)
     assert "too few to fit" in p.stderr
+
+
+
+# ---- through the bridge: only the engaged flight ---------------------------------------------
+
+T0_US = 1_700_000_000_000_000
+
+
+def write_lcm_flight(path: Path, data: FlightData, commands: np.ndarray, link: list[tuple[float, bool]] = ()):
+    """An LCM log as a flight through the bridge records it: the states, `commands` (as mppid
+    sent them, at data.tc) and the bridge's link messages (time [s], engaged)."""
+    import lcm
+    from mppi_mavlink import lcm_types
+
+    lcm_types.import_mppi_lcm()
+    from mppi_lcm import command_t, vehicle_state_t
+    link_t = lcm_types.import_link_type()
+    events = []
+    for k, (t, x) in enumerate(zip(data.t, data.x)):
+        m = vehicle_state_t()
+        m.utime = m.sample_utime = T0_US + int(round(t * 1e6))
+        m.seq, m.model, m.vehicle_count, m.nx, m.n, m.x = k, 2, 1, 13, 13, list(map(float, x))
+        events.append((m.utime, "MPPI_STATE", m.encode()))
+    for k, (t, u) in enumerate(zip(data.tc, commands)):
+        m = command_t()
+        m.utime, m.seq, m.state_seq, m.mode, m.kind = T0_US + int(round(t * 1e6)), k, k, 0, 2
+        m.n, m.u = 4, list(map(float, u))
+        events.append((m.utime, "MPPI_COMMAND", m.encode()))
+    for k, (t, engaged) in enumerate(link):
+        m = link_t()
+        m.utime, m.seq, m.engaged, m.hover_thrust = T0_US + int(round(t * 1e6)), k, int(engaged), -1.0
+        m.dialect, m.mode, m.hover_source, m.error = "ardupilot", "GUIDED", "", ""
+        events.append((m.utime, "MPPI_MAVLINK_LINK", m.encode()))
+    log = lcm.EventLog(str(path), "w", overwrite=True)
+    for utime, channel, msg in sorted(events, key=lambda e: e[0]):
+        log.write_event(utime, channel, msg)
+    log.close()
+
+
+def test_only_the_flight_the_bridge_was_engaged_for_is_fitted(tmp_path):
+    # ArduCopter's own takeoff (0-4 s) and landing (20-24 s): the vehicle flies its own
+    # commands while mppid's, logged, go nowhere. Engaged in between, it follows mppid's.
+    truth = RateModel(mass=1.2, drag=0.0, tau=[0.06, 0.08, 0.12], gain=[1.1, 0.9, 0.8], delay=0.02)
+    data = synthetic_flight(truth, seconds=24.0, seed=7)
+    sent = data.u.copy()
+    outside = (data.tc < 4.0) | (data.tc >= 20.0)
+    sent[outside, 0] *= 1.3
+    sent[outside, 1:] = np.random.default_rng(8).uniform(-1.5, 1.5, (int(outside.sum()), 3))
+    link = [(t, 4.0 <= t < 20.0) for t in np.arange(0.0, 24.0, 0.5)] + [(4.0, True), (20.0, False)]
+    write_lcm_flight(tmp_path / "bridge.lcmlog", data, sent, link)
+    p = sysid("fit", tmp_path / "bridge.lcmlog", "--report", tmp_path / "fit.json")
+    assert "bridge engaged 16.0 s" in p.stdout
+    report = json.loads((tmp_path / "fit.json").read_text())
+    assert report["engaged_s"] == pytest.approx(16.0, abs=0.05)
+    assert report["fit_s"] == pytest.approx(11.2, abs=0.05)
+    fit = report["fit"]
+    assert fit["delay_s"] == pytest.approx(truth.delay, abs=0.001)
+    assert fit["mass_kg"] == pytest.approx(truth.mass, rel=0.02)
+    for i, ax in enumerate("xyz"):
+        assert fit["axes"][ax]["gain"] == pytest.approx(truth.gain[i], rel=0.03)
+        assert fit["axes"][ax]["tau_s"] == pytest.approx(truth.tau[i], rel=0.03)
+    held = report["held_out"]
+    assert held["fitted"]["position_m"] < 0.2 * held["prior"]["position_m"]
+    # The same flight without the link messages: fitted over all of it, as before.
+    write_lcm_flight(tmp_path / "nolink.lcmlog", data, sent)
+    sysid("fit", tmp_path / "nolink.lcmlog", "--report", tmp_path / "nolink.json")
+    whole = json.loads((tmp_path / "nolink.json").read_text())
+    assert whole["engaged_s"] is None and whole["fit_s"] > 16.0
+    off = [abs(whole["fit"]["axes"][ax]["gain"] / truth.gain[i] - 1.0) for i, ax in enumerate("xyz")]
+    assert max(off) > 0.05, off   # the unfollowed commands bias it
+
+
+def test_an_axis_the_flight_did_not_excite_keeps_the_prior(tmp_path):
+    truth = RateModel(mass=1.0, tau=[0.06, 0.08, 0.3], gain=[1.1, 0.9, 0.5], delay=0.01)
+    data = synthetic_flight(truth, seconds=10.0, seed=9, yaw=False)
+    assert sysid_fit.excited_axes(data) == [0, 1]
+    write_lcm_flight(tmp_path / "noyaw.lcmlog", data, data.u)
+    sysid("fit", tmp_path / "noyaw.lcmlog", "--report", tmp_path / "fit.json")
+    fit = json.loads((tmp_path / "fit.json").read_text())["fit"]
+    assert fit["kept_prior"] == ["z"]
+    prior = yaml.safe_load((ROOT / "config/vehicles/sim_rate_1kg.yaml").read_text())["rate_response"]
+    assert (fit["axes"]["z"]["gain"], fit["axes"]["z"]["tau_s"]) == (prior["gain"][2], prior["tau"][2])
+    for i, ax in enumerate("xy"):
+        assert fit["axes"][ax]["gain"] == pytest.approx(truth.gain[i], rel=0.03)
+    # --keep-prior holds an excited axis too.
+    sysid("fit", tmp_path / "noyaw.lcmlog", "--keep-prior", "x", "--report", tmp_path / "keep.json")
+    assert json.loads((tmp_path / "keep.json").read_text())["fit"]["kept_prior"] == ["x", "z"]
 
 
 # ---- ArduPilot dataflash ----------------------------------------------------------------------
