@@ -112,6 +112,8 @@ def main(argv=None) -> int:
     rb.add_argument("--out", type=Path, required=True)
     rb.add_argument("--realtime", action="store_true", help="real time (the map's figures); default lock-step")
     rb.add_argument("--latency", type=float, default=None, metavar="SECONDS", help="lock-step: a fixed latency")
+    rb.add_argument("--realtime-jobs", type=int, default=1, metavar="N",
+                    help="real-time flights at once, each pinned to its own 1/N of the cores (as campaign's)")
     rb.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
 
     o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
@@ -229,7 +231,7 @@ def main(argv=None) -> int:
             return 2
         try:
             md = run_map([s.strip() for s in a.scenarios.split(",") if s.strip()], parse_seeds(a.seeds), a.out,
-                         a.realtime, sets=a.set, latency=a.latency)
+                         a.realtime, sets=a.set, latency=a.latency, realtime_jobs=a.realtime_jobs)
         except (FileNotFoundError, ValueError) as e:
             print(f"sitl: {e}", file=sys.stderr)
             return 2

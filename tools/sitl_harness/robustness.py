@@ -113,9 +113,10 @@ def machine() -> str:
                 break
     except OSError:
         pass
+    commit = os.environ.get("MPPID_COMMIT", "")  # a copied tree (tools/gpu) names its commit so
     try:
-        commit = subprocess.run(["git", "-C", str(paths.ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, timeout=10).stdout.strip()
+        commit = commit or subprocess.run(["git", "-C", str(paths.ROOT), "rev-parse", "--short", "HEAD"],
+                                          capture_output=True, text=True, timeout=10).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         commit = "?"
     return f"{platform.node()}: {cpu}, {os.cpu_count()} CPUs, {platform.system()} {platform.release()}; commit {commit}"
@@ -146,14 +147,16 @@ def table(files, runs: dict) -> tuple[str, dict]:
     return "\n".join(lines) + "\n", totals
 
 
-def run_map(bases: list[str], seeds: list[int], out: Path, realtime: bool, sets=(), latency=None) -> Path:
+def run_map(bases: list[str], seeds: list[int], out: Path, realtime: bool, sets=(), latency=None,
+            realtime_jobs: int = 1) -> Path:
     from .campaign import run_campaign
 
     out = Path(out).resolve()
     files = write_variants(bases, out)
     started = datetime.datetime.now(datetime.timezone.utc)
     load0 = os.getloadavg()
-    run_campaign([str(p) for *_, p in files], seeds, out, realtime=realtime, sets=sets, latency=latency, plots=False)
+    run_campaign([str(p) for *_, p in files], seeds, out, realtime=realtime, sets=sets, latency=latency, plots=False,
+                 realtime_jobs=realtime_jobs)
     load1 = os.getloadavg()
     data = json.loads((out / "summary.json").read_text())
     runs = {}
