@@ -13,7 +13,7 @@
 #   daemon_binary_tests   the mppid binary (under qemu too), but not the one test that needs
 #                         a network namespace (the udpm ones stay with the x86-64 stage)
 #   simd_kernels_share_no_symbols   the NEON kernel objects
-# Not here: the closed-loop flights, the MPC-DDP baseline (ddp_tests: 3 min of cold compile),
+# Not here: the benchmarks (bench: x86-64 timing tools), the closed-loop flights, the MPC-DDP baseline (ddp_tests: 3 min of cold compile),
 # the allocation counts of core_alloc_tests (the NEON path's are the same code as SSE4's;
 # ~3 min under emulation), the simulator, the fuzz corpora, systemd and the end-to-end tests:
 # their code is the x86-64 stage's, not the ISA's.
@@ -39,7 +39,7 @@ stamp() { date +%s; }
 TARGETS=(core_tests core_simd_tests plan_reference rt_tests rt_alloc_tests driver_tests lcm_types_roundtrip
          daemon_binary_tests mppid)
 # Defined in build-aarch64 but not built here (the list above says why).
-EXCLUDE_LABELS='closed_loop|fuzz|sim|e2e|systemd'
+EXCLUDE_LABELS='closed_loop|fuzz|sim|e2e|systemd|bench'
 EXCLUDE='^(NoAlloc\.|(closed_loop_tests|ddp_closed_loop_tests|ddp_tests|core_alloc_tests)_NOT_BUILT$|lcm_types_(python|java)$|DaemonBinary\.WarnsWhenItsLcmUrlWouldLeaveTheHost$)'
 
 [[ -x build/bin/plan_reference ]] || { echo "aarch64.sh: build/bin/plan_reference missing (tools/setup.sh builds it)" >&2; exit 1; }
