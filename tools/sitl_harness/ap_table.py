@@ -21,9 +21,7 @@ def _leg_key(r):
 
 def table(folders: list[Path], labels: list[str]) -> str:
     camps = [(label, json.loads((Path(f) / "summary.json").read_text())["runs"]) for f, label in zip(folders, labels)]
-    missions = []
-    for _, runs in camps:
-        missions += [r["scenario"] for r in runs if r["scenario"] not in missions]
+    missions = list(dict.fromkeys(r["scenario"] for _, runs in camps for r in runs))  # first-seen order, once each
     lines = ["| mission | controller | flights | success | RMS error [m] | largest error [m] | RMS, estimate [m] "
              "| largest tilt [deg] | failures |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for m in missions:
