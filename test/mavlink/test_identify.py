@@ -16,6 +16,9 @@ def test_identify_through_the_bridge(netns, procs, tmp_path):
     r = c.ctl("identify")
     assert not r["ok"] and "not flying the vehicle" in r["message"], r
     c.ok("offboard")
+    # Engaging asks mppid to forget what it learnt from setpoints that were not flown.
+    wait_for(lambda: "daemon.restart_estimates = 1 applied" in c.procs.log("mppid"), 5,
+             "mppid to restart its estimates on offboard\n--- mppid log\n" + c.procs.log("mppid")[-2000:])
     c.ok("arm")
     c.wait_event("mission_done", 30)  # up at the hold point
     n0 = len(c.setpoints())

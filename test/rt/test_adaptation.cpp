@@ -292,3 +292,62 @@ TEST(Identification, TheDaemonStartsItOnRequestOnRateTasksOnly) {
       EXPECT_FLOAT_EQ(c.u[1], c.u[0]);
   }
 }
+
+// ---- estimates from commands that were never flown ------------------------------------------
+
+TEST(RestartEstimates, ForgetsWhatCommandsNeverFlownTaught) {
+  // Before the bridge engages, the autopilot flies its own take-off and mppid's commands go
+  // nowhere: a vehicle climbing at 2 m/s^2 whatever mppid sends reads as an upward push or a
+  // lighter vehicle. daemon.restart_estimates (the bridge sends it on engaging) forgets it all.
+  auto ctl = controller("quadrotor_rate_track", {});
+  const float nominal_mass = ctl->mass();
+  test::FakeClock clock;
+  test::RecordingTransport tx;
+  transport::Inbox::Expect e;
+  e.nx = 13;
+  e.vehicles = 1;
+  e.model = 2;  // MODEL_QUADROTOR_RATE
+  transport::Inbox inbox(e);
+  daemon::LoopSettings s;
+  s.command_kind = 2;
+  s.disturbance = with_mass();
+  s.latency.actuation_delay_ns = 20 * kMs;
+  s.latency.delay_estimate.estimate = true;
+  daemon::ControlLoop loop(ctl.get(), &clock, &tx, &inbox, s);
+  std::atomic<bool> run{false};
+  const auto state = [&](int k) {
+    auto& st = inbox.state_buffer();
+    st.seq = k;
+    st.nx = 13;
+    st.n = 13;
+    st.vehicle_count = 1;
+    st.model = 2;
+    st.recv_ns = clock.now_ns();
+    st.sample_utime = clock.now_ns() / 1000;
+    const double t = 0.02 * k;
+    const auto x = rate_state();
+    std::copy(x.begin(), x.end(), st.x);
+    st.x[2] = static_cast<float>(1.0 + t * t);  // climbing at 2 m/s^2
+    st.x[5] = static_cast<float>(2.0 * t);
+    inbox.offer_state();
+  };
+  for (int k = 1; k <= 60; ++k) {
+    state(k);
+    ASSERT_TRUE(loop.step_realtime(run));
+  }
+  const float* d = loop.disturbance_estimate();
+  ASSERT_TRUE(std::fabs(d[2]) > 0.3f || std::fabs(ctl->mass() - nominal_mass) > 0.05f * nominal_mass)
+      << "the climb taught the estimates nothing: d_z " << d[2] << ", mass " << ctl->mass();
+
+  transport::ParamUpdate p;
+  std::strncpy(p.key, "daemon.restart_estimates", sizeof(p.key) - 1);
+  p.value = 1.0;
+  inbox.offer_param(p);
+  state(61);
+  ASSERT_TRUE(loop.step_realtime(run));
+  EXPECT_EQ(loop.counters().params_applied.load(), 1);
+  // The restart, then one cycle's update from a single state (which the observer needs two of).
+  for (int i = 0; i < 3; ++i) EXPECT_FLOAT_EQ(loop.disturbance_estimate()[i], 0.0f);
+  EXPECT_FLOAT_EQ(ctl->mass(), nominal_mass);
+  EXPECT_EQ(loop.counters().actuation_delay_ns.load(), 20 * kMs);
+}

@@ -71,6 +71,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
   held_.assign(c_->plan());
   failsafe_ = s_.failsafe_u.empty() ? u_init_ : s_.failsafe_u;
   if (s_.command_kind < 0) s_.command_kind = command_kind_for(controller->task());
+  configured_delay_ns_ = s_.latency.actuation_delay_ns;
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
   inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
@@ -220,6 +221,20 @@ void ControlLoop::align_plan(std::int64_t t_act_ns) {
 
 void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
+}
+
+// The commands sent so far were not flown (an autopilot flew its own take-off until the bridge
+// engaged: it asks for this then). What the estimates learnt from them goes: the disturbance,
+// the mass, the delay (back to the settings'), and the command history they predict through.
+void ControlLoop::restart_estimates() {
+  history_.reset();
+  if (observe_) {
+    observer_.reset();
+    observer_.apply(*c_);
+  }
+  delays_.reset();
+  s_.latency.actuation_delay_ns = configured_delay_ns_;
+  counters_.actuation_delay_ns.store(configured_delay_ns_, std::memory_order_relaxed);
 }
 
 void ControlLoop::adapt_to(const float* x, std::int64_t t_state_ns) {
@@ -500,6 +515,10 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
   const double v = p.value;
   if (!std::isfinite(v)) return key + ": must be finite";
   if (is_loop_param(key)) {
+    if (key == "daemon.restart_estimates") {
+      restart_estimates();
+      return {};
+    }
     if (key == "daemon.identify") {
       if (s_.command_kind != kThrustRates) return key + ": the identification manoeuvre is for the rate-controlled tasks";
       manoeuvre_.request(v != 0.0);
@@ -517,7 +536,8 @@ std::string ControlLoop::apply_param(const transport::ParamUpdate& p) {
       s_.failsafe_timeout_ns = std::llround(v * 1e6);
       return {};
     }
-    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify)";
+    return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, "
+                 "daemon.identify, daemon.restart_estimates)";
   }
   if (key.rfind("mppi.", 0) == 0)
     return key + ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*";

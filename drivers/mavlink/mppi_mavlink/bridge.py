@@ -819,6 +819,17 @@ class Bridge:
             self.engaged, self.engaged_mode, self.disengaged_why = True, self.custom_mode, ""
         log.info("engaged in mode %s: mppid's setpoints go to the autopilot", self.mode)
         self._publish_link(force=True)
+        # Until now mppid's setpoints were not flown (the autopilot's take-off, a pre-stream):
+        # what its estimates (disturbance, mass, delay) learnt from them is wrong. Asked for
+        # beside `offboard`'s answer; not fatal.
+        threading.Thread(target=self._restart_mppid_estimates, name="restart-estimates", daemon=True).start()
+
+    def _restart_mppid_estimates(self):
+        why = self._ask_mppid("daemon.restart_estimates", 1.0)
+        if why:
+            log.warning("engaged, but mppid's estimates were not restarted: %s", why)
+        else:
+            log.info("mppid's estimates restarted: its setpoints fly from now on")
 
     def do_land(self):
         self._disengage("land requested")
@@ -839,6 +850,25 @@ class Bridge:
                               [mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, APM_COPTER_LOITER], "mode LOITER")
         return "holding"
 
+    def _ask_mppid(self, key: str, value: float) -> str:
+        """A parameter update for mppid on MPPI_PARAMS, and its answer: "" when applied, else why not."""
+        msg = self.mppi_lcm.param_update_t()
+        with self.cond:
+            self.param_seq += 1
+            msg.seq = self.param_seq
+        msg.utime, msg.key, msg.value = int(time.time() * 1e6), key, float(value)
+        self.lc.publish(self.s["lcm"]["params_channel"], msg.encode())
+        deadline = time.monotonic() + self.s["mavlink"]["command_timeout_s"]
+        with self.cond:
+            while msg.seq not in self.param_results and time.monotonic() < deadline:
+                self.cond.wait(max(0.0, deadline - time.monotonic()))
+            r = self.param_results.pop(msg.seq, None)
+        if r is None:
+            return "mppid did not answer (is it running on this LCM bus?)"
+        if r.status != self.mppi_lcm.param_result_t.STATUS_APPLIED:
+            return f"refused by mppid: {r.reason}"
+        return ""
+
     def do_identify(self, on=1.0):
         """The identification manoeuvre (docs/sysid.md): asks mppid for it (daemon.identify on
         MPPI_PARAMS) and relays its answer. Only while mppid flies the vehicle: armed, its
@@ -848,21 +878,9 @@ class Bridge:
             self._require_fly("identify")
             if not (self.armed and self.streaming):
                 raise CommandError("identify refused: mppid is not flying the vehicle (armed, its setpoints streaming)")
-        msg = self.mppi_lcm.param_update_t()
-        with self.cond:
-            self.param_seq += 1
-            msg.seq = self.param_seq
-        msg.utime, msg.key, msg.value = int(time.time() * 1e6), "daemon.identify", 1.0 if start else 0.0
-        self.lc.publish(self.s["lcm"]["params_channel"], msg.encode())
-        deadline = time.monotonic() + self.s["mavlink"]["command_timeout_s"]
-        with self.cond:
-            while msg.seq not in self.param_results and time.monotonic() < deadline:
-                self.cond.wait(max(0.0, deadline - time.monotonic()))
-            r = self.param_results.pop(msg.seq, None)
-        if r is None:
-            raise CommandError("identify: mppid did not answer (is it running on this LCM bus?)")
-        if r.status != self.mppi_lcm.param_result_t.STATUS_APPLIED:
-            raise CommandError(f"identify refused by mppid: {r.reason}")
+        why = self._ask_mppid("daemon.identify", 1.0 if start else 0.0)
+        if why:
+            raise CommandError(f"identify: {why}")
         return "identification manoeuvre started (mppid: doublets and thrust steps)" if start else "identification stopped"
 
     def signing_counters(self) -> dict:

@@ -234,6 +234,7 @@ class ControlLoop {
   // What a new state teaches the loop: the external acceleration and the mass (the
   // disturbance observer), and the actuation delay the vehicle really has.
   void adapt_to(const float* x, std::int64_t t_state_ns);
+  void restart_estimates();  // daemon.restart_estimates
   void apply_between_cycles();
   std::string apply_param(const transport::ParamUpdate& p);
   // Live updates (control_loop_live.cpp): the answer to one update on the reply channel;
@@ -309,6 +310,7 @@ class ControlLoop {
   std::vector<float> x_pred_;
   DisturbanceObserver observer_;
   DelayEstimator delays_;
+  std::int64_t configured_delay_ns_ = 0;  // the settings' actuation delay (restart_estimates)
   IdentificationManoeuvre manoeuvre_;
   bool observe_ = false;  // the model takes an external acceleration and estimation is on
   std::atomic<std::int64_t> latency_estimate_ns_{0};
