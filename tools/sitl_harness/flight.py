@@ -98,6 +98,10 @@ class Flight:
                                        preexec_fn=_pdeathsig if main else None)
         line = self.holder.stdout.readline().decode().strip()
         if line != "ready":
+            try:  # its shell exits right after the failing command: say what it said
+                self.holder.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                pass
             err = self.holder.stderr.read().decode() if self.holder.poll() is not None else ""
             raise FlightError(f"network namespace set-up failed: {line} {err}".strip())
         self.pgid = self.holder.pid
