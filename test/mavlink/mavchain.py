@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from mavtest import LCM_URL, PYTHON, ROOT, Procs, events, find_binary, read_jsonl, wait_for
+from mavtest import LCM_URL, PYTHON, ROOT, Procs, events, find_binary, read_jsonl, require_binary, wait_for
 from mppi_mavlink import control, lcm_types
 
 VEHICLE_PORT = 14540      # the bridge listens here (PX4's offboard port)
@@ -71,8 +71,7 @@ class Chain:
         return self.procs.start("bridge", IO_PRIO + cmd)
 
     def start_mppid(self):
-        mppid = find_binary("mppid")
-        assert mppid is not None, "mppid not built: run tools/setup.sh (or set MPPID_BUILD_DIR)"
+        mppid = require_binary("mppid")
         cmd = [mppid, "--config", ROOT / "config" / "tasks" / f"{self.task}.yaml", "--lcm-url", LCM_URL,
                "--backend", "cpu"] + (["--realtime"] if RT else [])
         for kv in self.mppid_sets:

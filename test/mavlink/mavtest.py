@@ -34,6 +34,13 @@ CLONE_NEWNET = 0x40000000
 PYTHON = sys.executable
 
 
+def require_binary(name: str) -> Path:
+    """A binary of the build, or the test fails saying so (tools/setup.sh builds them all)."""
+    p = find_binary(name)
+    assert p is not None, f"{name} not built: run tools/setup.sh (or set MPPID_BUILD_DIR)"
+    return p
+
+
 def find_binary(name: str) -> Path | None:
     dirs = [os.environ.get("MPPID_BUILD_DIR")] if os.environ.get("MPPID_BUILD_DIR") else []
     dirs += ["build", "build-mavlink", "build-sim", "build-daemon"]

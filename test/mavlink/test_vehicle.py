@@ -7,7 +7,7 @@ import subprocess
 import pytest
 import yaml
 
-from mavtest import ROOT, find_binary
+from mavtest import ROOT, require_binary
 from mppi_mavlink import settings, vehicle
 
 SHIPPED = ROOT / "config" / "vehicles" / "sim_rate_1kg.yaml"
@@ -63,18 +63,14 @@ def test_the_bridge_and_mppid_refuse_the_same_files(tmp_path, doc, field):
     p = write(tmp_path, doc)
     with pytest.raises(vehicle.VehicleError, match=field.split(":")[0].replace(".", r"\.")):
         vehicle.load(p)
-    mppid = find_binary("mppid")
-    if mppid is None:
-        pytest.skip("mppid not built")
+    mppid = require_binary("mppid")
     r = subprocess.run([str(mppid), "--config", ROOT / "config/tasks/quadrotor_rate_track.yaml", "--vehicle", p,
                         "--lcm-url", "memq://", "--duration", "0.1"], capture_output=True, text=True, timeout=30)
     assert r.returncode == 2 and field.split(":")[0] in r.stderr + r.stdout, r.stderr
 
 
 def test_mppid_flies_the_file_the_bridge_accepts(tmp_path):
-    mppid = find_binary("mppid")
-    if mppid is None:
-        pytest.skip("mppid not built")
+    mppid = require_binary("mppid")
     p = write(tmp_path, GOOD)
     vehicle.load(p)
     r = subprocess.run([str(mppid), "--config", ROOT / "config/tasks/quadrotor_rate_track.yaml", "--vehicle", p,
