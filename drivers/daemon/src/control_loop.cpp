@@ -223,16 +223,22 @@ void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
-// The commands sent so far were not flown (an autopilot flew its own take-off until the bridge
-// engaged: it asks for this then). What the estimates learnt from them goes: the disturbance,
-// the mass, the delay (back to the settings'), and the command history they predict through.
-void ControlLoop::restart_estimates() {
+// What the commands sent so far taught: the command history they are predicted through, the
+// disturbance and mass estimates, the delay estimate's window (its delay stays).
+void ControlLoop::forget_estimates() {
   history_.reset();
   if (observe_) {
     observer_.reset();
     observer_.apply(*c_);
   }
   delays_.reset();
+}
+
+// The commands sent so far were not flown (an autopilot flew its own take-off until the bridge
+// engaged: it asks for this then). What the estimates learnt from them goes: the disturbance,
+// the mass, the delay (back to the settings'), and the command history they predict through.
+void ControlLoop::restart_estimates() {
+  forget_estimates();
   s_.latency.actuation_delay_ns = configured_delay_ns_;
   counters_.actuation_delay_ns.store(configured_delay_ns_, std::memory_order_relaxed);
 }
@@ -317,13 +323,8 @@ Outcome ControlLoop::enter_failsafe() {
   if (mode_.load(std::memory_order_relaxed) == Mode::kFailsafe) return Outcome::kFailsafe;
   c_->reset();
   held_.assign(c_->plan());
-  history_.reset();
   plan_timed_ = false;
-  if (observe_) {
-    observer_.reset();
-    observer_.apply(*c_);
-  }
-  delays_.reset();
+  forget_estimates();
   return Outcome::kFailsafe;
 }
 

@@ -234,6 +234,7 @@ class ControlLoop {
   // What a new state teaches the loop: the external acceleration and the mass (the
   // disturbance observer), and the actuation delay the vehicle really has.
   void adapt_to(const float* x, std::int64_t t_state_ns);
+  void forget_estimates();   // on failsafe and on restart_estimates
   void restart_estimates();  // daemon.restart_estimates
   void apply_between_cycles();
   std::string apply_param(const transport::ParamUpdate& p);
