@@ -13,6 +13,7 @@ from pathlib import Path
 
 import yaml
 
+from . import autopilots
 from . import vehicle as vehicle_file
 
 DEFAULTS = {
@@ -163,8 +164,9 @@ def validate(s: dict):
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or not (lo <= v <= hi):
             raise SettingsError(f"{sec}.{key}: must be a number in [{lo}, {hi}], got {v!r}")
 
-    if s["mavlink"]["dialect"] not in ("px4", "ardupilot"):
-        raise SettingsError(f"mavlink.dialect: must be px4 or ardupilot, got {s['mavlink']['dialect']!r}")
+    if s["mavlink"]["dialect"] not in autopilots.available():
+        raise SettingsError(f"mavlink.dialect: must be one of {', '.join(autopilots.available())} "
+                            f"(a file in mppi_mavlink/autopilots/), got {s['mavlink']['dialect']!r}")
     num("mavlink", "system_id", 1, 255)
     num("mavlink", "component_id", 1, 255)
     num("mavlink", "target_component", 0, 255)
