@@ -1,0 +1,173 @@
+"""Failsafes as PX4 and ArduPilot users expect them (docs/failsafes.md), against the simulated
+autopilot through a UDP tap that keeps every datagram; mppid stood in for by a controller
+that answers each state (linktools.py).
+
+The silent re-takeover: once engaged, mppid's setpoints stopping for any reason (mppid
+killed or restarted, the link to the autopilot lost and back, the states stopping) ends the
+engagement; nothing reaches the autopilot again until a new `offboard`, whatever comes back,
+and the operator is told (the bridge's log, and a STATUSTEXT to the ground station)."""
+import os
+import time
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from mavtest import wait_for  # noqa: E402
+from linktools import StandInController, UdpTap  # noqa: E402
+from mavchain import Chain  # noqa: E402
+
+pytestmark = pytest.mark.timeout(90)
+mavlink = mavutil.mavlink
+TAP_PORT = 14562
+ARDUPILOT = dict(autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
+
+
+@pytest.fixture
+def tap(netns):
+    t = UdpTap(TAP_PORT, 14540)
+    yield t
+    t.close()
+
+
+def _chain(procs, tmp_path, **kw):
+    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0"], **kw)
+    c.listen_lcm()
+    c.start_bridge()
+    c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
+    wait_for(lambda: c.status().get("link_up") and not c.status().get("refusal")
+             and c.status().get("states_published", 0) >= 60, 15, "link up, checks passed, states")
+    return c
+
+
+def _gcs(tap, command, *params):
+    """A ground station's COMMAND_LONG, straight to the autopilot (not through the bridge)."""
+    gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    p = list(params) + [0.0] * (7 - len(params))
+    tap.a.sendto(gcs.command_long_encode(1, 1, command, 0, *p).pack(gcs), tap.vehicle)
+
+
+def _statustexts(tap, since=0):
+    """The bridge's STATUSTEXTs on the link (component 191), chunks joined."""
+    out, parts = [], {}
+    for t, m in tap.decoded("down"):
+        if m.get_type() != "STATUSTEXT" or t < since or m.get_srcComponent() != 191:
+            continue
+        text = m.text if isinstance(m.text, str) else m.text.decode(errors="replace")
+        text = text.rstrip("\x00")
+        if getattr(m, "id", 0):
+            parts.setdefault(m.id, []).append(text)
+            if len(text) == 50:
+                continue
+            text = "".join(parts.pop(m.id))
+        out.append((m.severity, text))
+    return out
+
+
+def _between(tap, t0, t1):
+    return [t for t, _ in tap.setpoints() if t0 < t < t1]
+
+
+def _engage(c, tap):
+    msg = c.ok("offboard")
+    n = len(tap.setpoints())
+    wait_for(lambda: len(tap.setpoints()) > n + 25, 5, "setpoints after offboard")
+    assert c.status()["engaged"]
+    return msg
+
+
+def _assert_not_reengaged(c, tap, t_back, what):
+    """From t_back (what came back) on, nothing on the wire; disengaged, the operator told;
+    a new `offboard` is what flies again."""
+    time.sleep(2.0)
+    st = c.status()
+    late = _between(tap, t_back, time.monotonic_ns() // 1000)
+    assert late == [], f"{len(late)} setpoints after {what} came back: a re-takeover without `offboard`"
+    assert st["engaged"] is False, st
+    assert "`offboard`" in c.procs.log("bridge")
+    texts = [t for _, t in _statustexts(tap)]
+    assert any("disengaged" in t for t in texts), texts
+    t_offboard = time.monotonic_ns() // 1000
+    _engage(c, tap)
+    assert _between(tap, t_offboard, time.monotonic_ns() // 1000)
+
+
+def test_mppid_restart_never_reengages(netns, procs, tmp_path, tap):
+    """ArduPilot, engaged in GUIDED: mppid killed and back 1.5 s later (its seq from 1): the
+    bridge disengaged when the stream stopped, hands the vehicle to LOITER (GUIDED would only
+    level and drift), and forwards nothing of the new mppid until `offboard`."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, **ARDUPILOT)
+    try:
+        _engage(c, tap)
+        ctl.close()                       # mppid dies
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        assert "stopped" in c.status()["disengaged_why"]
+        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the hand-back to LOITER")
+        time.sleep(1.0)
+        ctl = StandInController()         # mppid restarted (systemd: Restart=on-failure)
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: ctl.seq > 50, 5, "the new mppid's commands")
+        _assert_not_reengaged(c, tap, t_back, "mppid")
+    finally:
+        ctl.close()
+
+
+def test_link_back_never_reengages(netns, procs, tmp_path, tap):
+    """ArduPilot, engaged: the link cut for 3 s and restored: no setpoint after it returns;
+    the bridge disengaged and, the link back, hands the vehicle to LOITER."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, **ARDUPILOT)
+    try:
+        _engage(c, tap)
+        tap.cut = True
+        wait_for(lambda: c.status().get("link_up") is False, 5, "the link loss")
+        assert c.status()["engaged"] is False
+        time.sleep(1.0)
+        tap.cut = False
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: c.status().get("link_up"), 5, "the link back")
+        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the hand-back to LOITER")
+        _assert_not_reengaged(c, tap, t_back, "the link")
+    finally:
+        ctl.close()
+
+
+def test_states_that_stop_never_reengage(netns, procs, tmp_path, tap):
+    """ArduPilot, engaged: a ground station stops ATTITUDE_QUATERNION for 1.5 s (no states, so
+    no fresh commands), then restarts it: nothing is forwarded when the states return."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, **ARDUPILOT)
+    try:
+        _engage(c, tap)
+        _gcs(tap, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, -1)
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        time.sleep(1.0)
+        _gcs(tap, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, 20000)
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: not c.status().get("refusal") and c.status().get("state_rate_hz", 0) > 40, 5, "states back")
+        _assert_not_reengaged(c, tap, t_back, "the states")
+    finally:
+        ctl.close()
+
+
+def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
+    """PX4 with COM_OF_LOSS_T 2 s: mppid silent for 0.8 s while the vehicle is still in
+    OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out, so PX4's
+    own offboard-loss failsafe acts (COM_OBL_RC_ACT; the simulated one lands)."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=2.0"])
+    try:
+        assert "OFFBOARD" in _engage(c, tap)
+        ctl.answer = False
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        assert c.status()["mode"] == "OFFBOARD"   # PX4 has not given up yet
+        time.sleep(0.3)
+        ctl.answer = True
+        t_back = time.monotonic_ns() // 1000
+        c.wait_event("failsafe", 5)
+        assert _between(tap, t_back, time.monotonic_ns() // 1000) == []
+        _assert_not_reengaged(c, tap, t_back, "mppid")
+    finally:
+        ctl.close()
