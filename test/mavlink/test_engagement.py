@@ -29,16 +29,39 @@ ROWS = [
     ("land disengages", False, [("engage", GUIDED, "GUIDED"), ("disengage", "land requested")], DISENGAGED,
      "land requested"),
     ("someone else's mode change disengages", False,
-     [("engage", GUIDED, "GUIDED"), ("watch", LOITER, "LOITER", True, True)], DISENGAGED,
+     [("engage", GUIDED, "GUIDED"), ("watch", LOITER, "LOITER", True, True, False, True)], DISENGAGED,
      "mode changed to LOITER by someone else"),
-    ("a disarm disengages", False, [("engage", GUIDED, "GUIDED"), ("watch", GUIDED, "GUIDED", False, True)],
+    ("a disarm disengages", False,
+     [("engage", GUIDED, "GUIDED"), ("watch", GUIDED, "GUIDED", False, True, True, True)],
      DISENGAGED, "the autopilot disarmed"),
-    ("the same mode keeps it", False, [("engage", GUIDED, "GUIDED"), ("watch", GUIDED, "GUIDED", True, True)],
-     ENGAGED, ""),
-    ("a mode change before offboard changes nothing", True, [("watch", LOITER, "LOITER", True, True)], PRESTREAM,
-     ""),
+    ("the same mode keeps it", False,
+     [("engage", GUIDED, "GUIDED"), ("watch", GUIDED, "GUIDED", True, True, True, True)], ENGAGED, ""),
+    ("a mode change before offboard changes nothing", True, [("watch", LOITER, "LOITER", True, True, False, False)],
+     PRESTREAM, ""),
     ("a mode change while disengaged keeps the reason", False,
-     [("disengage", "hold requested"), ("watch", GUIDED, "GUIDED", True, True)], DISENGAGED, "hold requested"),
+     [("disengage", "hold requested"), ("watch", GUIDED, "GUIDED", True, True, True, False)], DISENGAGED,
+     "hold requested"),
+    # One rule before and after a disengage (issue 29 4b): PX4 pre-streams whenever the
+    # vehicle is out of OFFBOARD, so the operator's own switch engages, before and after.
+    ("PX4: the operator's switch into OFFBOARD engages", True,
+     [("watch", OFFBOARD, "OFFBOARD", True, True, True, False)], ENGAGED, ""),
+    ("PX4: pre-streamed again once out of OFFBOARD after a disengage", True,
+     [("engage", OFFBOARD, "OFFBOARD"), ("watch", LOITER, "LOITER", True, True, False, True),
+      ("watch", LOITER, "LOITER", True, True, False, False)], PRESTREAM, ""),
+    ("PX4: ... and the switch engages again", True,
+     [("engage", OFFBOARD, "OFFBOARD"), ("watch", LOITER, "LOITER", True, True, False, True),
+      ("watch", LOITER, "LOITER", True, True, False, False), ("watch", OFFBOARD, "OFFBOARD", True, True, True, False)],
+     ENGAGED, ""),
+    ("PX4: disengaged while still in OFFBOARD stays so", True,
+     [("engage", OFFBOARD, "OFFBOARD"), ("disengage", "mppid's setpoints stopped"),
+      ("watch", OFFBOARD, "OFFBOARD", True, True, True, True)], DISENGAGED, "mppid's setpoints stopped"),
+    ("PX4: found in OFFBOARD at the first HEARTBEAT: nothing", True,
+     [("watch", OFFBOARD, "OFFBOARD", True, None, True, None)], DISENGAGED,
+     "the vehicle is in OFFBOARD, not switched there while the bridge watched"),
+    ("PX4: the bridge's own `offboard` engages, not the HEARTBEAT", True,
+     [("expect_offboard", True), ("watch", OFFBOARD, "OFFBOARD", True, True, True, False)], PRESTREAM, ""),
+    ("ArduPilot: GUIDED entered by someone else engages nothing", False,
+     [("watch", GUIDED, "GUIDED", True, True, True, False)], DISENGAGED, "waiting for `offboard`"),
     ("PX4 offboard after a disengage pre-streams again", True,
      [("engage", OFFBOARD, "OFFBOARD"), ("disengage", "hold requested"), ("prestream", "offboard requested")],
      PRESTREAM, ""),
@@ -51,7 +74,7 @@ ROWS = [
 @pytest.mark.parametrize("what,pre,events,state,why", ROWS, ids=[r[0] for r in ROWS])
 def test_transition(what, pre, events, state, why):
     changes = []
-    e = Engagement(pre, changes.append)
+    e = Engagement(pre, lambda why, changed: changes.append(changed))
     run(e, events)
     s = e.snapshot()
     assert (s.state, s.why) == (state, why)
@@ -59,14 +82,14 @@ def test_transition(what, pre, events, state, why):
     # every state change is in the record, in order, and was reported
     states = [PRESTREAM if pre else DISENGAGED] + [to for _, _, to, _ in e.transitions]
     assert states[-1] == state and all(a != b for a, b in zip(states, states[1:]))
-    assert len(changes) >= len(e.transitions)
+    assert changes.count(True) == len(e.transitions)
 
 
 def test_every_change_is_logged(caplog):
     caplog.set_level(logging.INFO, logger="mppi_mavlink")
     e = Engagement(False)
     e.engage(GUIDED, "GUIDED")
-    e.watch(LOITER, "LOITER", True, True)
+    e.watch(LOITER, "LOITER", True, True, False, True)
     text = caplog.text
     assert "disengaged -> engaged" in text and "engaged -> disengaged (mode changed to LOITER" in text
     assert "forwarding stopped: mode changed to LOITER by someone else" in text

@@ -154,20 +154,51 @@ def test_states_that_stop_never_reengage(netns, procs, tmp_path, tap):
 
 def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
     """PX4 with COM_OF_LOSS_T 2 s: mppid silent for 0.8 s while the vehicle is still in
-    OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out, so PX4's
-    own offboard-loss failsafe acts (COM_OBL_RC_ACT; the simulated one lands)."""
+    OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out while the
+    vehicle is in OFFBOARD, so PX4's own offboard-loss failsafe acts (COM_OBL_RC_ACT; the
+    simulated one lands). Out of OFFBOARD the pre-stream resumes (PX4 ignores it there), and
+    the vehicle never goes back to OFFBOARD by itself."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=2.0"])
     try:
         assert "OFFBOARD" in _engage(c, tap)
         ctl.answer = False
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engagement") == "disengaged", 3, "the bridge to disengage")
         assert c.status()["mode"] == "OFFBOARD"   # PX4 has not given up yet
         time.sleep(0.3)
         ctl.answer = True
         t_back = time.monotonic_ns() // 1000
+        time.sleep(0.5)
+        assert c.status()["mode"] == "OFFBOARD" and c.status()["engagement"] == "disengaged"
+        assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "forwarded while still in OFFBOARD"
         c.wait_event("failsafe", 5)
-        assert _between(tap, t_back, time.monotonic_ns() // 1000) == []
-        _assert_not_reengaged(c, tap, t_back, "mppid")
+        wait_for(lambda: c.status().get("engagement") == "prestream", 3, "the pre-stream out of OFFBOARD")
+        time.sleep(1.0)
+        modes = [e["mode"] for e in c.events("mode")]
+        assert modes[-1] == "AUTO.LAND" and modes.count("OFFBOARD") == 1, modes
+        texts = [t for _, t in _statustexts(tap)]
+        assert any("disengaged" in t and "stopped" in t for t in texts), texts
+    finally:
+        ctl.close()
+
+
+def test_px4_switch_engages_before_and_after_a_disengage(netns, procs, tmp_path, tap):
+    """PX4, one rule before and after a disengage: the operator's own switch into OFFBOARD (a
+    ground station's here, the RC's alike) engages mppid before any `offboard`, and again after
+    a switch out of it disengaged the bridge. Each change is told to the ground station."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path)
+    try:
+        wait_for(lambda: c.status().get("engagement") == "prestream" and c.status().get("streaming"), 5, "pre-stream")
+        for attempt in ("before", "after"):
+            _gcs(tap, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0)
+            wait_for(lambda: c.status().get("engagement") == "engaged", 4, f"engaged by the switch ({attempt})")
+            assert c.status()["mode"] == "OFFBOARD"
+            _gcs(tap, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3)
+            wait_for(lambda: c.status().get("engagement") != "engaged", 4, f"disengaged by the switch out ({attempt})")
+            wait_for(lambda: c.status().get("engagement") == "prestream", 4, "pre-streamed again")
+        texts = [t for _, t in _statustexts(tap)]
+        assert sum("mppid engaged" in t for t in texts) == 2, texts
+        assert sum("mppid disengaged: mode changed to" in t for t in texts) == 2, texts
     finally:
         ctl.close()

@@ -44,7 +44,7 @@ class Autopilot:
 
     # ---- what it tells us (receive thread) ----------------------------------------------
     def on_heartbeat(self, msg):
-        """The autopilot's HEARTBEAT: whether it was armed before it (None: not the autopilot's)."""
+        """The autopilot's HEARTBEAT: (armed, custom mode) before it, or None (not the autopilot's)."""
         src = msg.get_srcSystem()
         if msg.autopilot == mavlink.MAV_AUTOPILOT_INVALID or msg.type in (
                 mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER):
@@ -60,12 +60,12 @@ class Autopilot:
             if self.last_hb_mono is not None and now - self.last_hb_mono < 5.0:
                 self.hb_period += 0.2 * (min(now - self.last_hb_mono, 2.0) - self.hb_period)
             self.last_hb_mono = now
-            was_armed = self.armed
+            before = (self.armed, self.custom_mode)
             self.armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             self.base_mode, self.custom_mode = msg.base_mode, msg.custom_mode
             self.mode = mavutil.mode_string_v10(msg)
             self.cond.notify_all()
-        return was_armed
+        return before
 
     def from_target(self, msg) -> bool:
         return not self.target_system or msg.get_srcSystem() == self.target_system

@@ -3,26 +3,17 @@
 
 It composes its rooms: the link (link.py), the autopilot as seen and asked (autopilot.py),
 its profile (autopilots/px4.py, autopilots/ardupilot.py), telemetry -> state (state.py), the
-forwarding gate (gate.py, pure) and forwarding (forwarding.py), the engagement (engagement.py),
-the flight checks (checks.py) and requests to mppid (mppid_link.py).
+forwarding gate (gate.py, pure) and forwarding (forwarding.py), the engagement (engagement.py)
+and its failsafe (failsafe.py), the flight checks (checks.py), what the operator is told
+(notices.py), requests to mppid (mppid_link.py) and the reports (report.py).
 
 Threads: the MAVLink receive thread (telemetry -> LCM at once, ACKs, params), the LCM
 thread (commands -> the wire at once, so the bridge adds no period of its own), the
-housekeeping thread (companion HEARTBEAT 1 Hz, link watch, reconnect, link status), and the
-control socket thread (arm / takeoff / offboard / land / status, one at a time).
-
-The forwarding gate: a command reaches the wire only when its seq advanced, it is a
-thrust+rates command, mppid's latest status says healthy and is fresh, it answers a state
-the bridge published less than max_state_age_s ago, every value is finite, the thrust map
-is known, nothing refuses flight (GUID_OPTIONS, too slow a telemetry stream) and the bridge
-is engaged (below). Nothing is ever re-sent or made up: a hung or dead mppid stops the
-stream, and the autopilot's offboard-loss failsafe takes over.
-
-Engagement: ArduPilot takes any SET_ATTITUDE_TARGET in GUIDED over its own take-off, so it
-gets nothing before `offboard` is requested; PX4 ignores setpoints outside OFFBOARD and needs
-a stream before it, so it is pre-streamed from the start, as before. Either way the bridge
-disengages (forwards nothing until the next `offboard`) on `land`, `hold`, `disarm`, an
-ArduPilot `takeoff`, and on a mode change or disarm made by someone else after `offboard`.
+housekeeping thread (companion HEARTBEAT 1 Hz, link watch, reconnect, the failsafe, link
+status), and the control socket thread (arm / takeoff / offboard / land / status, one at a
+time). Nothing is ever re-sent or made up, and nothing engages by itself: after `offboard`,
+mppid's stream stopping, the link lost or a mode change made by someone else disengage the
+bridge until the next `offboard` (engagement.py, failsafe.py, docs/failsafes.md).
 """
 from __future__ import annotations
 
@@ -30,15 +21,17 @@ import logging
 import threading
 import time
 
-from . import autopilots, lcm_types, telemetry
+from . import autopilots, lcm_types, report, telemetry
 from .autopilot import Autopilot, CommandError
 from .autopilots import decode_param  # noqa: F401  (re-exported: test_frames)
 from .autopilots.base import mavlink
 from .checks import FlightChecks
-from .engagement import Engagement
+from .engagement import DISENGAGED, ENGAGED, PRESTREAM, Engagement
+from .failsafe import Failsafe
 from .forwarding import COUNTERS, Forwarder
 from .link import Link
 from .mppid_link import MppidParams
+from .notices import CRITICAL, INFO, NOTICE, WARNING, Notices
 from .state import BootClock, StatePublisher, mono_us, rotate as _rotate, wall_us  # noqa: F401  (re-exported)
 
 log = logging.getLogger("mppi_mavlink")
@@ -69,6 +62,10 @@ class Bridge:
         self.fwd = Forwarder(settings, self.mppi_lcm, self.link, self.ap, self.states, self.engagement, self.checks,
                              lambda on, why: self._publish_link(force=True))
         self.mppid = MppidParams(self.mppi_lcm, self._publish, l["params_channel"], m["command_timeout_s"])
+        self.notices = Notices(self.link)
+        self.failsafe = Failsafe(settings, self.engagement, self.fwd, self.ap, self.profile, self.notices)
+        self.fwd.on_mppid_restart = lambda: self.failsafe.stream_lost("mppid restarted (its command seq stepped back)")
+        self.told_refusal = ""
         self.lc.subscribe(l["command_channel"], self.fwd.on_command)
         self.lc.subscribe(l["status_channel"], self.fwd.on_status)
         self.lc.subscribe(l["param_result_channel"], self.mppid.on_result)
@@ -88,9 +85,12 @@ class Bridge:
         if t == "BAD_DATA":
             return
         if t == "HEARTBEAT":
-            was_armed = self.ap.on_heartbeat(msg)
-            if was_armed is not None:
-                self.engagement.watch(self.ap.custom_mode, self.ap.mode, self.ap.armed, was_armed)
+            before = self.ap.on_heartbeat(msg)
+            if before is not None:
+                was_armed, was_mode = before
+                offboard = self.profile.offboard_mode
+                self.engagement.watch(self.ap.custom_mode, self.ap.mode, self.ap.armed, was_armed,
+                                      offboard(self.ap.custom_mode), None if was_mode is None else offboard(was_mode))
             return
         if not self.ap.from_target(msg):
             return
@@ -101,12 +101,24 @@ class Bridge:
         if t == "EXTENDED_SYS_STATE":
             self.engagement.on_landed_state(msg.landed_state, TAKEOFF_STATES)
 
-    def _on_engagement(self, why: str):
-        """After every engagement change: a stopped stream or the link message says so."""
-        if self.fwd.streaming and not self.engagement.forwarding:
+    def _on_engagement(self, why: str, changed: bool):
+        """After every engagement change: a stopped stream or the link message says so, and
+        the ground station is told (STATUSTEXT)."""
+        state = self.engagement.snapshot().state
+        if self.fwd.streaming and state == DISENGAGED:
             self.fwd.set_streaming(False, why)
         else:
             self._publish_link(force=True)
+        if changed:
+            self._tell_engagement(state, why)
+
+    def _tell_engagement(self, state: str, why: str):
+        if state == ENGAGED:
+            self.notices.tell(NOTICE, f"mppid engaged: {why}")
+        elif state == PRESTREAM:
+            self.notices.tell(INFO, f"mppid pre-streaming: {why}")
+        else:
+            self.notices.tell(WARNING, f"mppid disengaged: {why}; send offboard to fly again")
 
     # ---- housekeeping ------------------------------------------------------------------
     def _housekeeping(self):
@@ -122,6 +134,8 @@ class Bridge:
                 next_reopen = now + self.s["mavlink"]["reconnect_period_s"]
                 self.link.reopen()
             self.fwd.check_stream()
+            self.failsafe.check(now)
+            self._tell_refusal()
             rate = self.states.rate.rate(now)
             if self.checks.check_state_rate(rate, self.ap.link_up, now - (self.link_up_mono or now)):
                 self._publish_link(force=True)
@@ -129,6 +143,13 @@ class Bridge:
                 next_link = now + link_period
                 self._publish_link()
             self.stop.wait(0.02)
+
+    def _tell_refusal(self):
+        """A refusal to fly, once each time it appears or changes its reason."""
+        r = self.refusal if self.ap.link_up else ""
+        if r.split(":")[0] != self.told_refusal.split(":")[0] and r:
+            self.notices.tell(CRITICAL, f"mppid refuses to fly: {r}")
+        self.told_refusal = r
 
     def _send_heartbeat(self):
         ok_state = mavlink.MAV_STATE_ACTIVE if self.fwd.streaming else (
@@ -156,9 +177,13 @@ class Bridge:
         else:
             ap.link_losses += 1
             log.error("link lost: autopilot HEARTBEAT overdue by %.1f s (%.1f s since the last)", timeout, now - hb)
+            self.failsafe.stream_lost("the link to the autopilot was lost")
         self._publish_link(force=True)
 
     def _on_link_up(self):
+        e = self.engagement.snapshot()
+        if e.state == DISENGAGED:  # what the ground station may have missed while the link was down
+            self.notices.tell(WARNING, f"mppid disengaged: {e.why}; send offboard to fly again")
         self._request_telemetry()
         self.checks.check_params(self.ap.read_param)
         self._publish_link(force=True)
@@ -177,30 +202,9 @@ class Bridge:
         log.info("telemetry asked for: states at %g Hz, status at %g Hz", t["state_hz"], t["status_hz"])
 
     def _publish_link(self, force=False):
-        msg = self.link_t()
-        msg.utime = wall_us()
         self.link_seq += 1
+        msg = report.link_message(self, self.link_t())
         msg.seq = self.link_seq
-        ap, c = self.ap, self.counters
-        msg.link_up, msg.link_losses, msg.dialect = int(ap.link_up), ap.link_losses, self.dialect
-        age = ap.heartbeat_age()
-        msg.heartbeat_age_s = -1.0 if age is None else float(age)
-        msg.target_system, msg.armed, msg.mode = ap.target_system, int(ap.armed), ap.mode
-        msg.streaming = int(self.fwd.streaming)
-        for k in COUNTERS:
-            if k.startswith(("dropped_", "setpoints_")) or k == "states_rejected":
-                setattr(msg, k, c[k])
-        thrust = self.checks.thrust
-        msg.hover_thrust = float(thrust.hover) if thrust else -1.0
-        msg.hover_source = self.checks.hover_source
-        msg.battery_voltage = float(ap.battery_voltage)
-        msg.battery_remaining = int(max(-1, min(100, ap.battery_remaining)))
-        msg.error = self.refusal or ""
-        msg.engaged = int(self.engagement.forwarding)
-        msg.state_rate_hz = float(self.states.rate.rate(time.monotonic()))
-        msg.signing = int(self.link.signing_key is not None)
-        sc = self.link.signing_counters()
-        msg.rejected_unsigned, msg.rejected_bad_signature = sc["rejected_unsigned"], sc["rejected_bad_signature"]
         try:
             self.lc.publish(self.s["lcm"]["link_channel"], msg.encode())
         except OSError:
@@ -231,6 +235,13 @@ class Bridge:
 
     def do_offboard(self):
         self._require_fly("offboard")
+        self.engagement.expect_offboard(True)
+        try:
+            return self._offboard()
+        finally:
+            self.engagement.expect_offboard(False)
+
+    def _offboard(self):
         self.profile.before_offboard(self.engagement, self.s["offboard"]["takeoff_wait_s"])
         deadline = time.monotonic() + self.s["offboard"]["wait_s"]
         ok, why = self.fwd.stream_ok()
@@ -279,17 +290,7 @@ class Bridge:
         return "identification manoeuvre started (mppid: doublets and thrust steps)" if start else "identification stopped"
 
     def status(self) -> dict:
-        ap, e, age = self.ap, self.engagement.snapshot(), self.ap.heartbeat_age()
-        thrust = self.checks.thrust
-        return {"link_up": ap.link_up, "heartbeat_age_s": None if age is None else round(age, 3),
-                "link_losses": ap.link_losses, "dialect": self.dialect, "target_system": ap.target_system,
-                "armed": ap.armed, "mode": ap.mode, "streaming": self.fwd.streaming,
-                "hover_thrust": thrust.hover if thrust else None, "hover_source": self.checks.hover_source,
-                "refusal": self.refusal, "battery_voltage": ap.battery_voltage,
-                "engaged": e.forwarding, "disengaged_why": e.why,
-                "state_rate_hz": round(self.states.rate.rate(time.monotonic()), 1),
-                "landed_state": ap.landed_state, "controller_healthy": self.fwd.last_status_healthy,
-                "signing": self.link.signing_key is not None, **self.link.signing_counters(), **self.counters}
+        return report.status(self)
 
     def execute(self, line: str) -> dict:
         parts = line.split()
@@ -309,6 +310,7 @@ class Bridge:
             return {"ok": True, "message": msg}
         except (CommandError, TypeError, ValueError) as e:
             log.error("%s", e)
+            self.notices.tell(WARNING, f"mppid: {e}")
             return {"ok": False, "message": str(e)}
 
     # ---- run ---------------------------------------------------------------------------

@@ -4,10 +4,17 @@ transition logged.
 States: `disengaged` (nothing is forwarded; `why` says since when), `prestream` (PX4: the
 stream runs before OFFBOARD is entered, which PX4 needs, and setpoints outside OFFBOARD are
 ignored by it), `engaged` (after `offboard`, in the custom mode it confirmed; leaving that
-mode, or a disarm, made by someone else ends it). Apart, `takeoff_in_progress`: ArduPilot's
-own take-off, which `offboard` waits for. The receive thread, the LCM thread and the control
-socket all change it, only through these methods; `on_change(why)` runs after each change,
-outside the lock.
+mode, or a disarm, made by someone else ends it, and so does mppid's stream stopping:
+failsafe.py). Apart, `takeoff_in_progress`: ArduPilot's own take-off, which `offboard` waits
+for. The receive thread, the LCM thread, housekeeping and the control socket all change it,
+only through these methods; `on_change(why, changed)` runs after each, outside the lock.
+
+One rule before and after a disengage (docs/failsafes.md): nothing engages by itself. On an
+autopilot that is pre-streamed (PX4), the pre-stream runs whenever the bridge is not engaged
+and the vehicle is out of its offboard mode, from the start and after any disengage alike, so
+the operator's own switch into OFFBOARD (RC or ground station) engages, seen as the mode
+changing into OFFBOARD; a vehicle found in OFFBOARD without that change (the bridge started,
+or disengaged, while it was there) gets nothing until it leaves OFFBOARD or `offboard` is sent.
 """
 from __future__ import annotations
 
@@ -38,7 +45,10 @@ class Snapshot:
 class Engagement:
     def __init__(self, prestream: bool, on_change=None):
         self.lock = threading.Condition()
-        self.on_change = on_change or (lambda why: None)
+        self.on_change = on_change or (lambda why, changed: None)
+        self.prestreamed = prestream
+        self._expecting = False         # `offboard` in progress: it, not a HEARTBEAT, engages
+        self.since = time.monotonic()   # of the latest state change
         self._state = PRESTREAM if prestream else DISENGAGED
         self._mode = None
         self._why = "" if prestream else "waiting for `offboard`"
@@ -62,6 +72,7 @@ class Engagement:
         self._why = why if state == DISENGAGED else ""
         if old == state:
             return False
+        self.since = time.monotonic()
         self.transitions.append((time.monotonic(), old, state, why))
         if state == DISENGAGED:
             log.warning("forwarding stopped: %s; nothing goes to the autopilot until the next `offboard`", why)
@@ -74,16 +85,15 @@ class Engagement:
             if self._state == ENGAGED:
                 return False
             changed = self._to(PRESTREAM, None, why)
-        if changed:
-            self.on_change(why)
+        self.on_change(why, changed)
         return changed
 
-    def engage(self, custom_mode, mode_name: str) -> bool:
-        why = f"`offboard` confirmed in mode {mode_name}"
+    def engage(self, custom_mode, mode_name: str, by: str = "`offboard`") -> bool:
+        why = f"{mode_name} entered: {by}"
         with self.lock:
             changed = self._to(ENGAGED, custom_mode, why)
         log.info("engaged in mode %s: mppid's setpoints go to the autopilot", mode_name)
-        self.on_change(why)
+        self.on_change(why, changed)
         return changed
 
     def disengage(self, why: str) -> bool:
@@ -92,21 +102,36 @@ class Engagement:
             changed = self._to(DISENGAGED, None, why)
             self._why = why
             self._takeoff = False
-        self.on_change(why)
+        self.on_change(why, changed)
         return changed
 
-    def watch(self, custom_mode, mode_name: str, armed: bool, was_armed: bool) -> bool:
-        """A HEARTBEAT after `offboard`: a mode change or a disarm that the bridge did not ask
-        for ends the engagement (the operator, a failsafe or the RC took over)."""
+    def watch(self, custom_mode, mode_name: str, armed: bool, was_armed: bool, in_offboard: bool,
+              was_in_offboard) -> bool:
+        """A HEARTBEAT. Engaged: a mode change or a disarm that the bridge did not ask for ends
+        the engagement (the operator, a failsafe or the RC took over). Pre-streamed autopilots:
+        the rule in the module doc (`was_in_offboard` None: the first HEARTBEAT)."""
         with self.lock:
-            if self._state != ENGAGED:
-                return False
-            mode = self._mode
-        if custom_mode != mode:
-            return self.disengage(f"mode changed to {mode_name} by someone else")
-        if was_armed and not armed:
-            return self.disengage("the autopilot disarmed")
+            state, mode = self._state, self._mode
+        if state == ENGAGED:
+            if custom_mode != mode:
+                return self.disengage(f"mode changed to {mode_name} by someone else")
+            if was_armed and not armed:
+                return self.disengage("the autopilot disarmed")
+            return False
+        if not self.prestreamed:
+            return False
+        if state == PRESTREAM and in_offboard and not self._expecting:
+            if was_in_offboard is False:
+                return self.engage(custom_mode, mode_name, "the operator switched it (RC or ground station)")
+            return self.disengage(f"the vehicle is in {mode_name}, not switched there while the bridge watched")
+        if state == DISENGAGED and not in_offboard:
+            return self.prestream(f"the vehicle is in {mode_name}: pre-streamed for the next switch")
         return False
+
+    def expect_offboard(self, on: bool) -> None:
+        """While `offboard` runs, the autopilot entering its offboard mode is the bridge's doing."""
+        with self.lock:
+            self._expecting = on
 
     def takeoff_started(self) -> None:
         with self.lock:

@@ -42,6 +42,7 @@ class Forwarder:
         self.ready_since = None
         self.last_ready_mono = None
         self.ready_times = []  # monotonic us of recent commands that passed the gate (offboard's stream check)
+        self.last_drop = ""    # why the latest command was not forwarded
         self.streaming = False
         self.stream_lock = threading.Lock()
         trace = settings["trace"]["file"]
@@ -80,6 +81,7 @@ class Forwarder:
                 reason = "disengaged"
         if reason is not None:
             self.counters["dropped_" + reason] += 1
+            self.last_drop = reason
             if self.streaming and (self.last_forward_mono is None or now - self.last_forward_mono > 100_000):
                 self.set_streaming(False, reason)
             return

@@ -57,6 +57,7 @@ DEFAULTS = {
         "max_state_age_s": 0.25,          # a command answering an older state is not forwarded
         "forward_hold_plan": True,        # MODE_HOLD_PLAN commands (deadline guard) are forwarded
         "restart_gap_s": 1.0,             # a seq step back after this long a silence: mppid restarted
+        "disengage_after_s": 0.5,         # engaged, nothing forwarded this long: disengage (failsafe.py)
     },
     "telemetry": {
         "request": True,                  # ask for the streams below on every link-up (ArduPilot sends none unasked)
@@ -186,6 +187,7 @@ def validate(s: dict):
     num("forwarding", "status_timeout_s", 0.05, 60)
     num("forwarding", "max_state_age_s", 0.005, 10)
     num("forwarding", "restart_gap_s", 0.0, 60)
+    num("forwarding", "disengage_after_s", 0.1, 10)
     num("offboard", "min_rate_hz", 2.0001, 1000)
     num("offboard", "prestream_s", 1.0, 60)
     num("offboard", "wait_s", 0.0, 60)

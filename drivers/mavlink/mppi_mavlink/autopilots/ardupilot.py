@@ -1,7 +1,8 @@
 """ArduPilot Copter: GUIDED with attitude/rate targets. GUIDED takes any SET_ATTITUDE_TARGET
 over its own take-off, so nothing is streamed before `offboard` (no pre-stream) and `offboard`
 waits for a take-off to end. The thrust is read as thrust only with GUID_OPTIONS bit 3. A lost
-stream in GUIDED only levels the vehicle after GUID_TIMEOUT and holds its altitude, drifting."""
+stream in GUIDED only levels the vehicle after GUID_TIMEOUT and holds its altitude, drifting:
+so the bridge hands it to LOITER itself (`hand_back`, failsafe.py)."""
 from __future__ import annotations
 
 from .base import CUSTOM, AutopilotProfile, mavlink
@@ -55,6 +56,10 @@ class ArduPilot(AutopilotProfile):
 
     def hold(self, ap) -> None:
         ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LOITER], "mode LOITER")
+
+    def hand_back(self, ap) -> str:
+        self.hold(ap)
+        return "LOITER"
 
 
 PROFILE = ArduPilot()
