@@ -202,3 +202,24 @@ def test_px4_switch_engages_before_and_after_a_disengage(netns, procs, tmp_path,
         assert sum("mppid disengaged: mode changed to" in t for t in texts) == 2, texts
     finally:
         ctl.close()
+
+
+@pytest.mark.parametrize("action,mode", [(5, "AUTO.LOITER"), (0, "POSCTL")])
+def test_px4_offboard_loss_does_what_com_obl_rc_act_says(netns, procs, tmp_path, tap, action, mode):
+    """mppid stops answering in OFFBOARD: the bridge disengages after 0.5 s, PX4 (simulated)
+    does what COM_OBL_RC_ACT says after COM_OF_LOSS_T (Hold, Position), not a landing the
+    bridge assumed; the ground station heard both (the autopilot's and the bridge's text)."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, vehicle_params=[f"COM_OBL_RC_ACT={action}", "COM_OF_LOSS_T=1.0"])
+    try:
+        _engage(c, tap)
+        ctl.answer = False
+        fs = c.wait_event("failsafe", 5)[0]
+        assert fs["action"] == mode
+        wait_for(lambda: c.status().get("mode") == mode.split(".")[-1] or c.status().get("mode") == mode, 3,
+                 f"the HEARTBEAT to show {mode}")
+        assert c.status()["engagement"] != "engaged"
+        texts = [e["text"] for e in c.events("statustext")]
+        assert any(t.startswith("mppid disengaged: mppid's setpoints stopped") for t in texts), texts
+    finally:
+        ctl.close()

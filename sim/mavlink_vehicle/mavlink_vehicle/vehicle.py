@@ -30,6 +30,8 @@ mavlink = mavutil.mavlink
 # PX4 custom mode: main mode in bits 16..23, sub mode in bits 24..31.
 PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "OFFBOARD": (6, 0), "AUTO.TAKEOFF": (4, 2),
              "AUTO.LOITER": (4, 3), "AUTO.LAND": (4, 6)}
+# PX4's COM_OBL_RC_ACT values this stand-in has (others: land).
+OFFBOARD_LOSS_ACTIONS = {0: "POSCTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
 # ArduPilot Copter custom modes.
 APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
 
@@ -53,8 +55,10 @@ class Vehicle:
             # only messages signed with the key (pymavlink's own implementation, not the
             # bridge's: the test checks one against the other).
             self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
+        # COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
+        # 4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
         self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
-                       "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0}
+                       "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0}
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
         self.params.update(params or {})
         hover = self.params["MOT_THST_HOVER" if autopilot == "ardupilot" else "MPC_THR_HOVER"]
@@ -135,6 +139,8 @@ class Vehicle:
                         self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
                 elif msg.type == mavlink.MAV_TYPE_GCS:
                     self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
+            elif t == "STATUSTEXT":  # a companion's, which an autopilot routes to the ground station
+                self.event("statustext", text=_pid(msg.text), severity=msg.severity, src=msg.get_srcComponent())
             elif t == "COMMAND_LONG":
                 self._wire({"mono_us": now, "type": t, "command": msg.command,
                             "params": [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
@@ -360,10 +366,11 @@ class Vehicle:
         if self.mode == "OFFBOARD" and self.setpoint_t is not None and not self.fresh_setpoint():
             self.counters["failsafes"] += 1
             self.hold_sp = list(self.plant.x[0:3])
-            self.set_mode("AUTO.LAND", "offboard lost")
-            self.event("failsafe", reason="offboard setpoints lost",
+            action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
+            self.set_mode(action, "offboard lost")
+            self.event("failsafe", reason="offboard setpoints lost", action=action,
                        last_setpoint_age_s=round(self.t - self.setpoint_t, 4))
-            self.statustext("Failsafe: offboard lost, landing", mavlink.MAV_SEVERITY_CRITICAL)
+            self.statustext(f"Failsafe: offboard lost, {action}", mavlink.MAV_SEVERITY_CRITICAL)
         if self.mode == "OFFBOARD" and self.setpoint_t is None and not self.plant.on_ground:
             pass
         if self.mode == "AUTO.TAKEOFF" and self.takeoff_alt is not None and \
