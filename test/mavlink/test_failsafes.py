@@ -31,8 +31,8 @@ def tap(netns):
     t.close()
 
 
-def _chain(procs, tmp_path, **kw):
-    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0"], **kw)
+def _chain(procs, tmp_path, bridge_sets=(), **kw):
+    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0", *bridge_sets], **kw)
     c.listen_lcm()
     c.start_bridge()
     c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
@@ -221,5 +221,26 @@ def test_px4_offboard_loss_does_what_com_obl_rc_act_says(netns, procs, tmp_path,
         assert c.status()["engagement"] != "engaged"
         texts = [e["text"] for e in c.events("statustext")]
         assert any(t.startswith("mppid disengaged: mppid's setpoints stopped") for t in texts), texts
+    finally:
+        ctl.close()
+
+
+def test_geofence_holds_the_vehicle_and_refuses_offboard_outside(netns, procs, tmp_path, tap):
+    """ArduPilot with a cylinder fence of 10 m, max_z 2.5 m: mppid (stood in) climbing past it
+    after `offboard` is disengaged at the fence, the vehicle put in LOITER (the autopilot holds
+    it), the operator told; `offboard` out there is refused, naming the fence."""
+    ctl = StandInController(lambda seq: [9.81 * 1.3, 0.0, 0.0, 0.0])   # climbs
+    c = _chain(procs, tmp_path, bridge_sets=["fence.shape=cylinder", "fence.radius=10", "fence.max_z=2.5"], **ARDUPILOT)
+    try:
+        c.ok("arm")
+        c.ok("takeoff 1.5")
+        _engage(c, tap)                                 # waits for the take-off, then GUIDED
+        wait_for(lambda: "geofence" in c.status().get("disengaged_why", ""), 10, "the fence")
+        st = c.status()
+        assert st["engaged"] is False and "above the fence's max_z 2.5" in st["disengaged_why"], st
+        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the autopilot holding")
+        texts = [e["text"] for e in c.events("statustext")]
+        assert any("geofence" in t for t in texts), texts
+        wait_for(lambda: "geofence" in c.ctl("offboard", 10)["message"], 10, "offboard refused outside the fence")
     finally:
         ctl.close()

@@ -82,3 +82,27 @@ def test_the_forest_is_seeded_and_clear_of_start_and_goal():
     assert a == b and a != c and len(a) > 10
     assert min(np.hypot(x, y) - r for x, y, r in a) > 2.5
     assert min(np.hypot(x - 40, y) - r for x, y, r in a) > 2.5
+
+
+FENCE = {"shape": "cylinder", "center": [0, 0], "radius": 8, "min_z": 0.5, "max_z": 5}
+
+
+@pytest.mark.parametrize("legs, inside", [
+    ([{"circle": {"center": [-3, 0, 2], "radius": 3, "speed": 2}}], True),
+    ([{"circle": {"center": [-5, 0, 2], "radius": 5, "speed": 2}}], False),      # reaches x = -10
+    ([{"line": {"to": [7, 0, 2], "speed": 1}}], True),
+    ([{"line": {"to": [7.9, 0, 2], "speed": 1}}], False),                       # the vehicle's 0.2 m
+    ([{"hold": {"for": 1}}, {"goal": {"at": [0, 0, 6]}}], False),               # above max_z
+    ([{"waypoints": {"points": [[3, 3, 2], [3, -3, 2], [12, 0, 2]], "speed": 2}}], False)])
+def test_every_leg_is_checked_against_the_fence_before_flight(legs, inside):
+    doc = {"legs": legs, "takeoff": 2.0, "fence": FENCE}
+    if inside:
+        assert plan.from_dict(doc).fence.radius == 8
+    else:
+        with pytest.raises(plan.PlanError, match=r"^fence: legs\["):
+            plan.from_dict(doc)
+
+
+def test_a_bad_fence_names_the_field():
+    with pytest.raises(plan.PlanError, match="fence.radius"):
+        plan.from_dict({"legs": [{"hold": {}}], "fence": {"shape": "cylinder"}})

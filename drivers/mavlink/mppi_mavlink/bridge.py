@@ -63,7 +63,8 @@ class Bridge:
                              lambda on, why: self._publish_link(force=True))
         self.mppid = MppidParams(self.mppi_lcm, self._publish, l["params_channel"], m["command_timeout_s"])
         self.notices = Notices(self.link)
-        self.failsafe = Failsafe(settings, self.engagement, self.fwd, self.ap, self.profile, self.notices)
+        self.failsafe = Failsafe(settings, self.engagement, self.fwd, self.ap, self.profile, self.notices,
+                                 self.states)
         self.fwd.on_mppid_restart = lambda: self.failsafe.stream_lost("mppid restarted (its command seq stepped back)")
         self.told_refusal = ""
         self.lc.subscribe(l["command_channel"], self.fwd.on_command)
@@ -214,6 +215,8 @@ class Bridge:
     def _require_fly(self, what):
         if self.refusal:
             raise CommandError(f"{what} refused: {self.refusal}")
+        if what == "offboard" and self.failsafe.fence_breach():
+            raise CommandError(f"offboard refused: {self.failsafe.fence_breach()}")
 
     def do_arm(self):
         self._require_fly("arm")

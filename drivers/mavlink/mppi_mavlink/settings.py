@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from . import autopilots
+from . import autopilots, fence
 from . import vehicle as vehicle_file
 
 DEFAULTS = {
@@ -73,6 +73,12 @@ DEFAULTS = {
         "takeoff_wait_s": 30.0,           # ArduPilot: how long `offboard` waits for a take-off to end
     },
     "takeoff": {"altitude": 2.0},         # m above home
+    # The geofence (fence.py), in the autopilot's local frame, ENU: engaged and outside it, the
+    # bridge disengages and holds (failsafe.py); `offboard` outside it is refused.
+    "fence": {"shape": None,              # box | cylinder | None (no fence)
+              "center": None, "radius": None,       # cylinder: [x, y], m
+              "min": None, "max": None,             # box: [x, y] corners, m
+              "min_z": None, "max_z": None},        # m, either shape
     "control": {"socket": "/run/mppid-mavlink/control.sock"},
     "trace": {"file": None},              # JSONL of every forwarded setpoint (latency measurement)
 }
@@ -202,6 +208,10 @@ def validate(s: dict):
         raise SettingsError(f"telemetry.min_state_hz ({s['telemetry']['min_state_hz']:g}) must not exceed "
                             f"telemetry.state_hz ({s['telemetry']['state_hz']:g})")
     num("takeoff", "altitude", 0.1, 1000)
+    try:
+        fence.parse({k: v for k, v in s["fence"].items() if v is not None})
+    except fence.FenceError as e:
+        raise SettingsError(str(e)) from None
     num("mavlink", "signing_link_id", 0, 255)
     if not isinstance(s["mavlink"]["signing_link_id"], int):
         raise SettingsError("mavlink.signing_link_id: must be an integer in [0, 255]")

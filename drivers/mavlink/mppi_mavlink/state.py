@@ -67,6 +67,7 @@ class StatePublisher:
         self.last_lpn = None
         self.lock = threading.Lock()
         self.rate = telemetry.StateRate(1.0)
+        self.last_p = None           # ENU position of the latest state published
 
     def published(self, seq):
         """(monotonic us when published, the autopilot's time) of state `seq`, or None."""
@@ -133,5 +134,6 @@ class StatePublisher:
         msg.n = 13
         msg.x = x
         self.publish(self.channel, msg.encode())
+        self.last_p = tuple(x[0:3])
         self.counters["states_published"] += 1
         self.rate.add(time.monotonic())

@@ -21,6 +21,11 @@ or built from the command line. Validated at load; an error names the field.
       - circle: {center: [-5, 0, 2], radius: 5, speed: 3, laps: 2}
       - figure_eight: {center: [0, 0, 2], radius: 5, speed: 3, laps: 1}
     score: {settle: 3.0}  # tracking error counts this long after a path reaches full speed
+    fence: {shape: cylinder, center: [0, 0], radius: 30, min_z: 0.5, max_z: 10}
+                          # or {shape: box, min: [x, y], max: [x, y], ...}: every leg is checked
+                          # against it before flight, vehicle_radius inside (the mission's frame;
+                          # the start taken at x, y = 0 at the take-off altitude); the bridge
+                          # holds the vehicle at its own (config/bridge: fence)
 
 Every path starts at rest, ramps to its speed over `ramp` seconds (default: speed / 1 m/s²,
 at least 1 s) and ramps down to rest at its end, from the point where the previous leg ended;
@@ -37,6 +42,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mppi_mavlink import fence as fence_mod
+
 from . import forest, reference
 
 LEG_KEYS = {
@@ -48,7 +55,7 @@ LEG_KEYS = {
     "figure_eight": {"center", "radius", "speed", "ramp", "laps"},
 }
 TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
-            "score"}
+            "score", "fence"}
 TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it
 ON_PATH = 0.5        # m: closer than this to a curve's start point needs no transit
 
@@ -68,6 +75,7 @@ class Mission:
     obstacles: dict = field(default_factory=dict)
     settle: float = 3.0
     task: str | None = None
+    fence: fence_mod.Fence | None = None
 
     def trees(self, origin_xy, seed: int) -> list[tuple[float, float, float]]:
         """The virtual trees in local coordinates (the forest seeded by `seed`)."""
@@ -116,10 +124,38 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     vr = doc.get("vehicle_radius", 0.2)
     if not _num(vr, 0, 5):
         raise PlanError("vehicle_radius: metres in [0, 5]")
-    return Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
-                   takeoff=None if takeoff is None else float(takeoff),
-                   land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
-                   obstacles=obstacles, settle=float(settle), task=doc.get("task"))
+    try:
+        fence = fence_mod.parse(doc.get("fence"))
+    except fence_mod.FenceError as e:
+        raise PlanError(str(e)) from None
+    m = Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
+                takeoff=None if takeoff is None else float(takeoff),
+                land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
+                obstacles=obstacles, settle=float(settle), task=doc.get("task"), fence=fence)
+    check_fence(m)
+    return m
+
+
+def check_fence(m: Mission, dt: float = 0.05):
+    """Every leg inside the mission's fence, vehicle_radius inside it, sampled every `dt` s of
+    its reference; the first point outside names its leg."""
+    if m.fence is None:
+        return
+    first_z = next((leg_a[k][2] for leg in m.legs for leg_a in leg.values() for k in ("at", "to", "center")
+                    if k in (leg_a or {})), 0.0)
+    here = np.array([0.0, 0.0, m.takeoff if m.takeoff is not None else first_z])
+    for i in range(len(m.legs)):
+        for step in steps(m, i, here, np.zeros(3)):
+            if step.duration is None or step.kind in ("hold", "goal"):
+                pts = [np.asarray(step.ref["center"], float)]
+            else:
+                pts = reference.evaluate(step.ref, np.arange(0.0, step.duration + dt, dt))[0]
+            for p in pts:
+                why = m.fence.breach(p, m.vehicle_radius)
+                if why:
+                    raise PlanError(f"fence: legs[{i}].{step.kind} leaves it at ({p[0]:.1f}, {p[1]:.1f}, "
+                                    f"{p[2]:.1f}): {why}")
+            here = step.end
 
 
 def _num(v, lo=-1e6, hi=1e6) -> bool:
