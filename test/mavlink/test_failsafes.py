@@ -7,6 +7,7 @@ killed or restarted, the link to the autopilot lost and back, the states stoppin
 engagement; nothing reaches the autopilot again until a new `offboard`, whatever comes back,
 and the operator is told (the bridge's log, and a STATUSTEXT to the ground station)."""
 import os
+import threading
 import time
 
 import pytest
@@ -242,5 +243,106 @@ def test_geofence_holds_the_vehicle_and_refuses_offboard_outside(netns, procs, t
         texts = [e["text"] for e in c.events("statustext")]
         assert any("geofence" in t for t in texts), texts
         wait_for(lambda: "geofence" in c.ctl("offboard", 10)["message"], 10, "offboard refused outside the fence")
+    finally:
+        ctl.close()
+
+
+def _engage_armed(c, tap, autopilot):
+    """Engaged and armed on the ground: PX4 OFFBOARD then arm, ArduPilot GUIDED then arm."""
+    _engage(c, tap)
+    c.ok("arm")
+    assert c.status()["engagement"] == "engaged"
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_battery_failsafe_disengages(netns, procs, tmp_path, tap, autopilot):
+    """The autopilot's battery failsafe (PX4 COM_LOW_BAT_ACT, ArduPilot BATT_FS_LOW_ACT; the
+    simulated battery drains 30 %/s) lands the vehicle: the mode change disengages the bridge,
+    which tells the ground station; mppid never flies the last of the battery."""
+    ctl = StandInController()
+    params = ["SIM_BATT_DRAIN=30"] + (["COM_LOW_BAT_ACT=2"] if autopilot == "px4" else
+                                      ["BATT_FS_LOW_ACT=1", "GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
+    c = _chain(procs, tmp_path, autopilot=autopilot, vehicle_params=params)
+    try:
+        _engage_armed(c, tap, autopilot)
+        fs = c.wait_event("failsafe", 10)[0]
+        assert fs["reason"] == "battery low"
+        wait_for(lambda: c.status().get("engagement") != "engaged", 3, "the bridge to disengage")
+        wait_for(lambda: any("mode changed to LAND by someone else" in e["text"] for e in c.events("statustext")), 3,
+                 "the ground station told")
+        assert [e["mode"] for e in c.events("mode")][-1] in ("AUTO.LAND", "LAND")
+    finally:
+        ctl.close()
+
+
+def test_ground_station_lost_disengages(netns, procs, tmp_path, tap):
+    """ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5, LAND, after FS_GCS_TIMEOUT 1 s): the
+    ground station's HEARTBEATs stop while mppid flies; ArduPilot lands, the bridge disengages
+    on the mode change and does not re-engage."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, autopilot="ardupilot",
+               vehicle_params=["FS_GCS_ENABLE=5", "FS_GCS_TIMEOUT=1", "GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
+    try:
+        gcs, quiet = mavlink.MAVLink(None, srcSystem=255, srcComponent=190), threading.Event()
+
+        def ground_station():  # HEARTBEATs at 4 Hz until told to fall silent
+            while not quiet.wait(0.25):
+                hb = gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                tap.a.sendto(hb.pack(gcs), tap.vehicle)
+        threading.Thread(target=ground_station, daemon=True).start()
+        _engage_armed(c, tap, "ardupilot")
+        time.sleep(1.5)
+        assert c.status()["engagement"] == "engaged" and not c.events("failsafe")
+        quiet.set()
+        fs = c.wait_event("failsafe", 5)[0]
+        assert fs["reason"] == "ground station lost"
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        assert c.status()["disengaged_why"] == "mode changed to LAND by someone else"
+        t = time.monotonic_ns() // 1000
+        time.sleep(1.0)
+        assert _between(tap, t, time.monotonic_ns() // 1000) == []
+    finally:
+        ctl.close()
+
+
+def test_statustext_on_engage_disengage_and_every_refusal(netns, procs, tmp_path, tap):
+    """The ground station is told (STATUSTEXT from the bridge, component 191, chunks joined): a
+    refusal to fly (GUID_OPTIONS without bit 3) once, each refused request, then, the parameter
+    fixed, the engagement on `offboard` and the disengagement on `hold`, each with its reason."""
+    ctl = StandInController()
+    c = Chain(procs, tmp_path, autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=1", "MOT_THST_HOVER=0.4"],
+              bridge_sets=["telemetry.grace_s=1.0"])
+    try:
+        c.listen_lcm()
+        c.start_bridge()
+        c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
+        wait_for(lambda: "GUID_OPTIONS" in (c.status().get("refusal") or ""), 10, "the refusal")
+        time.sleep(1.0)
+        r = c.ctl("offboard")
+        assert not r["ok"]
+        wait_for(lambda: (mavlink.MAV_SEVERITY_WARNING, "mppid: " + r["message"]) in _statustexts(tap), 2,
+                 "the refused request told")
+        texts = _statustexts(tap)
+        refusals = [(sev, t) for sev, t in texts if t.startswith("mppid refuses to fly: GUID_OPTIONS=1")]
+        assert len(refusals) == 1 and refusals[0][0] == mavlink.MAV_SEVERITY_CRITICAL, texts
+        assert "Set GUID_OPTIONS=9" in refusals[0][1]             # the whole text, over chunks
+        assert (mavlink.MAV_SEVERITY_WARNING, "mppid: " + r["message"]) in texts
+        assert not [t for _, t in texts if "not read yet" in t or "waiting for" in t]  # no noise at start
+        procs.stop("vehicle")
+        wait_for(lambda: c.status().get("link_up") is False, 5, "the link loss (parameters are read on link-up)")
+        c.vehicle_params = ["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"]
+        c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
+        wait_for(lambda: c.status().get("link_up") and not c.status().get("refusal"), 15, "checks passed")
+        t0 = time.monotonic_ns() // 1000
+        _engage(c, tap)
+        c.ok("hold")
+        time.sleep(0.3)
+        texts = _statustexts(tap, since=t0)
+        assert any(sev == mavlink.MAV_SEVERITY_NOTICE and t.startswith("mppid engaged: GUIDED entered: `offboard`")
+                   for sev, t in texts), texts
+        assert (mavlink.MAV_SEVERITY_WARNING, "mppid disengaged: hold requested; send offboard to fly again") in texts
+        # the simulated autopilot, as a ground station, shows the same texts whole
+        shown = [e["text"] for e in c.events("statustext")]
+        assert "mppid disengaged: hold requested; send offboard to fly again" in shown
     finally:
         ctl.close()

@@ -25,7 +25,7 @@ from . import autopilots, lcm_types, report, telemetry
 from .autopilot import Autopilot, CommandError
 from .autopilots import decode_param  # noqa: F401  (re-exported: test_frames)
 from .autopilots.base import mavlink
-from .checks import FlightChecks
+from .checks import NOT_READ, FlightChecks
 from .engagement import DISENGAGED, ENGAGED, PRESTREAM, Engagement
 from .failsafe import Failsafe
 from .forwarding import COUNTERS, Forwarder
@@ -147,7 +147,7 @@ class Bridge:
 
     def _tell_refusal(self):
         """A refusal to fly, once each time it appears or changes its reason."""
-        r = self.refusal if self.ap.link_up else ""
+        r = self.refusal if self.ap.link_up and self.refusal != NOT_READ else ""
         if r.split(":")[0] != self.told_refusal.split(":")[0] and r:
             self.notices.tell(CRITICAL, f"mppid refuses to fly: {r}")
         self.told_refusal = r
@@ -183,7 +183,7 @@ class Bridge:
 
     def _on_link_up(self):
         e = self.engagement.snapshot()
-        if e.state == DISENGAGED:  # what the ground station may have missed while the link was down
+        if e.state == DISENGAGED and self.engagement.transitions:  # missed while the link was down
             self.notices.tell(WARNING, f"mppid disengaged: {e.why}; send offboard to fly again")
         self._request_telemetry()
         self.checks.check_params(self.ap.read_param)

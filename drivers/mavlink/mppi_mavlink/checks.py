@@ -10,6 +10,7 @@ from .autopilot import CommandError
 from .thrust import ThrustMap
 
 log = logging.getLogger("mppi_mavlink")
+NOT_READ = "autopilot parameters not read yet"
 
 
 class FlightChecks:
@@ -21,7 +22,7 @@ class FlightChecks:
         if vh["hover_thrust"] is not None:
             self.thrust = ThrustMap(vh["mass"], vh["gravity"], float(vh["hover_thrust"]))
             self.hover_source = "settings"
-        self.param_refusal = "autopilot parameters not read yet"
+        self.param_refusal = NOT_READ
         self.rate_refusal = ""
 
     @property

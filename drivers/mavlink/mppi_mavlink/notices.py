@@ -10,7 +10,7 @@ from .autopilots.base import mavlink
 
 INFO, NOTICE, WARNING, CRITICAL = (mavlink.MAV_SEVERITY_INFO, mavlink.MAV_SEVERITY_NOTICE,
                                    mavlink.MAV_SEVERITY_WARNING, mavlink.MAV_SEVERITY_CRITICAL)
-MAX_CHUNKS = 4
+MAX_CHUNKS = 6   # 299 characters: the longest refusal (GUID_OPTIONS) whole
 
 
 def chunks(text: str) -> list[bytes]:
