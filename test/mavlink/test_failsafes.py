@@ -192,6 +192,8 @@ def test_px4_switch_engages_before_and_after_a_disengage(netns, procs, tmp_path,
     try:
         wait_for(lambda: c.status().get("engagement") == "prestream" and c.status().get("streaming"), 5, "pre-stream")
         for attempt in ("before", "after"):
+            n = len(tap.setpoints())  # PX4 takes OFFBOARD only with setpoints arriving
+            wait_for(lambda: len(tap.setpoints()) > n + 10, 3, f"the pre-stream ({attempt})")
             _gcs(tap, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0)
             wait_for(lambda: c.status().get("engagement") == "engaged", 4, f"engaged by the switch ({attempt})")
             assert c.status()["mode"] == "OFFBOARD"
@@ -344,5 +346,26 @@ def test_statustext_on_engage_disengage_and_every_refusal(netns, procs, tmp_path
         # the simulated autopilot, as a ground station, shows the same texts whole
         shown = [e["text"] for e in c.events("statustext")]
         assert "mppid disengaged: hold requested; send offboard to fly again" in shown
+    finally:
+        ctl.close()
+
+
+def test_px4_bridge_restarted_in_offboard_never_takes_over(netns, procs, tmp_path, tap):
+    """The bridge itself restarted (systemd) while PX4 is still in OFFBOARD (COM_OF_LOSS_T 5 s
+    here): the new bridge finds the vehicle in OFFBOARD at its first HEARTBEAT, never switched
+    there while it watched, and forwards nothing; PX4's own failsafe follows."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=5.0"])
+    try:
+        _engage(c, tap)
+        procs.stop("bridge")
+        c.start_bridge()
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: c.status().get("link_up"), 10, "the new bridge's link")
+        wait_for(lambda: c.status().get("engagement") == "disengaged", 3, "the new bridge to stay disengaged")
+        assert "not switched there while the bridge watched" in c.status()["disengaged_why"]
+        time.sleep(1.0)
+        assert c.status()["mode"] == "OFFBOARD"
+        assert _between(tap, t_back, time.monotonic_ns() // 1000) == []
     finally:
         ctl.close()
