@@ -42,7 +42,7 @@ while (($#)); do
     --progress) progress=1 ;;
     --aarch64) do_aarch64=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,26s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,27s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
