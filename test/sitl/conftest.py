@@ -29,7 +29,7 @@ def sim_binary():
     if b is None:
         missing("mppid-sim not built (cmake --build <build> --target mppid-sim)")
     if importlib.util.find_spec("mppi_lcm") is None:
-        missing("mppi_lcm Python types not installed (tools/setup.sh installs lcmtypes/ into .venv)")
+        missing("mppi_lcm Python types not built (target mppi_lcm_python)")
     return b
 
 
