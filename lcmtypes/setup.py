@@ -3,6 +3,7 @@ package's .lcm files, into that package's folder beside them (ignored by git), s
 an editable install (pip install -e) both import the same generated modules.
 
 Everything else is in pyproject.toml."""
+import shutil
 from pathlib import Path
 
 from setuptools import setup
@@ -31,6 +32,7 @@ class BuildPyWithLcmGen(build_py):
     def run(self):
         for name in PACKAGES:
             generate(HERE / name)
+            shutil.rmtree(Path(self.build_lib) / name, ignore_errors=True)  # an earlier build's copy
         super().run()
 
 
