@@ -4,10 +4,11 @@
 without a build tree and without the repository on the path.
 
 Offline and quick: the three folders are copied out of the checkout (the build writes beside
-its sources) and built without isolation and without an index; the new venv sees this venv's
-site-packages only for what they depend on (lcm, pymavlink, pyyaml, numpy) and the build
-tools (setuptools, lcm-gen). The commands then fly: the simulated PX4 -> the installed bridge
--> LCM -> the installed mission tool holding a point, in a private network namespace."""
+its sources) and built without isolation and without an index. The new venv finds what they
+declare they need (lcm, pymavlink, pyyaml, numpy; pip resolves it) and the build tools
+(setuptools, lcm-gen) in this venv's site-packages, after its own. The commands then fly: the
+simulated PX4 -> the installed bridge -> LCM -> the installed mission tool holding a point, in
+a private network namespace."""
 import json
 import shutil
 import subprocess
