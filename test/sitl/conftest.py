@@ -1,6 +1,7 @@
 """Fixtures of the SITL tests: the binaries, the controller to fly."""
 from __future__ import annotations
 
+import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -26,7 +27,7 @@ def sim_binary():
     b = paths.find_binary("mppid-sim")
     if b is None:
         missing("mppid-sim not built (cmake --build <build> --target mppid-sim)")
-    if paths.lcm_python_dir() is None:
+    if importlib.util.find_spec("mppi_lcm") is None:
         missing("mppi_lcm Python types not built (target mppi_lcm_python)")
     return b
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,24 +27,6 @@ def find_binary(name: str) -> Path | None:
         if p.is_file() and os.access(p, os.X_OK):
             return p
     return None
-
-
-def lcm_python_dir() -> Path | None:
-    for d in build_dirs():
-        if (d / "python" / "mppi_lcm" / "__init__.py").is_file():
-            return d / "python"
-    return None
-
-
-def add_lcm_types_to_path() -> None:
-    """Makes `import mppi_lcm` work (generated into <build>/python by the build)."""
-    d = lcm_python_dir()
-    if d is not None:
-        if str(d) not in sys.path:
-            sys.path.insert(0, str(d))
-        return
-    raise RuntimeError("mppi_lcm Python types not found: build the mppi_lcm_python target "
-                       "(searched %s)" % ", ".join(str(d) for d in build_dirs()))
 
 
 def scenario_path(name: str) -> Path:
