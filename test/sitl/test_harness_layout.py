@@ -166,7 +166,7 @@ def test_sim_flight_commands(mppid_binary, tmp_path):
     plan = SimFlight(spec).plan()
     cmds = plan.commands
     ctrl = cmds["controller"][cmds["controller"].index(str(mppid_binary)):]
-    assert ctrl[1:5] == ["--config", str(paths.TASKS / "quadrotor_track.yaml"), "--lcm-url", spec.lcm_url]
+    assert ctrl[1:5] == ["--config", str(paths.TASKS / "quadrotor_forest.yaml"), "--lcm-url", spec.lcm_url]
     assert "--lockstep" in ctrl and ctrl[ctrl.index("--backend") + 1] == "cpu"
     sets = [ctrl[i + 1] for i, c in enumerate(ctrl) if c == "--set"]
     assert sets == ["daemon.latency.floor_ms=12", "daemon.latency.ceiling_ms=12", "mppi.seed=7",
@@ -175,7 +175,7 @@ def test_sim_flight_commands(mppid_binary, tmp_path):
     assert sim[1:] == ["--scenario", str(paths.SCENARIOS / "forest_4m.yaml"), "--seed", "7", "--lcm-url",
                        spec.lcm_url, "--out", str(tmp_path), "--lockstep", "--latency", "0.012"]
     assert cmds["inject"][-4:] == ["--lcm-url", spec.lcm_url, "--at", "2:mppi.rollouts=512"]
-    assert plan.record["controller_config"] == str(paths.TASKS / "quadrotor_track.yaml")
+    assert plan.record["controller_config"] == str(paths.TASKS / "quadrotor_forest.yaml")
     assert list(plan.record["commands"]) == ["sim", "controller", "logger", "inject"]
     rt = SimFlight(FlightSpec(scenario="forest_4m", out=tmp_path, realtime=True, controller="standin")).plan()
     assert rt.commands["sim"][-1] == "--realtime" and "sitl_harness.standin" in rt.commands["controller"]

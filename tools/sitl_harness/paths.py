@@ -29,6 +29,21 @@ def find_binary(name: str) -> Path | None:
     return None
 
 
+def require_lcm_types() -> None:
+    """Checks that the LCM types (`mppi_lcm`, installed with the project's Python packages)
+    import; RuntimeError saying how to get them otherwise."""
+    import importlib.util
+
+    if importlib.util.find_spec("mppi_lcm") is None:
+        raise RuntimeError("mppi_lcm Python types not importable: install the project's Python packages "
+                           "(tools/setup.sh)")
+
+
+# The old name, for callers outside the harness (tools/mppid_view) until they import mppi_lcm
+# as the installed package it is: it no longer edits the import path.
+add_lcm_types_to_path = require_lcm_types
+
+
 def scenario_path(name: str) -> Path:
     """A YAML file, a scenario name (config/scenarios) or a mission name (config/missions)."""
     p = Path(name)
