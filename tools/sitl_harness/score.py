@@ -42,10 +42,7 @@ def _controller_stats(status, commands=()):
     if not msgs:
         # No status in the log (a lock-step flight can end within one status period): the
         # per-cycle figures still come from the commands.
-        t = timing.flight_timing([], [m for _, m in commands])
-        t.pop("compute_samples_ms", None)
-        t.pop("state_to_command_samples_ms", None)
-        return t
+        return _timing_figures([], commands)
     last = msgs[-1]
     res = {
         "backend": last.backend,
@@ -58,11 +55,16 @@ def _controller_stats(status, commands=()):
         "status_messages": len(msgs),
         "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
     }
+    res.update(_timing_figures(msgs, commands))
+    return res
+
+
+def _timing_figures(msgs, commands) -> dict:
+    """timing.py's figures of the flight, without the samples they come from."""
     t = timing.flight_timing(msgs, [m for _, m in commands])
     t.pop("compute_samples_ms", None)
     t.pop("state_to_command_samples_ms", None)
-    res.update(t)
-    return res
+    return t
 
 
 def score_flight(out: Path, spec, info: dict) -> dict:
