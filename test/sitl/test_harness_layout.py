@@ -55,7 +55,7 @@ def test_sandbox_without_a_namespace_continues_a_stopped_process_to_end_it(tmp_p
     under a sim_stop fault) still ends on terminate, at its SIGTERM, not after the grace."""
     sb = Sandbox(tmp_path, deathsig=signal.SIGKILL, any_thread=True)
     p = sb.spawn("sim", ["sleep", "60"])
-    assert sb.pgid is None and sb.exited("sim") is None
+    assert sb.pgid is None and sb.returncode("sim") is None
     p.send_signal(signal.SIGSTOP)
     t0 = time.monotonic()
     sb.terminate("sim", 5.0)

@@ -148,7 +148,7 @@ class Sandbox:
         self.procs[name] = p
         return p
 
-    def exited(self, name: str) -> int | None:
+    def returncode(self, name: str) -> int | None:
         """The exit code of `name`, None while it runs."""
         return self.procs[name].poll()
 

@@ -142,7 +142,7 @@ class ArduPilotFlight(Flight):
         cmds.update(controller=ctrl, bridge=bridge, mission=mission_cmd + ["--bridge", str(sock)])
         return cmds
 
-    def start(self, plan: Plan, t0: float) -> None:
+    def start(self, plan: Plan) -> None:
         sb, cmds = self.sandbox, plan.commands
         sb.spawn("logger", cmds["logger"])
         sb.spawn("sim", cmds["sim"])

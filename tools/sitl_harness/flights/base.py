@@ -113,7 +113,7 @@ class Flight:
     def plan(self) -> Plan:
         raise NotImplementedError
 
-    def start(self, plan: Plan, t0: float) -> None:
+    def start(self, plan: Plan) -> None:
         raise NotImplementedError
 
     def watch(self, plan: Plan, t0: float) -> str | None:
@@ -134,7 +134,7 @@ class Flight:
         outcome = None
         try:
             self.sandbox.start_namespace()
-            self.start(plan, t0)
+            self.start(plan)
             outcome = self.watch(plan, t0)
         except SandboxError as e:
             raise FlightError(str(e)) from None
@@ -152,10 +152,10 @@ class Flight:
         self.sandbox.stop(last="logger")
 
     def exited(self, name: str) -> bool:
-        return self.sandbox.exited(name) is not None
+        return self.sandbox.returncode(name) is not None
 
     def returncode(self, name: str) -> int | None:
-        return self.sandbox.exited(name)
+        return self.sandbox.returncode(name)
 
     def _record(self, t0: float, outcome, extra: dict) -> dict:
         """harness.json: how the flight ended, its processes' exit codes and events, and `extra`."""

@@ -100,7 +100,6 @@ class SimFlight(Flight):
         spec = self.spec
         scen_path = paths.scenario_path(spec.scenario)
         scen = yaml.safe_load(scen_path.read_text())
-        self.scenario = scen
         sim_bin = paths.find_binary("mppid-sim")
         if sim_bin is None:
             raise FlightError("mppid-sim not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
@@ -130,7 +129,7 @@ class SimFlight(Flight):
             cmds = {**cmds, "mission": mission_command(spec, paths.ROOT / scen["mission"], self.out)}
         return Plan(commands=cmds, wall_timeout=wall_timeout, record=record)
 
-    def start(self, plan: Plan, t0: float) -> None:
+    def start(self, plan: Plan) -> None:
         sb, cmds = self.sandbox, plan.commands
         if self.view is not None:
             self.view.start()
