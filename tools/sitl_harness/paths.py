@@ -39,11 +39,6 @@ def require_lcm_types() -> None:
                            "(tools/setup.sh)")
 
 
-# The old name, for callers outside the harness (tools/mppid_view) until they import mppi_lcm
-# as the installed package it is: it no longer edits the import path.
-add_lcm_types_to_path = require_lcm_types
-
-
 def scenario_path(name: str) -> Path:
     """A YAML file, a scenario name (config/scenarios) or a mission name (config/missions)."""
     p = Path(name)

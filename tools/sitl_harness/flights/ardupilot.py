@@ -14,7 +14,7 @@ private network namespace (sandbox.py), one process each:
 
 The autopilot's parameters: ArduPilot's SITL defaults for a copter
 (<ardupilot>/Tools/autotest/default_params/copter.parm), then config/ardupilot/copter_mppid.parm
-(argued there line by line). A fresh EEPROM every flight (--wipe), so flights do not inherit
+and guided_baseline.parm (each argued there line by line). A fresh EEPROM every flight (--wipe), so flights do not inherit
 each other's learnt hover thrust.
 """
 from __future__ import annotations
@@ -34,6 +34,9 @@ from .base import SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, logg
 # ArduPilot's SITL home (Canberra Model Aircraft Club, the autotest default): lat, lon, alt AMSL, heading.
 HOME = "-35.363261,149.165230,584,353"
 PARAMS = paths.ROOT / "config" / "ardupilot" / "copter_mppid.parm"
+# The GUIDED baseline's position-controller tuning (argued in the file): loaded for every flight,
+# mppid's too, so both controllers take off and are scored on the same vehicle.
+BASELINE = paths.ROOT / "config" / "ardupilot" / "guided_baseline.parm"
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
 IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
 # mppid's settings through ArduCopter, over the task file (argued there), then the mission's
@@ -67,7 +70,7 @@ def ardupilot_defaults(binary: Path) -> Path:
 
 def sitl_command(binary: Path, ap_dir: Path, fifo: bool) -> list[str]:
     """The SITL in its own folder (EEPROM, dataflash logs); the world, above the controller."""
-    defaults = f"{ardupilot_defaults(binary)},{PARAMS}"
+    defaults = f"{ardupilot_defaults(binary)},{PARAMS},{BASELINE}"
     sim = ["sh", "-c", f'cd "{ap_dir}" && exec "$0" "$@"', str(binary), "--model", "quad", "--speedup", "1",
            "--home", HOME, "--defaults", defaults, "-I0", "--wipe"]
     if fifo:
