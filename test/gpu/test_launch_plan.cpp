@@ -106,7 +106,7 @@ CudaSettings with(void (*f)(CudaSettings&)) {
   return c;
 }
 
-std::vector<Row> rows() {
+std::vector<Row> single_rows() {
   const CudaSettings none;
   return {
       // Single vehicles: chunked up to 128 rollouts a multiprocessor, 4 warps once the blocks
@@ -163,6 +163,12 @@ std::vector<Row> rows() {
       {"quadrotor K=262144 chunked", quadrotor_forest(), 262144, 100, h100(),
        with([](CudaSettings& c) { c.kernel = CudaSettings::Kernel::kChunked; }), "rollout_chunked", 8192, 128, 4, 1,
        false, false},
+  };
+}
+
+std::vector<Row> team_rows() {
+  const CudaSettings none;
+  return {
       // Teams: team3 (10 rollouts a block) always chunked, 20 steps and 16 warps while every
       // block has a multiprocessor; team9 (3 a block) chunked while its blocks are at most 4 a
       // multiprocessor, else the lane kernel with the noise drawn by the pre-pass.
@@ -190,12 +196,24 @@ std::vector<Row> rows() {
        with([](CudaSettings& c) { c.kernel = CudaSettings::Kernel::kLanes; }), "rollout_team", 120, 32, 0, 0, true,
        false},
       // A device of 16 multiprocessors: the thresholds follow it.
+      {"team9 K=1024 on 16 SMs", team(9), 1024, 100, orin(), none, "rollout_team", 171, 64, 0, 0, true, false},
+  };
+}
+
+std::vector<Row> device_rows() {
+  const CudaSettings none;
+  return {
       {"quadrotor K=4096 on 16 SMs", quadrotor_forest(), 4096, 100, orin(), none, "rollout_single", 64, 64, 0, 1, false,
        true},
       {"quadrotor K=2048 on 16 SMs", quadrotor_forest(), 2048, 100, orin(), none, "rollout_chunked", 64, 128, 4, 1, false,
        true},
-      {"team9 K=1024 on 16 SMs", team(9), 1024, 100, orin(), none, "rollout_team", 171, 64, 0, 0, true, false},
   };
+}
+
+std::vector<Row> rows() {
+  std::vector<Row> all = single_rows();
+  for (auto part : {team_rows(), device_rows()}) all.insert(all.end(), part.begin(), part.end());
+  return all;
 }
 
 TEST(CudaLaunchPlan, Table) {
@@ -326,7 +344,7 @@ TEST(CudaLaunchPlan, DescribeNamesTheKernelAndItsShape) {
 TEST(CudaSettings, NamesRoundTripAndValidation) {
   CudaSettings s;
   EXPECT_EQ(describe(s),
-            "kernel=auto chunk_steps=auto warps=auto noise=auto controls=auto lanes=auto grid=device pdl=auto graph=on");
+            "kernel=auto chunk_steps=auto warps=auto noise=auto controls=auto lanes=auto grid=device pdl=auto graph=true");
   for (const char* k : {"auto", "chunked", "lanes"}) {
     ASSERT_TRUE(parse_cuda_setting(k, &s.kernel)) << k;
     EXPECT_STREQ(to_string(s.kernel), k);

@@ -104,13 +104,13 @@ inline std::string validate(const CudaSettings& s, int vehicles) {
   return {};
 }
 
-// One line, every field: "kernel=auto chunk_steps=auto warps=auto ... graph=on".
+// One line, every field as the settings file writes it: "kernel=auto chunk_steps=auto ... graph=true".
 inline std::string describe(const CudaSettings& s) {
   const auto count = [](int v) { return v == 0 ? std::string("auto") : std::to_string(v); };
   return std::string("kernel=") + to_string(s.kernel) + " chunk_steps=" + count(s.chunk_steps) +
          " warps=" + count(s.warps) + " noise=" + to_string(s.noise) + " controls=" + to_string(s.controls) +
          " lanes=" + count(s.lanes) + " grid=" + to_string(s.grid) + " pdl=" + to_string(s.pdl) +
-         " graph=" + (s.graph ? "on" : "off");
+         " graph=" + (s.graph ? "true" : "false");
 }
 
 }  // namespace mppi
