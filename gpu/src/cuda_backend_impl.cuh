@@ -23,7 +23,6 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
-#include <cstdlib>
 #include <cstring>
 #include <memory>
 #include <stdexcept>
@@ -76,7 +75,7 @@ class CudaBackend final : public RolloutBackend<T> {
       : k_(s.rollouts), t_(s.horizon), dt_(s.dt), substeps_(s.substeps), seed_(s.seed) {
     // Settings first: the sampler constants index every per-channel vector.
     std::string err = validate(s, kNu);
-    if (err.empty()) err = validate(cuda, T::kVehicles);
+    if (const std::string e = validate(cuda, T::kVehicles); err.empty() && !e.empty()) err = "mppi.cuda." + e;
     if (!err.empty()) throw std::runtime_error("cuda backend: invalid settings: " + err);
     device_ = current_device_checked(&device_name_);
     c_ = make_sampler_constants<kNu>(s);

@@ -507,6 +507,14 @@ TEST(CudaErrors, SettingsThatDoNotMatchTheTaskAreAClearError) {
   EXPECT_NE(msg.find("sigma"), std::string::npos) << msg;
 }
 
+TEST(CudaErrors, LaunchSettingsOutOfRangeAreAClearError) {
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(1024, 100);
+  CudaSettings cuda;
+  cuda.warps = 9;  // rollout_chunked has at most 8
+  const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings, cuda); });
+  EXPECT_NE(msg.find("mppi.cuda.warps"), std::string::npos) << msg;
+}
+
 TEST(CudaBackend, ReportsItsMemoryAndName) {
   SKIP_WITHOUT_CUDA();
   auto sc = gpu_test::make_scenario<QuadrotorForest>(4096, 100);
