@@ -182,8 +182,8 @@ if want bench; then
     team9_forest:6000 >"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing"
   "$B/bin/mppid-gpu-timing" --iters $itbig --warmup 5 quadrotor_forest:1048576 >"$RES/gpu-timing-1m.json" \
     2>>"$RES/bench.err" || fail "mppid-gpu-timing 1M"
-  "$PY" tools/fig11.py assemble "$RES/bench.jsonl" --gpu "$(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)" \
-    --date "$(date -u +%F)" -o "$RES/fig11.json" >>"$LOG" 2>&1 && "$PY" tools/fig11.py plot "$RES/fig11.json" >>"$LOG" 2>&1 ||
+  "$PY" bench/figures/fig11.py assemble "$RES/bench.jsonl" --gpu "$(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)" \
+    --date "$(date -u +%F)" -o "$RES/fig11.json" >>"$LOG" 2>&1 && "$PY" bench/figures/fig11.py plot "$RES/fig11.json" >>"$LOG" 2>&1 ||
     say "fig11 plot failed (see log)"
   note ""
   note "| bench (mppid-bench, config/tasks, T=100) | K | median us | p99 us |"
