@@ -44,8 +44,6 @@ int resolved_threads(const MppiSettings& s) { return s.threads > 0 ? s.threads :
 
 }  // namespace
 
-bool is_live_key(const char* key) { return std::strncmp(key, "mppi.", 5) == 0; }
-
 std::string apply_live_update(MppiSettings* s, const std::string& key, double v, int nu, const LiveSettings& lim) {
   if (!std::isfinite(v)) return key + ": must be finite";
   MppiSettings n = *s;
