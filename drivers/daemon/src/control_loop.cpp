@@ -227,17 +227,17 @@ Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
 }
 
 // The held plan's step due now (the plan has moved on past it). Returns the mode actually
-// published: the failsafe if the held step fails the gate.
+// published: the failsafe if the held step fails the gate. The command history records what
+// went out: the failsafe then, not the refused step (nothing, if the failsafe was blocked too).
 Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
   stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
   std::copy_n(plan_.due(), nu_, u_.data());
-  Mode m = Mode::kHoldPlan;
-  if (!publish(Mode::kHoldPlan, u_.data(), s.seq)) {
-    publish_failsafe(s.seq);
-    m = Mode::kFailsafe;
+  if (publish(Mode::kHoldPlan, u_.data(), s.seq)) {
+    remember(sent_ns(s.now_ns, t0), u_.data());
+    return Mode::kHoldPlan;
   }
-  remember(sent_ns(s.now_ns, t0), u_.data());
-  return m;
+  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  return Mode::kFailsafe;
 }
 
 Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep) {
