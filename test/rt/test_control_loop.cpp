@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <chrono>
+#include <iterator>
 #include <limits>
 #include <optional>
 #include <thread>
@@ -525,6 +526,61 @@ TEST(ControlLoop, ParameterUpdatesApplyBetweenCyclesAndBadOnesAreReported) {
   EXPECT_EQ(r.ctl.mid_cycle_changes, 0);
   for (int k = 0; k < 50; ++k) r.fresh_cycle();
   EXPECT_EQ(r.tx.statuses.back().rejected_params, 5);
+}
+
+// The parameter table (loop_params.cpp): every kind of key, routed to its row, answered
+// with the row's message. One row per update, in order (a row may depend on the one before).
+TEST(ControlLoop, ParameterTableRoutesEachKeyAndAnswersWithItsReason) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::string daemon_keys =
+      ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify, "
+      "daemon.restart_estimates)";
+  const std::string below = ": must be > 0 and below daemon.failsafe_timeout_ms";
+  const std::string above = ": must be above daemon.state_timeout_ms and <= 60000";
+  struct Row {
+    const char* key;
+    double value;
+    std::string reason;  // "" = applied; else the reason after the key
+  };
+  const Row rows[] = {
+      {"cost.w_xy", 3.0, ""},
+      {"cost.w_xy", -1.0, ": out of range [0, 1e6]"},  // the controller's field table
+      {"model.nonexistent", 1.0, ": unknown parameter"},
+      {"bogus", 1.0, ": unknown parameter"},
+      {"daemonx", 1.0, ": unknown parameter"},
+      {"cost.w_xy", nan, ": must be finite"},
+      {"daemon.restart_estimates", nan, ": must be finite"},
+      {"mppi.lambda", 2.0, ": optimizer settings are fixed for a run (restart with --set); tunable: model.*, cost.*"},
+      {"daemon.rate_hz", 10.0, daemon_keys},
+      {"daemon.", 1.0, daemon_keys},
+      {"daemon.state_timeout_ms", 0.0, below},
+      {"daemon.state_timeout_ms", 500.0, below},  // the failsafe timeout is 500 ms
+      {"daemon.state_timeout_ms", 50.0, ""},
+      {"daemon.failsafe_timeout_ms", 50.0, above},
+      {"daemon.failsafe_timeout_ms", 60001.0, above},
+      {"daemon.failsafe_timeout_ms", 400.0, ""},
+      {"daemon.identify", 1.0, ": the identification manoeuvre is for the rate-controlled tasks"},
+      {"daemon.restart_estimates", 1.0, ""},
+  };
+  Rig r;
+  for (const Row& row : rows) {
+    transport::ParamUpdate p;
+    std::strncpy(p.key, row.key, sizeof(p.key) - 1);
+    p.value = row.value;
+    r.inbox.offer_param(p);
+  }
+  r.fresh_cycle();
+  ASSERT_EQ(r.tx.param_results.size(), std::size(rows));
+  for (std::size_t i = 0; i < std::size(rows); ++i) {
+    const auto& got = r.tx.param_results[i];
+    EXPECT_STREQ(got.key, rows[i].key);
+    EXPECT_EQ(got.applied, rows[i].reason.empty()) << rows[i].key;
+    EXPECT_EQ(std::string(got.reason), rows[i].reason.empty() ? "" : rows[i].key + rows[i].reason);
+  }
+  EXPECT_EQ(r.loop.settings().state_timeout_ns, 50 * kMs);
+  EXPECT_EQ(r.loop.settings().failsafe_timeout_ns, 400 * kMs);
+  ASSERT_EQ(r.ctl.params_set.size(), 1u);
+  EXPECT_EQ(r.ctl.params_set[0].second, 3.0);
 }
 
 TEST(ControlLoop, LockstepAnswersEveryTickWithOneCommand) {
