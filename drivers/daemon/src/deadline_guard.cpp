@@ -26,7 +26,7 @@ DeadlineGuard::~DeadlineGuard() {
 }
 
 void DeadlineGuard::start() {
-  if (!thread_.joinable()) thread_ = std::thread([this] { main(); });
+  if (!thread_.joinable()) thread_ = std::thread([this] { watch(); });
 }
 
 std::atomic<bool>* DeadlineGuard::next_stop_flag() {
@@ -106,7 +106,7 @@ void DeadlineGuard::cover(std::uint64_t id, std::int64_t deadline_ns) {
   }
 }
 
-void DeadlineGuard::main() {
+void DeadlineGuard::watch() {
   if (s_.fifo_priority > 0) {
     sched_param sp{};
     sp.sched_priority = s_.fifo_priority;

@@ -74,7 +74,7 @@ class DeadlineGuard {
 
  private:
   enum : std::uint64_t { kIdle = 0, kArmed = 1, kWaiting = 2, kPublishing = 3 };
-  void main();
+  void watch();  // the thread: each armed cycle, from its arm to its disarm
   bool sleep_until(std::int64_t t);  // false when told to quit
   void raise_stop_flag(std::uint64_t id, std::int64_t deadline_ns);
   void cover(std::uint64_t id, std::int64_t deadline_ns);
