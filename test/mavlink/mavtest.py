@@ -52,6 +52,16 @@ def find_binary(name: str) -> Path | None:
 
 
 @pytest.fixture
+def tap(request, netns):
+    """A UDP tap between the bridge and the simulated autopilot (linktools.UdpTap) on the test
+    module's TAP_PORT, keeping every datagram."""
+    from linktools import UdpTap
+    t = UdpTap(request.module.TAP_PORT, 14540)
+    yield t
+    t.close()
+
+
+@pytest.fixture
 def netns():
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     old = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
