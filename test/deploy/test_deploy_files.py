@@ -157,3 +157,17 @@ def test_self_test_fails_on_settings_that_cannot_fly(tmp_path):
                         str(ROOT / "config" / "tasks" / "quadrotor_rate_track.yaml"), "--vehicle", str(bad)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode != 0 and "self-test passed" not in r.stderr
+
+
+def test_every_command_block_of_the_first_flight_guide_says_where_it_runs():
+    """docs/first-flight.md: each command block is tagged; the package stage runs the
+    no-vehicle, stand-in and after-flight ones (test/deploy/package_flight.py)."""
+    text = (ROOT / "docs" / "first-flight.md").read_text()
+    fences = re.findall(r"^```(.*)$", text, flags=re.M)
+    opening = fences[0::2]
+    assert len(fences) % 2 == 0 and opening, "unbalanced fences"
+    tags = {"no-vehicle", "stand-in", "after-flight", "board", "vehicle", "ground"}
+    bad = [f for f in opening if not (f.startswith("sh ") and f[3:] in tags)]
+    assert not bad, f"untagged or unknown blocks: {bad}"
+    for runnable in ("no-vehicle", "stand-in", "after-flight"):
+        assert f"sh {runnable}" in opening, runnable
