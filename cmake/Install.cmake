@@ -105,12 +105,14 @@ file(GLOB _bridge_profiles ${PROJECT_SOURCE_DIR}/config/bridge/px4_*.yaml ${PROJ
 # Not the simulators' (this machine's SITL) nor px4_serial.yaml (a vehicle path of the source tree).
 list(FILTER _bridge_profiles EXCLUDE REGEX "(_sitl|px4_serial)\\.yaml$")
 install(FILES ${_bridge_profiles} DESTINATION ${_share}/bridge)
-install(FILES ${PROJECT_SOURCE_DIR}/config/tasks/quadrotor_rate_track.yaml
-              ${PROJECT_SOURCE_DIR}/config/tasks/quadrotor_rate_track_pi5.yaml
-              ${PROJECT_SOURCE_DIR}/config/tasks/quadrotor_rate_forest.yaml
-        DESTINATION ${_share}/tasks)
-install(FILES ${PROJECT_SOURCE_DIR}/config/deploy/vehicle.yaml ${PROJECT_SOURCE_DIR}/config/vehicles/sim_rate_1kg.yaml
-        DESTINATION ${_share}/vehicles)
+# The task templates name the deployed vehicle, so a copy into /etc/mppid works as it is.
+foreach(_t quadrotor_rate_track quadrotor_rate_track_pi5 quadrotor_rate_forest)
+  file(READ ${PROJECT_SOURCE_DIR}/config/tasks/${_t}.yaml _task)
+  string(REGEX REPLACE "\nvehicle: [^\n]*" "\nvehicle: /etc/mppid/vehicle.yaml" _task "${_task}")
+  file(WRITE ${CMAKE_BINARY_DIR}/deploy/share/tasks/${_t}.yaml "${_task}")
+  install(FILES ${CMAKE_BINARY_DIR}/deploy/share/tasks/${_t}.yaml DESTINATION ${_share}/tasks)
+endforeach()
+install(FILES ${PROJECT_SOURCE_DIR}/config/deploy/vehicle.yaml DESTINATION ${_share}/vehicles)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/missions/ DESTINATION ${_share}/missions FILES_MATCHING PATTERN "*.yaml")
 # The autopilots' parameter files (config/ardupilot/*.parm, config/px4/*.params).
 foreach(_ap ardupilot px4)

@@ -61,15 +61,17 @@ def unit_value(unit: str, key: str) -> str | None:
 
 
 class Stack:
-    """The processes of the flight stack, each logging to OUT/NAME.log; all on one CPU when
-    `cpu` is given (the latency budget of a slower computer: docs/first-flight.md)."""
+    """The processes of the flight stack, each logging to OUT/NAME.log; mppid, the bridge and
+    the recorder on one CPU when `cpu` is given, the stand-in autopilot (a flight controller of
+    its own on a vehicle) on `standin_cpu` (the latency budget: docs/first-flight.md)."""
 
-    def __init__(self, cpu: int | None):
+    def __init__(self, cpu: int | None, standin_cpu: int | None):
         self.procs: dict[str, subprocess.Popen] = {}
         self.pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
+        self.standin_pin = ["taskset", "-c", str(standin_cpu)] if standin_cpu is not None else []
 
     def start(self, name: str, cmd: list[str], env=None):
-        cmd = self.pin + cmd
+        cmd = (self.standin_pin if name == "standin" else self.pin) + cmd
         log = open(OUT / f"{name}.log", "ab")
         self.procs[name] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                             env={**os.environ, **(env or {})})
@@ -232,14 +234,15 @@ def main() -> int:
     ap = argparse.ArgumentParser(description="the flight stack from the installed package, and missions")
     ap.add_argument("--out", type=Path, default=OUT)
     ap.add_argument("--flights", default="hover:px4,circle_3ms:ardupilot", help="MISSION:AUTOPILOT,...")
-    ap.add_argument("--cpu", type=int, help="every process on this one CPU (taskset)")
+    ap.add_argument("--cpu", type=int, help="mppid, the bridge and the recorder on this one CPU (taskset)")
+    ap.add_argument("--standin-cpu", type=int, help="the stand-in autopilot on this CPU")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="mppid --set")
     ap.add_argument("--no-doc", dest="doc", action="store_false",
                     help="without first-flight.md's commands (a measurement)")
     a = ap.parse_args()
     OUT = a.out
     OUT.mkdir(parents=True, exist_ok=True)
-    st = Stack(a.cpu)
+    st = Stack(a.cpu, a.standin_cpu)
     flights = [f.split(":") for f in a.flights.split(",")]
     results: dict = {"cpu": a.cpu, "mppid_sets": a.set, "doc_blocks": {}}
     try:
