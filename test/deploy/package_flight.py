@@ -80,6 +80,19 @@ class Stack:
     def alive(self, name: str) -> bool:
         return self.procs[name].poll() is None
 
+    def cpu_share(self, name: str) -> float | None:
+        """CPU time over wall time since it started (1.0: one core busy), children included
+        for the ones started through chrt or taskset (those exec, so the pid is the program)."""
+        try:
+            fields = Path(f"/proc/{self.procs[name].pid}/stat").read_text().rsplit(")", 1)[1].split()
+            uptime = float(Path("/proc/uptime").read_text().split()[0])
+        except (OSError, KeyError):
+            return None
+        tck = os.sysconf("SC_CLK_TCK")
+        cpu = (int(fields[11]) + int(fields[12])) / tck
+        wall = uptime - int(fields[19]) / tck
+        return round(cpu / wall, 3) if wall > 0 else None
+
     def stop(self, name: str):
         p = self.procs.pop(name)
         if p.poll() is None:
@@ -258,6 +271,7 @@ def main() -> int:
                 results["doc_blocks"]["stand-in"] = run_doc("stand-in")
             results[name] = fly(name)
             alive.update({f"{n} ({name})": st.alive(n) for n in ("recorder", "mppid", "bridge")})
+            results[name]["cpu_share"] = {n: st.cpu_share(n) for n in ("mppid", "bridge", "recorder", "standin")}
             st.stop("standin")
             st.stop("bridge")
         results["alive"] = alive
