@@ -114,12 +114,13 @@ foreach(_t quadrotor_rate_track quadrotor_rate_track_pi5 quadrotor_rate_forest)
 endforeach()
 install(FILES ${PROJECT_SOURCE_DIR}/config/deploy/vehicle.yaml DESTINATION ${_share}/vehicles)
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/missions/ DESTINATION ${_share}/missions FILES_MATCHING PATTERN "*.yaml")
-# The autopilots' parameter files (config/ardupilot/*.parm, config/px4/*.params).
+# The autopilots' parameter files for a vehicle (config/ardupilot/*.parm, config/px4/*.params),
+# not the SITL baseline's tuning (guided_baseline.parm: never on a real vehicle).
 foreach(_ap ardupilot px4)
   if(EXISTS ${PROJECT_SOURCE_DIR}/config/${_ap})
     install(DIRECTORY ${PROJECT_SOURCE_DIR}/config/${_ap}/ DESTINATION ${_share}/autopilot/${_ap}
-            FILES_MATCHING PATTERN "*.parm" PATTERN "*.params")
+            FILES_MATCHING PATTERN "*.parm" PATTERN "*.params" PATTERN "guided_baseline.parm" EXCLUDE)
   endif()
 endforeach()
-install(FILES ${PROJECT_SOURCE_DIR}/docs/first-flight.md ${PROJECT_SOURCE_DIR}/docs/deploy.md
+install(FILES ${PROJECT_SOURCE_DIR}/docs/first-flight.md ${PROJECT_SOURCE_DIR}/docs/deploy.md ${PROJECT_SOURCE_DIR}/docs/failsafes.md
         DESTINATION ${CMAKE_INSTALL_DOCDIR})
