@@ -15,7 +15,7 @@ import pytest
 from sitl_helpers import ROOT, group_members, pid_alive
 from sitl_harness import cli, paths
 from sitl_harness.flights import PLANTS, flight_class
-from sitl_harness.flights.ardupilot import HOME, OVERLAY, PARAMS, VEHICLE, ArduPilotFlight
+from sitl_harness.flights.ardupilot import BASELINE, HOME, OVERLAY, PARAMS, VEHICLE, ArduPilotFlight
 from sitl_harness.flights.base import FlightError, FlightSpec
 from sitl_harness.flights.sim import SimFlight
 from sitl_harness.overlay import load_sets
@@ -118,7 +118,7 @@ def test_ardupilot_guided_flight_commands(tmp_path):
     sim = cmds["sim"][cmds["sim"].index("sh"):]
     assert sim[3] == str(binary.resolve())
     assert sim[sim.index("--defaults") + 1] == f"{binary.parents[3].resolve()}/Tools/autotest/default_params/" \
-                                               f"copter.parm,{PARAMS}"
+                                               f"copter.parm,{PARAMS},{BASELINE}"
     assert sim[sim.index("--home") + 1] == HOME and sim[-2:] == ["-I0", "--wipe"]
     assert cmds["recorder"][1:] == ["-m", "sitl_harness.ap_truth", "--url", "tcp:127.0.0.1:5762", f"--home={HOME}",
                                     "--out", str(flight.out)]

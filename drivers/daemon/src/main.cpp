@@ -367,6 +367,23 @@ void print_stats(const ControlLoop& loop, const DaemonSettings& ds, const mppi::
   std::cout << mppi::daemon::format_stats(f, loop, inbox.counters) << std::flush;
 }
 
+// The loop thread's real-time set-up and warm-up done (else it is joined, and false), and
+// the real-time report given (where it was required and refused, the thread is stopped).
+bool await_warm_up(LoopThread* lt, std::thread* loop_thread, const Options& opt,
+                   const mppi::rt::RealtimeResult& rt_result, const DaemonSettings& ds) {
+  while (lt->ready.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (lt->ready.load() < 0) {
+    loop_thread->join();
+    spdlog::error("backend warm-up failed: {}", lt->warmup_error);
+    return false;
+  }
+  if (opt.realtime && !report_realtime(rt_result, ds, opt.require_realtime)) {
+    lt->stop = true;
+    loop_thread->join();
+    return false;
+  }
+  return true;
+}
 
 // --self-test: a resting state (zeros, the identity attitude where the model has a
 // quaternion), kSelfTestCycles cycles from it after the warm-up; the command must be finite
@@ -443,17 +460,7 @@ int main(int argc, char** argv) {
   // ---- loop thread: real-time set-up, warm-up, then cycles -------------------------------
   LoopThread lt(&loop, initial, &ds, opt.realtime, &rt_result);
   std::thread loop_thread([&lt] { lt.main(); });
-  while (lt.ready.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  if (lt.ready.load() < 0) {
-    loop_thread.join();
-    spdlog::error("backend warm-up failed: {}", lt.warmup_error);
-    return kExitRuntime;
-  }
-  if (opt.realtime && !report_realtime(rt_result, ds, opt.require_realtime)) {
-    lt.stop = true;
-    loop_thread.join();
-    return kExitRuntime;
-  }
+  if (!await_warm_up(&lt, &loop_thread, opt, rt_result, ds)) return kExitRuntime;
 
   // ---- run ---------------------------------------------------------------------------------
   // States and ticks must be taken in while the optimizer fills the cores.
