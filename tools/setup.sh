@@ -73,6 +73,8 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # the package stage (tools/package-test.sh): a clean Debian 12 root to install the .deb into
+  mmdebstrap
   # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
   # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
   chromium
@@ -89,6 +91,7 @@ APT_PACKAGES_AARCH64=(
   g++-aarch64-linux-gnu qemu-user-static
   libgomp1:arm64 libhwy-dev:arm64 libspdlog-dev:arm64 libgtest-dev:arm64 libgmock-dev:arm64
   libyaml-cpp0.7:arm64 libglib2.0-0:arm64
+  libsystemd-dev:arm64  # the arm64 mppid's sd_notify: its unit is Type=notify (tools/package.sh)
 )
 
 missing_packages() {
