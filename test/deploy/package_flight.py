@@ -93,8 +93,9 @@ class Stack:
         wall = uptime - int(fields[19]) / tck
         return round(cpu / wall, 3) if wall > 0 else None
 
-    def stop(self, name: str):
-        p = self.procs.pop(name)
+    @staticmethod
+    def _terminate(p: subprocess.Popen):
+        """SIGTERM, then SIGKILL after 5 s."""
         if p.poll() is None:
             p.send_signal(signal.SIGTERM)
             try:
@@ -102,14 +103,12 @@ class Stack:
             except subprocess.TimeoutExpired:
                 p.kill()
 
+    def stop(self, name: str):
+        self._terminate(self.procs.pop(name))
+
     def stop_all(self):
-        for name, p in reversed(list(self.procs.items())):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(5)
-                except subprocess.TimeoutExpired:
-                    p.kill()
+        for p in reversed(list(self.procs.values())):
+            self._terminate(p)
 
 
 def start_stack(st: Stack, mppid_sets: list[str]):
