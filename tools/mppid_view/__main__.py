@@ -20,8 +20,7 @@ import time
 from pathlib import Path
 
 
-def main(argv=None) -> int:
-    os.environ.setdefault("RERUN_ANALYTICS", "0")  # offline; and nothing to send anyway
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="tools/view", description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
     lv = sub.add_parser("live")
@@ -46,42 +45,61 @@ def main(argv=None) -> int:
     sh.add_argument("url")
     sh.add_argument("out")
     sh.add_argument("--wait", type=float, default=20.0)
-    a = ap.parse_args(argv)
+    return ap
 
-    if a.cmd == "live":
-        from .live import LiveView
-        view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid)
-        print(f"view: {view.url}", flush=True)
-        counts = view.run(a.seconds)
-        print("view: drawn " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())), flush=True)
-        return 0
-    if a.cmd == "convert":
-        from .convert import convert
-        out = Path(a.out) if a.out else Path(a.log).with_suffix(".rrd")
-        counts = convert(Path(a.log), out)
-        print(f"{out}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
-        return 0 if counts else 1
-    if a.cmd == "open":
-        # rerun's own CLI (in the wheel) serves a file: its gRPC server and web viewer.
-        from .live import viewer_url
-        rerun = Path(sys.executable).with_name("rerun")
-        print(f"view: {viewer_url(a.web_port, a.grpc_port)}  (Ctrl-C to stop)", flush=True)
-        os.execv(str(rerun), [str(rerun), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(a.web_port),
-                              "--port", str(a.grpc_port), a.rrd])
-    if a.cmd == "blueprint":
-        from .blueprint import blueprint
-        blueprint().save("mppid", a.out)
-        print(a.out)
-        return 0
-    if a.cmd == "screenshot":
-        from .browser import HeadlessChromium
-        with HeadlessChromium() as b:
-            b.open(a.url)
-            time.sleep(a.wait)
-            Path(a.out).write_bytes(b.screenshot())
-        print(a.out)
-        return 0
-    return 2
+
+def cmd_live(a) -> int:
+    from .live import LiveView
+    view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid)
+    print(f"view: {view.url}", flush=True)
+    counts = view.run(a.seconds)
+    print("view: drawn " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())), flush=True)
+    return 0
+
+
+def cmd_convert(a) -> int:
+    from .convert import convert
+    out = Path(a.out) if a.out else Path(a.log).with_suffix(".rrd")
+    counts = convert(Path(a.log), out)
+    print(f"{out}: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())))
+    return 0 if counts else 1
+
+
+def cmd_open(a) -> int:
+    # rerun's own CLI (in the wheel) serves a file: its gRPC server and web viewer.
+    from .live import viewer_url
+    rerun = Path(sys.executable).with_name("rerun")
+    print(f"view: {viewer_url(a.web_port, a.grpc_port)}  (Ctrl-C to stop)", flush=True)
+    os.execv(str(rerun), [str(rerun), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(a.web_port),
+                          "--port", str(a.grpc_port), a.rrd])
+    return 2  # not reached
+
+
+def cmd_blueprint(a) -> int:
+    from .blueprint import blueprint
+    blueprint().save("mppid", a.out)
+    print(a.out)
+    return 0
+
+
+def cmd_screenshot(a) -> int:
+    from .browser import HeadlessChromium
+    with HeadlessChromium() as b:
+        b.open(a.url)
+        time.sleep(a.wait)  # the viewer draws for this long before the picture (not a timing check)
+        Path(a.out).write_bytes(b.screenshot())
+    print(a.out)
+    return 0
+
+
+COMMANDS = {"live": cmd_live, "convert": cmd_convert, "open": cmd_open, "blueprint": cmd_blueprint,
+            "screenshot": cmd_screenshot}
+
+
+def main(argv=None) -> int:
+    os.environ.setdefault("RERUN_ANALYTICS", "0")  # offline; and nothing to send anyway
+    a = parser().parse_args(argv)
+    return COMMANDS[a.cmd](a)
 
 
 if __name__ == "__main__":

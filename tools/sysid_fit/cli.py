@@ -113,19 +113,9 @@ def fit_command(a) -> int:
         "held_out": {"prior": prediction_errors(prior_model, held), "fitted": prediction_errors(model, held)},
     }
     if a.structure:
-        from .structure import fit_second_order
-        second = [fit_second_order(train, i, grid) for i in range(3)]
-        report["structure"] = {AXES[i]: {"first_order_rmse_rad_s": axes[i].rmse, "second_order_rmse_rad_s": second[i].rmse,
-                                         "gain": second[i].gain, "wn_rad_s": second[i].wn, "zeta": second[i].zeta,
-                                         "delay_s": second[i].delay} for i in range(3)}
+        report["structure"] = structure_report(train, grid, axes)
     if a.truth:
-        truth = truth_of(Path(a.truth))
-        got = {"mass": thrust.mass, "drag": thrust.drag, "delay": delay}
-        for i, ax in enumerate(AXES):
-            got[f"tau_{ax}"], got[f"gain_{ax}"] = axes[i].tau, axes[i].gain
-        report["truth"] = {k: {"truth": truth[k], "fitted": got[k],
-                               "error_pct": (100.0 * (got[k] - truth[k]) / truth[k]) if truth[k] else None}
-                           for k in truth}
+        report["truth"] = truth_report(Path(a.truth), thrust, delay, axes)
     print_report(report)
     if a.out:
         vehicle_file.dump(fitted, a.out, header=f"tools/sysid fit {a.log}\nheld-out 0.5 s prediction: "
@@ -134,6 +124,26 @@ def fit_command(a) -> int:
     if a.report:
         Path(a.report).write_text(json.dumps(report, indent=2) + "\n")
     return 0
+
+
+def structure_report(train, grid, axes) -> dict:
+    """Each axis's first-order fit beside a second-order one (--structure)."""
+    from .structure import fit_second_order
+    second = [fit_second_order(train, i, grid) for i in range(3)]
+    return {AXES[i]: {"first_order_rmse_rad_s": axes[i].rmse, "second_order_rmse_rad_s": second[i].rmse,
+                      "gain": second[i].gain, "wn_rad_s": second[i].wn, "zeta": second[i].zeta,
+                      "delay_s": second[i].delay} for i in range(3)}
+
+
+def truth_report(path: Path, thrust, delay: float, axes) -> dict:
+    """The fit against the simulator's truth (--truth): each parameter's error in percent."""
+    truth = truth_of(path)
+    got = {"mass": thrust.mass, "drag": thrust.drag, "delay": delay}
+    for i, ax in enumerate(AXES):
+        got[f"tau_{ax}"], got[f"gain_{ax}"] = axes[i].tau, axes[i].gain
+    return {k: {"truth": truth[k], "fitted": got[k],
+                "error_pct": (100.0 * (got[k] - truth[k]) / truth[k]) if truth[k] else None}
+            for k in truth}
 
 
 def print_report(r: dict):

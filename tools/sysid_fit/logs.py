@@ -80,7 +80,9 @@ def _inside(t: np.ndarray, spans) -> np.ndarray:
     return k
 
 
-def read_lcm(path: str | Path, lockstep_latency: float | None = None) -> FlightData:
+def _lcm_messages(path) -> dict:
+    """The log's rate-model states by seq, thrust-rate commands, lock-step ticks by seq,
+    the bridge's engagement and hover thrust (a message that does not decode is skipped)."""
     from mppi_mavlink import lcm_types
     lcm_types.import_mppi_lcm()
     import lcm
@@ -90,29 +92,52 @@ def read_lcm(path: str | Path, lockstep_latency: float | None = None) -> FlightD
     except Exception:  # noqa: BLE001 - the link type is optional (no bridge in the flight)
         link_t = None
 
-    states, commands, ticks, hover, link = {}, [], {}, [], []
+    out = {"states": {}, "commands": [], "ticks": {}, "hover": [], "link": []}
     log = lcm.EventLog(str(path), "r")
     for ev in log:
         try:
             if ev.channel == STATE_CHANNEL:
                 m = vehicle_state_t.decode(ev.data)
                 if m.model == RATE_MODEL and m.vehicle_count == 1 and m.nx == 13 and all(map(math.isfinite, m.x)):
-                    states[m.seq] = (m.sample_utime, list(m.x))
+                    out["states"][m.seq] = (m.sample_utime, list(m.x))
             elif ev.channel == COMMAND_CHANNEL:
                 m = command_t.decode(ev.data)
                 if m.kind == THRUST_RATES and m.n == 4 and m.mode != MODE_FAILSAFE and all(map(math.isfinite, m.u)):
-                    commands.append((m.utime, m.state_seq, list(m.u)))
+                    out["commands"].append((m.utime, m.state_seq, list(m.u)))
             elif ev.channel == CLOCK_CHANNEL:
                 m = sim_clock_t.decode(ev.data)
-                ticks.setdefault(m.seq, (m.sim_utime, m.utime))
+                out["ticks"].setdefault(m.seq, (m.sim_utime, m.utime))
             elif ev.channel == LINK_CHANNEL and link_t is not None:
                 m = link_t.decode(ev.data)
-                link.append((m.utime, bool(m.engaged)))
+                out["link"].append((m.utime, bool(m.engaged)))
                 if m.hover_thrust > 0 and math.isfinite(m.hover_thrust):
-                    hover.append(m.hover_thrust)
+                    out["hover"].append(m.hover_thrust)
         except ValueError:
             continue  # a message that does not decode is not data
     log.close()
+    return out
+
+
+def _command_times(commands, ticks, lockstep_latency) -> np.ndarray:
+    """When each command acted [us]: sent (real time), or its tick's sim time plus the latency
+    (lock-step: the given one, else the measured one); NaN where its tick is missing."""
+    if not ticks:
+        return np.array([c[0] for c in commands], dtype=np.float64)
+    tc = []
+    for utime, state_seq, _ in commands:
+        tick = ticks.get(state_seq)
+        if tick is None:
+            tc.append(np.nan)
+            continue
+        sim_us, wall_us = tick
+        charged = lockstep_latency * 1e6 if lockstep_latency is not None else max(0.0, utime - wall_us)
+        tc.append(sim_us + charged)
+    return np.array(tc, dtype=np.float64)
+
+
+def read_lcm(path: str | Path, lockstep_latency: float | None = None) -> FlightData:
+    m = _lcm_messages(path)
+    states, commands = m["states"], m["commands"]
     if len(states) < 50:
         raise LogError(f"{path}: {len(states)} rate-model states (MPPI_STATE, model quadrotor_rate): too few to fit")
     if len(commands) < 50:
@@ -124,31 +149,20 @@ def read_lcm(path: str | Path, lockstep_latency: float | None = None) -> FlightD
     keep = np.concatenate([[True], np.diff(ts) > 0])
     ts, x = ts[keep], x[keep]
 
-    clock = "lockstep" if ticks else "realtime"
-    tc = []
-    for utime, state_seq, _ in commands:
-        if clock == "realtime":
-            tc.append(utime)
-        else:
-            tick = ticks.get(state_seq)
-            if tick is None:
-                tc.append(np.nan)
-                continue
-            sim_us, wall_us = tick
-            charged = lockstep_latency * 1e6 if lockstep_latency is not None else max(0.0, utime - wall_us)
-            tc.append(sim_us + charged)
-    tc = np.array(tc, dtype=np.float64)
+    clock = "lockstep" if m["ticks"] else "realtime"
+    tc = _command_times(commands, m["ticks"], lockstep_latency)
     u = np.array([c[2] for c in commands], dtype=np.float64)
     ok = np.isfinite(tc)
     tc, u = tc[ok], u[ok]
     order = np.argsort(tc, kind="stable")
     t0 = ts[0]
+    hover = m["hover"]
     data = FlightData((ts - t0) * 1e-6, x, (tc[order] - t0) * 1e-6, u[order], str(path), clock,
                       float(np.median(hover)) if hover else None)
     if clock == "lockstep" and lockstep_latency is None:
         data.notes.append("lock-step log: each command counted from its tick plus the measured latency")
-    if link and clock == "realtime":
-        data = engaged_only(data, [((a - t0) * 1e-6, (b - t0) * 1e-6) for a, b in engaged_intervals(link)])
+    if m["link"] and clock == "realtime":
+        data = engaged_only(data, [((a - t0) * 1e-6, (b - t0) * 1e-6) for a, b in engaged_intervals(m["link"])])
     return data
 
 
@@ -190,15 +204,8 @@ def _q_from_euler_ned(roll, pitch, yaw):
                      cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy], axis=1)
 
 
-def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle: float | None) -> FlightData:
-    """ArduCopter's log. The input is what mppid asked for through the bridge: GUIA, GUIDED's
-    attitude target (body rates in deg/s, FRD; thrust 0..1, with GUID_OPTIONS bit 3), logged
-    as each target arrives; without GUIA, RATE's desired rates and CTUN.ThO, which are the rate
-    loop's input after ArduCopter's own input shaping (the fit then leaves the shaping out: a
-    note says so). The output: RATE's achieved rates, ATT, the first EKF core's position and
-    velocity (XKF1, or NKF1 in older logs). Thrust in newtons through the vehicle's mass and
-    hover throttle (CTUN.ThH when the vehicle file has none)."""
-    from mppi_mavlink import frames
+def _dataflash_rows(path) -> dict[str, list[tuple]]:
+    """RATE, CTUN, ATT, the first EKF core's XKF1/NKF1 and GUIA rows of a dataflash log, times in s."""
     from pymavlink import DFReader
 
     log = DFReader.DFReader_binary(str(path), zero_time_base=True)
@@ -206,7 +213,7 @@ def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle
     while True:
         m = log.recv_match(type=["RATE", "CTUN", "ATT", "XKF1", "NKF1", "GUIA"])
         if m is None:
-            break
+            return rows
         t = m.TimeUS * 1e-6
         kind = m.get_type()
         if kind == "RATE":
@@ -219,6 +226,19 @@ def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle
             rows["GUIA"].append((t, m.RollRt, m.PitchRt, m.YawRt, m.Thrust))
         elif getattr(m, "C", 0) == 0:  # the first EKF core
             rows["EKF"].append((t, m.PN, m.PE, m.PD, m.VN, m.VE, m.VD))
+
+
+def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle: float | None) -> FlightData:
+    """ArduCopter's log. The input is what mppid asked for through the bridge: GUIA, GUIDED's
+    attitude target (body rates in deg/s, FRD; thrust 0..1, with GUID_OPTIONS bit 3), logged
+    as each target arrives; without GUIA, RATE's desired rates and CTUN.ThO, which are the rate
+    loop's input after ArduCopter's own input shaping (the fit then leaves the shaping out: a
+    note says so). The output: RATE's achieved rates, ATT, the first EKF core's position and
+    velocity (XKF1, or NKF1 in older logs). Thrust in newtons through the vehicle's mass and
+    hover throttle (CTUN.ThH when the vehicle file has none)."""
+    from mppi_mavlink import frames
+
+    rows = _dataflash_rows(path)
     counts = {k: len(v) for k, v in rows.items()}
     if min(counts["RATE"], counts["CTUN"], counts["ATT"], counts["EKF"]) < 50:
         raise LogError(f"{path}: RATE/CTUN/ATT/XKF1 messages {counts}: too few to fit")

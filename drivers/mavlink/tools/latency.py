@@ -56,21 +56,30 @@ def ctl(sock, line):
     return request(sock, line, 30)
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--rollouts", type=int, default=512)
-    ap.add_argument("--task", default="quadrotor_rate_track")
-    ap.add_argument("--no-rt", action="store_true", help="no SCHED_FIFO (mppid without --realtime)")
-    ap.add_argument("--out", help="keep the logs here (default: a temporary folder)")
-    a = ap.parse_args()
-    out = Path(a.out or tempfile.mkdtemp(prefix="mavlink-latency-"))
-    out.mkdir(parents=True, exist_ok=True)
+def private_network():
+    """This process into a network namespace of its own, with the loopback multicast route."""
     libc = ctypes.CDLL("libc.so.6", use_errno=True)
     if libc.unshare(0x40000000) != 0:
         sys.exit("latency: unshare(CLONE_NEWNET) failed: run as root")
     subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
     subprocess.run(["ip", "route", "add", "224.0.0.0/4", "dev", "lo"], check=True)
+
+
+def wait_until_streaming(sock: str, seconds: float = 20.0):
+    """Until the bridge has the link, no refusal, mppid's stream and 75 states published."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            st = ctl(sock, "status")["status"]
+            if st["link_up"] and not st["refusal"] and st["streaming"] and st["states_published"] > 75:
+                return
+        except (OSError, ValueError, KeyError):
+            pass
+        time.sleep(0.2)
+
+
+def fly(a, out: Path) -> tuple[int, int]:
+    """The chain (bridge, mppid, the simulated autopilot) engaged for a.seconds: its window [us]."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     rt = [] if a.no_rt else ["chrt", "-f", "85"]
     sock = str(out / "bridge.sock")
@@ -87,23 +96,16 @@ def main():
                         "--backend", "cpu", "--set", f"mppi.rollouts={a.rollouts}"] + ([] if a.no_rt else ["--realtime"]))
         start("vehicle", rt + [PY, "-m", "mavlink_vehicle", "--url", "udpout:127.0.0.1:14540", "--out", out,
                                "--start", "0,0,0"])
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            try:
-                st = ctl(sock, "status")["status"]
-                if st["link_up"] and not st["refusal"] and st["streaming"] and st["states_published"] > 75:
-                    break
-            except (OSError, ValueError, KeyError):
-                pass
-            time.sleep(0.2)
+        wait_until_streaming(sock)
         for line in ("offboard", "arm"):
             r = ctl(sock, line)
             if not r["ok"]:
                 sys.exit(f"latency: {line}: {r['message']}")
         t0 = time.monotonic_ns() // 1000
-        time.sleep(a.seconds)
+        time.sleep(a.seconds)  # the measured window
         t1 = time.monotonic_ns() // 1000
         ctl(sock, "land")
+        return t0, t1
     finally:
         for p in procs[::-1]:
             p.send_signal(signal.SIGTERM)
@@ -112,6 +114,20 @@ def main():
                 p.wait(5)
             except subprocess.TimeoutExpired:
                 p.kill()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--rollouts", type=int, default=512)
+    ap.add_argument("--task", default="quadrotor_rate_track")
+    ap.add_argument("--no-rt", action="store_true", help="no SCHED_FIFO (mppid without --realtime)")
+    ap.add_argument("--out", help="keep the logs here (default: a temporary folder)")
+    a = ap.parse_args()
+    out = Path(a.out or tempfile.mkdtemp(prefix="mavlink-latency-"))
+    out.mkdir(parents=True, exist_ok=True)
+    private_network()
+    t0, t1 = fly(a, out)
     res = measure(out, t0, t1)
     res.update({"seconds": a.seconds, "rollouts": a.rollouts, "task": a.task, "realtime": not a.no_rt,
                 "machine": {"cpus": os.cpu_count(), "cpu": _cpu_model(), "kernel": platform.release(),
