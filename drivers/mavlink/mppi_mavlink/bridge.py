@@ -33,7 +33,7 @@ from collections import OrderedDict
 os.environ.setdefault("MAVLINK20", "1")  # ODOMETRY and the SET_ATTITUDE_TARGET extensions
 from pymavlink import mavutil  # noqa: E402
 
-from . import frames, lcm_types, signing, telemetry  # noqa: E402
+from . import clock_sync, frames, lcm_types, signing, telemetry  # noqa: E402
 from .thrust import ThrustMap  # noqa: E402
 
 log = logging.getLogger("mppi_mavlink")
@@ -169,7 +169,7 @@ class Bridge:
 
     def _init_state(self):
         """The state stream to mppid: sequence numbers, publish times, the latest odometry."""
-        self.boot_clock = BootClock()
+        self.boot_clock = clock_sync.ClockSync()  # the autopilot's clock on ours, drift followed
         self.state_seq = 0
         self.state_times = OrderedDict()   # seq -> (monotonic us when published, MAVLink time_usec)
         self.last_odom_mono = None
@@ -381,7 +381,7 @@ class Bridge:
             while len(self.state_times) > 256:
                 self.state_times.popitem(last=False)
         msg.utime = now_wall
-        msg.sample_utime = self.boot_clock.to_wall_us(int(boot_us), now_wall)
+        msg.sample_utime = self.boot_clock.update(int(boot_us), now_wall)
         msg.model = self.mppi_lcm.vehicle_state_t.MODEL_QUADROTOR_RATE
         msg.vehicle_count = 1
         msg.nx = 13
