@@ -19,7 +19,7 @@ scheduling), and steps in `a` when the autopilot's clock stands still or jumps.
   lower envelope: no kept sample maps later than it arrived). Until two windows are closed,
   the line runs through the running minimum with the skew found before (none at first).
 - A sample maps onto the line, never later than its own arrival.
-- Steps (the autopilot's clock stood still, or the route changed): once fitted, when every
+- Steps (the autopilot's clock stood still, or the route changed): when every
   sample for `step_s` arrives more than `step_us` later (or earlier) than the line allows,
   the line moves by the least excess, onto the least-delayed sample since, and the envelope
   forgets the minima from before (the skew's median needs no help). A stalled receiver
@@ -100,7 +100,7 @@ class ClockSync:
         """Every sample for step_s off the line by more than step_us, the same way: a step."""
         excess = d - self.offset_at(ap_us)
         side = (excess > self.step_us) - (excess < -self.step_us)
-        if not self.fitted or side == 0:  # (unfitted, the skew is not known yet)
+        if side == 0:
             self.off = None
             return
         if self.off is None or self.off[2] != side:
