@@ -26,8 +26,10 @@ scheduling), and steps in `a` when the autopilot's clock stands still or jumps.
   cannot fake a step up (its queued samples arrive together, the newest with little delay),
   but a queue on the sender's side lasting longer than `step_s` looks like one: its samples
   look fresher than they are (never later than they arrived) until it drains, and the step
-  down then undoes it. The choice: SIH's 0.22 s stalls cost mppid 0.25 s of held plan, not
-  the envelope's 2 s.
+  down then undoes it. The choice, made by a flight: after each of SIH's 0.2 s stalls mppid
+  holds (its states look old) and the bridge pauses the stream until the step is taken,
+  while PX4 flies the last rate setpoint on (up to COM_OF_LOSS_T, 1 s): 0.35 s of a 3 rad/s
+  roll rate flipped the vehicle. So `step_s` is short (0.1 s), not the envelope's 2 s.
 - Falls within `step_us`: a refit lowers the line by at most `max_step_us` a window.
 - Start over: the autopilot's clock went back more than `reset_s` (a reboot), or a sample
   arrived `reset_s` before the line allows (its clock jumped ahead). The skew is kept.
@@ -43,7 +45,7 @@ from collections import deque
 
 class ClockSync:
     def __init__(self, window_s: float = 0.5, windows: int = 40, envelope: int = 4, max_skew: float = 0.2,
-                 max_step_us: int = 5000, step_us: int = 10_000, step_s: float = 0.25, reset_s: float = 1.0):
+                 max_step_us: int = 5000, step_us: int = 10_000, step_s: float = 0.1, reset_s: float = 1.0):
         if (window_s <= 0 or windows < 2 or not 1 <= envelope <= windows or max_skew < 0 or max_step_us <= 0
                 or step_us <= 0 or step_s <= 0 or reset_s <= 0):
             raise ValueError("clock_sync: window_s > 0, windows >= 2, 1 <= envelope <= windows, max_skew >= 0, "
