@@ -17,6 +17,7 @@ bridge maps PX4's boot time onto it).
 """
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import sys
@@ -26,6 +27,18 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 EARTH_R = 6_378_137.0
+
+
+def _import(name: str, where: Path):
+    """The installed package, else this checkout's copy (a venv without the packages, or
+    with another checkout's installed)."""
+    try:
+        return importlib.import_module(name)
+    except ImportError:
+        for mod in [m for m in sys.modules if m.split(".")[0] == name.split(".")[0]]:
+            del sys.modules[mod]
+        sys.path.insert(0, str(where))
+        return importlib.import_module(name)
 
 
 def _jsonl(p: Path) -> list[dict]:
@@ -52,9 +65,7 @@ def clock_rate(boot_us: np.ndarray, wall_us: np.ndarray) -> dict:
 
 def truth_enu(truth: list[dict], est: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     """(times on the mission's clock [us], ENU positions [m]) of the truth."""
-    sys.path.insert(0, str(ROOT / "drivers" / "mavlink"))
-    from mppi_mavlink.clock_sync import ClockSync
-    sync = ClockSync()
+    sync = _import("mppi_mavlink.clock_sync", ROOT / "drivers" / "mavlink").ClockSync()
     t = np.array([sync.update(r["time_usec"], r["wall_us"]) for r in truth], float)
     lat = np.radians([r["lat"] * 1e-7 for r in truth])
     lon = np.radians([r["lon"] * 1e-7 for r in truth])
@@ -69,16 +80,13 @@ def truth_enu(truth: list[dict], est: list[dict]) -> tuple[np.ndarray, np.ndarra
 
 
 def estimate_enu(est: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    sys.path.insert(0, str(ROOT / "drivers" / "mavlink"))
-    from mppi_mavlink.clock_sync import ClockSync
-    sync = ClockSync()
+    sync = _import("mppi_mavlink.clock_sync", ROOT / "drivers" / "mavlink").ClockSync()
     t = np.array([sync.update(r["time_boot_ms"] * 1000, r["wall_us"]) for r in est], float)
     return t, np.array([[r["y"], r["x"], -r["z"]] for r in est], float)
 
 
 def legs(mission: list[dict], t_truth, X, t_est, E, settle: float) -> dict:
-    sys.path.insert(0, str(ROOT / "drivers" / "mission"))
-    from mppi_mission import reference
+    reference = _import("mppi_mission.reference", ROOT / "drivers" / "mission")
     steps = [m for m in mission if m.get("event") == "step" and m["leg"] >= 0]
     res = {}
     for i, s in enumerate(steps):
@@ -108,12 +116,9 @@ def link_record(out: Path) -> dict:
     log = out / "flight.lcmlog"
     if not log.is_file():
         return {}
-    for d in ("build", "build-sim", "build-daemon"):
-        if (ROOT / d / "python" / "mppi_lcm").is_dir():
-            sys.path.insert(0, str(ROOT / d / "python"))
-            break
     import lcm
-    from mppi_lcm import command_t, vehicle_state_t
+    mppi_lcm = _import("mppi_lcm", ROOT / "build" / "python")
+    command_t, vehicle_state_t = mppi_lcm.command_t, mppi_lcm.vehicle_state_t
     ages, modes, first = [], {}, {}
     ev_log = lcm.EventLog(str(log), "r")
     t_start = None
