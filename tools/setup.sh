@@ -9,9 +9,10 @@
 #   --no-venv    skip the Python venv (.venv) and requirements.txt
 #   --no-build   skip configuring and building (build/)
 #   --flight     only what a SITL flight needs (tools/fly.sh): the venv's flight packages
-#                (requirements-flight.txt) and the targets mppid, mppid-sim and the LCM
-#                types; a later run without it adds the rest
-#   --view       with --flight: also the live view's packages (requirements-view.txt)
+#                (requirements-flight.txt), the project's flight packages (the LCM types,
+#                the bridge, the mission tool, the harness) and the targets mppid, mppid-sim
+#                and the LCM types; a later run without it adds the rest
+#   --view       with --flight: also the live view (requirements-view.txt, tools/mppid_view)
 #   --progress   one progress line instead of the compiler's output (kept in build/build.log;
 #                its end is shown if the build fails)
 #   --aarch64    also what the aarch64 cross build needs (tools/aarch64.sh, docs/aarch64.md):
@@ -41,7 +42,7 @@ while (($#)); do
     --progress) progress=1 ;;
     --aarch64) do_aarch64=1 ;;
     --) shift; cmake_extra=("$@"); break ;;
-    -h|--help) sed -n '2,26s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,27s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "setup.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -72,6 +73,8 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # the package stage (tools/package-test.sh): a clean Debian 12 root to install the .deb into
+  mmdebstrap
   # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
   # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
   chromium
@@ -88,6 +91,7 @@ APT_PACKAGES_AARCH64=(
   g++-aarch64-linux-gnu qemu-user-static
   libgomp1:arm64 libhwy-dev:arm64 libspdlog-dev:arm64 libgtest-dev:arm64 libgmock-dev:arm64
   libyaml-cpp0.7:arm64 libglib2.0-0:arm64
+  libsystemd-dev:arm64  # the arm64 mppid's sd_notify: its unit is Type=notify (tools/package.sh)
 )
 
 missing_packages() {
@@ -184,6 +188,54 @@ if ((do_venv)); then
     else
       log "lcm for aarch64: $lcm_version present"
     fi
+  fi
+fi
+
+# ---- the project's Python packages ----------------------------------------------------
+# Every folder with a pyproject.toml (docs/setup.md), installed editable into .venv: the
+# commands (mppid-mavlink-bridge, mppid-mission, mppid-sitl, ...) land in .venv/bin and the
+# sources stay where they are. No build isolation and no dependencies: setuptools, lcm (its
+# lcm-gen makes the LCM types) and every package's dependencies come from the requirements
+# above, so nothing is downloaded. Re-installed when a pyproject.toml or the LCM types'
+# sources change (lcmtypes/setup.py, lcmtypes/*/*.lcm).
+PY_PACKAGES_FLIGHT=(lcmtypes drivers/mavlink drivers/mission tools/sitl_harness)
+PY_PACKAGES_VIEW=(tools/mppid_view)
+PY_PACKAGES=("${PY_PACKAGES_FLIGHT[@]}" "${PY_PACKAGES_VIEW[@]}" sim/mavlink_vehicle tools/sysid_fit)
+PACKAGES_STAMP="$VENV/.mppid-packages.sha256"
+FLIGHT_PACKAGES_STAMP="$VENV/.mppid-flight-packages.sha256"
+
+packages_hash() {
+  local d
+  { printf '%s\n' "$@"
+    for d in "$@"; do cat "$d/pyproject.toml"; done
+    cat lcmtypes/setup.py lcmtypes/*/*.lcm
+    "$VENV/bin/python" -c 'import sys; print(sys.version)'
+  } | sha256sum | cut -d' ' -f1
+}
+# pip install -e each folder unless STAMP says these are installed as they are.
+install_packages() {
+  local stamp="$1" want d args=()
+  shift
+  want="$(packages_hash "$@")"
+  if [[ "$want" == "$(cat "$stamp" 2>/dev/null || true)" ]]; then
+    log "venv: packages unchanged ($*)"
+    return
+  fi
+  for d in "$@"; do args+=(-e "./$d"); done
+  log "pip install -e $*"
+  "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation "${args[@]}"
+  printf '%s\n' "$want" >"$stamp"
+}
+
+if ((do_venv)); then
+  if ((flight)) && [[ "$(packages_hash "${PY_PACKAGES[@]}")" != "$(cat "$PACKAGES_STAMP" 2>/dev/null || true)" ]]; then
+    flight_packages=("${PY_PACKAGES_FLIGHT[@]}")
+    ((view)) && flight_packages+=("${PY_PACKAGES_VIEW[@]}")
+    install_packages "$FLIGHT_PACKAGES_STAMP" "${flight_packages[@]}"
+  elif ((!flight)); then
+    install_packages "$PACKAGES_STAMP" "${PY_PACKAGES[@]}"
+  else
+    log "venv: packages unchanged"
   fi
 fi
 

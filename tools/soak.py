@@ -31,7 +31,6 @@ out-of-limit command, RSS growth above 1 MB after warm-up, a fault not recovered
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
 import math
 import os
@@ -43,9 +42,8 @@ import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
-from sitl_harness import paths  # noqa: E402
+from sitl_harness import paths
+from sitl_harness.sandbox import Sandbox, deathsig_setter, enter_private_network
 
 LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 RESTART_SEC = 1.0           # drivers/systemd/mppid.service: RestartSec=1s
@@ -59,25 +57,6 @@ MODE = {0: "normal", 1: "hold_plan", 2: "failsafe"}
 
 def mono() -> float:
     return time.monotonic()
-
-
-def pdeathsig():
-    try:
-        ctypes.CDLL("libc.so.6").prctl(1, signal.SIGKILL)
-    except OSError:
-        pass
-
-
-def enter_private_network():
-    """Re-executes the soak inside `unshare -n` (root, or a user namespace) with lo up and
-    multicast routed to it, once."""
-    if os.environ.get("MPPID_SOAK_NETNS") == "1":
-        subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
-        subprocess.run(["ip", "route", "add", "224.0.0.0/4", "dev", "lo"], check=True)
-        return
-    os.environ["MPPID_SOAK_NETNS"] = "1"
-    pre = ["unshare", "-n"] if os.geteuid() == 0 else ["unshare", "-r", "-n"]
-    os.execvp(pre[0], pre + ["--", sys.executable, os.path.abspath(__file__)] + sys.argv[1:])
 
 
 def rss_kb(pid: int) -> int | None:
@@ -95,7 +74,6 @@ class Soak:
         self.a = a
         self.out = Path(a.out).resolve()
         self.out.mkdir(parents=True, exist_ok=True)
-        paths.add_lcm_types_to_path()
         import lcm
         import mppi_lcm
         import yaml
@@ -120,9 +98,10 @@ class Soak:
         self.commands: list[tuple[float, int, int]] = []   # (t, seq, mode)
         self.bad_commands: list[dict] = []
         self.statuses: list[tuple[float, object]] = []
-        # Processes.
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.logs = {}
+        # Processes: in the soak's own network namespace (enter_private_network), SIGKILLed
+        # with it; the supervisor thread restarts mppid, so its children get that too.
+        self.sandbox = Sandbox(self.out, deathsig=signal.SIGKILL, any_thread=True)
+        self.procs = self.sandbox.procs
         self.incarnations: list[dict] = []   # mppid: start, pid, rss samples
         self.expected_exit = False
         self.proc_lock = threading.Lock()   # mppid's process: the fault and the supervisor
@@ -131,14 +110,6 @@ class Soak:
         self.t0 = mono()
 
     # ---- processes ------------------------------------------------------------------------
-    def spawn(self, name, cmd, prio=None):
-        log = self.logs.get(name) or open(self.out / f"{name}.log", "ab")
-        self.logs[name] = log
-        p = subprocess.Popen([str(c) for c in cmd], stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                             cwd=ROOT, preexec_fn=pdeathsig)
-        self.procs[name] = p
-        return p
-
     def start_mppid(self):
         cmd = [self.mppid_bin, "--config", paths.TASKS / f"{self.task}.yaml", "--lcm-url", LCM_URL, "--backend",
                "cpu", "--set", "daemon.channels.state=SOAK_STATE", "--stats"]
@@ -146,7 +117,7 @@ class Soak:
             cmd.append("--realtime")
         for kv in self.a.set:
             cmd += ["--set", kv]
-        p = self.spawn("mppid", cmd)
+        p = self.sandbox.spawn("mppid", cmd)
         self.incarnations.append({"start": mono() - self.t0, "pid": p.pid, "rss": []})
         return p
 
@@ -158,7 +129,7 @@ class Soak:
         # 80): the state source is short I/O work and must not be starved by the CPU hog or
         # by whatever else runs on the machine.
         prio = ["chrt", "-f", "85"] if self.rt() else []
-        return self.spawn("sim", prio + [self.sim_bin, "--scenario", self.scen_path, "--seed", self.a.seed, "--realtime",
+        return self.sandbox.spawn("sim", prio + [self.sim_bin, "--scenario", self.scen_path, "--seed", self.a.seed, "--realtime",
                                   "--lcm-url", LCM_URL, "--out", self.out, "--duration", seconds, "--quiet"])
 
     # ---- LCM: relay and watch --------------------------------------------------------------
@@ -228,7 +199,8 @@ class Soak:
         elif kind == "duplicates":
             ev["injected"] = self.inject_state("latest", copies=20)
         elif kind == "cpu_hog":
-            hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], preexec_fn=pdeathsig)
+            hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"],
+                                     preexec_fn=deathsig_setter(signal.SIGKILL))
                     for _ in range(os.cpu_count() or 2)]
             time.sleep(3.0)
             for h in hogs:
@@ -304,18 +276,9 @@ class Soak:
                 time.sleep(0.05)
         finally:
             self.stop.set()
-            for name in ("sim", "mppid"):
-                p = self.procs.get(name)
-                if p is not None and p.poll() is None:
-                    p.send_signal(signal.SIGCONT)
-                    p.terminate()
-                    try:
-                        p.wait(5)
-                    except subprocess.TimeoutExpired:
-                        p.kill()
-                        p.wait()
-            for f in self.logs.values():
-                f.close()
+            for name in ("sim", "mppid"):  # the world first: it must not see mppid go
+                self.sandbox.terminate(name, 5.0)
+            self.sandbox.stop()
         return self.report(seconds)
 
     # ---- report ----------------------------------------------------------------------------
@@ -431,7 +394,7 @@ def main() -> int:
     a = ap.parse_args()
     if a.minutes * 60 < WARMUP_S + 10:
         ap.error(f"--minutes must leave room for the {WARMUP_S:.0f} s warm-up and a fault")
-    enter_private_network()
+    enter_private_network("MPPID_SOAK_NETNS")
     signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
     return Soak(a).run()
 

@@ -3,12 +3,15 @@
 # over test/ (a real-time forest flight among them), a short soak with scheduled faults
 # (tools/soak, every fault once), the sanitizer and fuzzing stage (tools/sanitize.sh:
 # ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
-# then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user).
+# then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user) and the
+# package stage (tools/package-test.sh: the .debs built, installed into a clean Debian 12 root
+# and flown from there; the arm64 one's programs under qemu-user).
 # Exits non-zero when anything failed. This is what CI runs (.ci/run).
 #
 #   tools/test.sh [--quick] [setup.sh arguments]     e.g. tools/test.sh --no-apt
 #
-#   --quick   ctest and pytest only (no soak, no sanitizer builds, no fuzzing, no aarch64)
+#   --quick   ctest and pytest only (no soak, no sanitizer builds, no fuzzing, no aarch64,
+#             no package stage)
 #
 # Environment: CTEST_ARGS adds ctest arguments (e.g. "-L lcm"), PYTEST_ARGS pytest ones,
 # MPPID_SOAK_MINUTES the soak's length (2.5: the schedule's seven faults once each).
@@ -55,6 +58,8 @@ if ((!quick)); then
   tools/sanitize.sh || status=1
   echo "[test] tools/aarch64.sh"
   tools/aarch64.sh || status=1
+  echo "[test] tools/package-test.sh (MPPID_PACKAGE_STAGE=0 skips it)"
+  tools/package-test.sh || status=1
 fi
 
 if ((status == 0)); then echo "[test] all passed"; else echo "[test] FAILED" >&2; fi

@@ -127,64 +127,89 @@ __device__ __forceinline__ float team_term(const typename T::Params& p, const ty
 // 128 registers a thread.
 constexpr int kTeamMaxThreads = 512;
 
+// ---- rollout_chunked_team's block: its shared memory and its phases ------------------------
+
 template <class T, bool kKeep>
-__global__ void __launch_bounds__(kTeamMaxThreads, 1)
-    rollout_chunked_team(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
-                         float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
-                         int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
+struct TeamChunkedBlock {
   using Lay = TeamChunkLayout<T>;
-  constexpr int M = Lay::M, VNX = Lay::VNX, VNU = T::kVehicleNu, NU = Lay::NU, R = Lay::R, TERMS = Lay::TERMS;
-  constexpr int NB = Lay::NB, XS = Lay::XS, US = Lay::US, QS = Lay::QS;
+  static constexpr int M = Lay::M, VNX = Lay::VNX, VNU = T::kVehicleNu, NU = Lay::NU, R = Lay::R, TERMS = Lay::TERMS;
+  static constexpr int NB = Lay::NB, XS = Lay::XS, US = Lay::US, QS = Lay::QS;
   static_assert(M > 1 && M <= 32, "rollout_chunked_team is for teams");
-  extern __shared__ __align__(16) unsigned char smem[];
-  const Lay L(chunk, horizon);
   using Params = typename T::Params;
   using Vehicle = typename T::Vehicle;
 
-  const int tid = static_cast<int>(threadIdx.x), threads = static_cast<int>(blockDim.x);
-  const int warps = threads >> 5, warp = tid >> 5, lane = tid & 31;
-  const int k0 = static_cast<int>(blockIdx.x) * R;
-  const int valid = K - k0 < R ? K - k0 : R;
-  const int nchunks = (horizon + chunk - 1) / chunk;
+  const Input<T>* in;
+  const float* plan;
+  float* u_keep;
+  int K, horizon, chunk, substeps;
+  float dt;
+  int tid, threads, warps, warp, lane, k0, valid, nchunks;
+  float *xs, *us, *ccs, *gz, *tq, *xf, *qb;
+  std::uint32_t* hits;
+  std::uint32_t* mask;  // crashed vehicles, per rollout
+  int* from;            // first step to cost again, per rollout
+  int* scan;            // first step to look for crashes at, per rollout
+  int *slot, *pending;
+  const Params* p;   // staged in shared memory
+  const Params* gp;  // the cycle's parameters in global memory (the obstacles and their grid)
+  NoiseKey key;
 
-  stage_chunk_params<T>(in->params, smem + L.params);
-  float* xs = reinterpret_cast<float*>(smem + L.xs);
-  float* us = reinterpret_cast<float*>(smem + L.us);
-  float* ccs = reinterpret_cast<float*>(smem + L.cc);
-  float* gz = reinterpret_cast<float*>(smem + L.gz);
-  float* tq = reinterpret_cast<float*>(smem + L.tq);
-  auto* hits = reinterpret_cast<std::uint32_t*>(smem + L.hit);
-  float* xf = reinterpret_cast<float*>(smem + L.xf);
-  auto* mask = reinterpret_cast<std::uint32_t*>(smem + L.flags);  // crashed vehicles, per rollout
-  int* from = reinterpret_cast<int*>(mask + R);                   // first step to cost again
-  int* scan = from + R;                                           // first step to look for crashes at
-  int* slot = scan + R;
-  int* pending = slot + 32;
-  float* qb = reinterpret_cast<float*>(smem + L.qb);
-  for (int e = tid; e < R; e += threads) mask[e] = 0u;
-  for (int e = tid; e < chunk * R; e += threads) hits[e] = 0u;
-  if (lane == 0) slot[warp] = warp_slot();
-  if (tid < 2) pending[tid] = 0;
-  const NoiseKey key = in->key;
-  const Params& p = *reinterpret_cast<const Params*>(smem + L.params);
-  const Params& gp = in->params;
+  // Lays out shared memory, stages the parameters and clears the crash state (no barrier).
+  __device__ TeamChunkedBlock(const Input<T>* in_, const float* plan_, float* u_keep_, int K_, int horizon_,
+                              int chunk_, float dt_, int substeps_, unsigned char* smem)
+      : in(in_), plan(plan_), u_keep(u_keep_), K(K_), horizon(horizon_), chunk(chunk_), substeps(substeps_), dt(dt_) {
+    const Lay L(chunk, horizon);
+    tid = static_cast<int>(threadIdx.x);
+    threads = static_cast<int>(blockDim.x);
+    warps = threads >> 5;
+    warp = tid >> 5;
+    lane = tid & 31;
+    k0 = static_cast<int>(blockIdx.x) * R;
+    valid = K - k0 < R ? K - k0 : R;
+    nchunks = (horizon + chunk - 1) / chunk;
+    stage_chunk_params<T>(in->params, smem + L.params);
+    xs = reinterpret_cast<float*>(smem + L.xs);
+    us = reinterpret_cast<float*>(smem + L.us);
+    ccs = reinterpret_cast<float*>(smem + L.cc);
+    gz = reinterpret_cast<float*>(smem + L.gz);
+    tq = reinterpret_cast<float*>(smem + L.tq);
+    hits = reinterpret_cast<std::uint32_t*>(smem + L.hit);
+    xf = reinterpret_cast<float*>(smem + L.xf);
+    mask = reinterpret_cast<std::uint32_t*>(smem + L.flags);
+    from = reinterpret_cast<int*>(mask + R);
+    scan = from + R;
+    slot = scan + R;
+    pending = slot + 32;
+    qb = reinterpret_cast<float*>(smem + L.qb);
+    for (int e = tid; e < R; e += threads) mask[e] = 0u;
+    for (int e = tid; e < chunk * R; e += threads) hits[e] = 0u;
+    if (lane == 0) slot[warp] = warp_slot();
+    if (tid < 2) pending[tid] = 0;
+    key = in->key;
+    p = reinterpret_cast<const Params*>(smem + L.params);
+    gp = &in->params;
+  }
 
-  auto steps_of = [&](int ci) { return horizon - ci * chunk < chunk ? horizon - ci * chunk : chunk; };
-  auto xs_at = [&](int ci, int s, int r, int j) {
+  __device__ int steps_of(int ci) const { return horizon - ci * chunk < chunk ? horizon - ci * chunk : chunk; }
+  // Vehicle j of rollout r after step s of chunk ci; the rollout's control at that step; the control costs.
+  __device__ float* xs_at(int ci, int s, int r, int j) const {
     return xs + ((static_cast<std::size_t>((ci & 1) * chunk + s) * R + r) * M + j) * XS;
-  };
-  auto us_at = [&](int ci, int s, int r) { return us + (static_cast<std::size_t>((ci % 3) * chunk + s) * R + r) * US; };
-  auto cc_at = [&](int ci, int s) { return ccs + static_cast<std::size_t>((ci % 3) * chunk + s) * R; };
+  }
+  __device__ float* us_at(int ci, int s, int r) const {
+    return us + (static_cast<std::size_t>((ci % 3) * chunk + s) * R + r) * US;
+  }
+  __device__ float* cc_at(int ci, int s) const { return ccs + static_cast<std::size_t>((ci % 3) * chunk + s) * R; }
+  __device__ CostTable table() const { return {qb, QS, horizon}; }
 
   // Noise, first half: the normals of (step s of chunk ci, rollout r, block b).
-  auto normals = [&](int ci, int s, int r, int b) {
+  __device__ void normals(int ci, int s, int r, int b) const {
     float v[4];
     mppi::gaussian4(key, static_cast<std::uint32_t>(k0 + r), static_cast<std::uint32_t>(ci * chunk + s),
-              static_cast<std::uint32_t>(b), v);
+                    static_cast<std::uint32_t>(b), v);
     *reinterpret_cast<float4*>(gz + ((s * R + r) * NB + b) * 4) = make_float4(v[0], v[1], v[2], v[3]);
-  };
+  }
   // Second half: core's perturb and control cost on them.
-  auto perturbed = [&](int ci, int s, int r) {
+  __device__ void perturbed(int ci, int s, int r, const SamplerConstants<NU>& c) const {
     const int i = ci * chunk + s;
     const float* pu = plan + i * NU;
     float u[NU], du[NU];
@@ -195,20 +220,29 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
     for (int n = 0; n < NU; ++n) uo[n] = u[n];
     cc_at(ci, s)[r] = control_cost<NU>(c, pu, du);
     if (kKeep && r < valid) store_floats<NU>(u_keep + (static_cast<std::size_t>(i) * K + k0 + r) * NU, u);
-  };
+  }
+  // The noise of chunk ci by threads ct of nct: normals, a barrier (bar), perturb.
+  template <class Barrier>
+  __device__ void draw_chunk(int ci, int ct, int nct, Barrier&& bar, const SamplerConstants<NU>& c) const {
+    const int steps = steps_of(ci);
+    for (int e = ct; e < steps * R * NB; e += nct) normals(ci, e / (R * NB), e / NB % R, e % NB);
+    bar();
+    for (int e = ct; e < steps * R; e += nct) perturbed(ci, e / R, e % R, c);
+  }
+
   // Term `term` of (step s of chunk ci, rollout r), with the rollout's current crash mask.
-  auto term_item = [&](int ci, int s, int r, int term) {
+  __device__ void term_item(int ci, int s, int r, int term) const {
     const std::uint32_t m = mask[r];
     auto state = [&](int j) -> const float* {
       return ((m >> j) & 1u) != 0u ? xf + (r * M + j) * XS : xs_at(ci, s, r, j);
     };
     std::uint32_t bits = 0u;
     const float t = static_cast<float>(ci * chunk + s + 1) * dt;
-    tq[(s * R + r) * TERMS + term] = team_term<T>(p, gp, term, state, t, m, &bits);
+    tq[(s * R + r) * TERMS + term] = team_term<T>(*p, *gp, term, state, t, m, &bits);
     if (bits != 0u) atomicOr(&hits[s * R + r], bits);
-  };
+  }
   // The dynamics of chunk ci: lane r * M + j advances vehicle j of rollout r.
-  auto produce = [&](int ci) {
+  __device__ void produce(int ci) const {
     const int r = lane / M, j = lane % M;
     if (r >= R) return;
     float x[VNX];
@@ -223,125 +257,151 @@ __global__ void __launch_bounds__(kTeamMaxThreads, 1)
     for (int s = 0; s < steps; ++s) {
       float u[VNU];
       lds_vec<VNU>(us_at(ci, s, r) + j * VNU, u);
-      for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p.vehicle, x, u, h);  // Task::advance's step
+      for (int sub = 0; sub < substeps; ++sub) Vehicle::step(p->vehicle, x, u, h);  // Task::advance's step
       sts_vec<VNX>(xs_at(ci, s, r, j), x);
     }
-  };
-  // The noise of chunk ci by threads ct of nct: normals, a barrier, perturb (bar: the barrier).
-  auto draw_chunk = [&](int ci, int ct, int nct, auto&& bar) {
-    const int steps = steps_of(ci);
-    for (int e = ct; e < steps * R * NB; e += nct) normals(ci, e / (R * NB), e / NB % R, e % NB);
-    bar();
-    for (int e = ct; e < steps * R; e += nct) perturbed(ci, e / R, e % R);
-  };
+  }
 
   // Prologue: the noise of chunk 0; then the dynamics of chunk 0 beside the noise of chunk 1.
-  __syncthreads();
-  draw_chunk(0, tid, threads, [] { __syncthreads(); });
-  __syncthreads();
-  {
+  __device__ void prologue(const SamplerConstants<NU>& c) const {
+    __syncthreads();
+    draw_chunk(0, tid, threads, [] { __syncthreads(); }, c);
+    __syncthreads();
     const int producer = producer_warp(0, slot, warps);
     if (warp == producer) produce(0);
     if (nchunks > 1 && (warps == 1 || warp != producer)) {
       const Consumers con = consumers_of(producer);
-      draw_chunk(1, con.ct, con.nct, [con] { consumer_sync(con.nct); });
-    }
-  }
-  __syncthreads();
-  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
-
-  for (int ci = 0; ci < nchunks; ++ci) {
-    const int producer = ci + 1 < nchunks ? producer_warp(ci + 1, slot, warps) : -1;
-    if (warp == producer) produce(ci + 1);
-    if (warps == 1 || warp != producer) {
-      const auto [ct, nct] = consumers_of(producer);
-      const int steps = steps_of(ci);
-      const int n_terms = steps * R * TERMS;
-      const bool draw_next = ci + 2 < nchunks;
-      const int steps2 = draw_next ? steps_of(ci + 2) : 0;
-      // ---- the terms of chunk ci (vehicles frozen before it); the normals of chunk ci + 2 ----
-      for (int e = ct; e < n_terms + steps2 * R * NB; e += nct) {
-        if (e < n_terms) {
-          const int s = e / (R * TERMS), r = e / TERMS % R, term = e % TERMS;
-          if (r < valid) term_item(ci, s, r, term);
-        } else {
-          const int f = e - n_terms;
-          normals(ci + 2, f / (R * NB), f / NB % R, f % NB);
-        }
-      }
-      if (ct < R) scan[ct] = 0;
-      consumer_sync(nct);
-      // ---- rounds: the first new crash of each rollout freezes its vehicles, the steps
-      // after it are costed again; the perturbed controls of chunk ci + 2 beside round 0 ----
-      for (int round = 0;; ++round) {
-        if (ct < R && ct < valid) {
-          const int r = ct;
-          const std::uint32_t m = mask[r];
-          int s = scan[r];
-          std::uint32_t fresh = 0u;
-          for (; s < steps; ++s) {
-            fresh = hits[s * R + r] & ~m;
-            if (fresh != 0u) break;
-          }
-          if (fresh != 0u) {
-            for (int j = 0; j < M; ++j) {
-              if (((fresh >> j) & 1u) == 0u) continue;
-              const float* src = xs_at(ci, s, r, j);
-              for (int n = 0; n < XS; ++n) xf[(r * M + j) * XS + n] = src[n];
-            }
-            mask[r] = m | fresh;
-            from[r] = s + 1;
-            scan[r] = s + 1;
-            for (int s2 = s + 1; s2 < steps; ++s2) hits[s2 * R + r] = 0u;
-            if (s + 1 < steps) pending[round & 1] = 1;
-          } else {
-            from[r] = steps;
-            scan[r] = steps;
-          }
-        } else if (ct < R) {
-          from[ct] = steps;
-        }
-        if (ct == R) pending[(round + 1) & 1] = 0;
-        if (round == 0 && draw_next)
-          for (int e = ct; e < steps2 * R; e += nct) perturbed(ci + 2, e / R, e % R);
-        consumer_sync(nct);
-        if (pending[round & 1] == 0) break;
-        for (int e = ct; e < n_terms; e += nct) {
-          const int s = e / (R * TERMS), r = e / TERMS % R, term = e % TERMS;
-          if (r < valid && s >= from[r]) term_item(ci, s, r, term);
-        }
-        consumer_sync(nct);
-      }
-      // ---- q per (step, rollout): the terms in running_with's order, plus the control cost ----
-      for (int e = ct; e < steps * R; e += nct) {
-        const int s = e / R, r = e % R;
-        if (r < valid) {
-          const float* tv = tq + (s * R + r) * TERMS;
-          float q = 0.0f;
-          for (int n = 0; n < TERMS; ++n) q += tv[n];
-          qb[(ci * chunk + s) * QS + r] = sanitize_cost(q + cc_at(ci, s)[r]);
-        }
-        hits[s * R + r] = 0u;
-      }
+      draw_chunk(1, con.ct, con.nct, [con] { consumer_sync(con.nct); }, c);
     }
     __syncthreads();
   }
-  griddep_launch_dependents();
 
-  // ---- terminal cost and the cost-to-go, one thread per rollout; the block's weighted sums ----
-  const CostTable table{qb, QS, horizon};
-  if (tid < valid) {
+  // The consumers' part of iteration ci: the terms of chunk ci beside the normals of chunk
+  // ci + 2; the crash rounds beside its perturbed controls; the running costs.
+  __device__ void consume(int ci, int producer, const SamplerConstants<NU>& c) const {
+    const Consumers con = consumers_of(producer);
+    terms_and_normals(ci, con);
+    consumer_sync(con.nct);
+    crash_rounds(ci, con, c);
+    running_costs(ci, con);
+  }
+  // The terms of chunk ci (vehicles frozen before it); the normals of chunk ci + 2.
+  __device__ void terms_and_normals(int ci, const Consumers& con) const {
+    const int n_terms = steps_of(ci) * R * TERMS;
+    const int steps2 = ci + 2 < nchunks ? steps_of(ci + 2) : 0;
+    for (int e = con.ct; e < n_terms + steps2 * R * NB; e += con.nct) {
+      if (e < n_terms) {
+        const int s = e / (R * TERMS), r = e / TERMS % R, term = e % TERMS;
+        if (r < valid) term_item(ci, s, r, term);
+      } else {
+        const int f = e - n_terms;
+        normals(ci + 2, f / (R * NB), f / NB % R, f % NB);
+      }
+    }
+    if (con.ct < R) scan[con.ct] = 0;
+  }
+  // Rounds: the first new crash of each rollout freezes its vehicles and the steps after it
+  // are costed again, until no rollout has one; the perturbed controls of chunk ci + 2 beside
+  // round 0.
+  __device__ void crash_rounds(int ci, const Consumers& con, const SamplerConstants<NU>& c) const {
+    const int steps = steps_of(ci), n_terms = steps * R * TERMS;
+    const int steps2 = ci + 2 < nchunks ? steps_of(ci + 2) : 0;
+    for (int round = 0;; ++round) {
+      if (con.ct < R) freeze_at_next_crash(ci, con.ct, round);
+      if (con.ct == R) pending[(round + 1) & 1] = 0;
+      if (round == 0)
+        for (int e = con.ct; e < steps2 * R; e += con.nct) perturbed(ci + 2, e / R, e % R, c);
+      consumer_sync(con.nct);
+      if (pending[round & 1] == 0) break;
+      for (int e = con.ct; e < n_terms; e += con.nct) {
+        const int s = e / (R * TERMS), r = e / TERMS % R, term = e % TERMS;
+        if (r < valid && s >= from[r]) term_item(ci, s, r, term);
+      }
+      consumer_sync(con.nct);
+    }
+  }
+  // Rollout r: its first crash in chunk ci from scan[r] on with a vehicle not yet frozen
+  // freezes those vehicles there; from[r]: the first step to cost again (none: the chunk's end).
+  __device__ void freeze_at_next_crash(int ci, int r, int round) const {
+    const int steps = steps_of(ci);
+    if (r >= valid) {
+      from[r] = steps;
+      return;
+    }
+    const std::uint32_t m = mask[r];
+    int s = scan[r];
+    std::uint32_t fresh = 0u;
+    for (; s < steps; ++s) {
+      fresh = hits[s * R + r] & ~m;
+      if (fresh != 0u) break;
+    }
+    if (fresh == 0u) {
+      from[r] = steps;
+      scan[r] = steps;
+      return;
+    }
+    for (int j = 0; j < M; ++j) {
+      if (((fresh >> j) & 1u) == 0u) continue;
+      const float* src = xs_at(ci, s, r, j);
+      for (int n = 0; n < XS; ++n) xf[(r * M + j) * XS + n] = src[n];
+    }
+    mask[r] = m | fresh;
+    from[r] = s + 1;
+    scan[r] = s + 1;
+    for (int s2 = s + 1; s2 < steps; ++s2) hits[s2 * R + r] = 0u;
+    if (s + 1 < steps) pending[round & 1] = 1;
+  }
+  // q per (step, rollout): the terms in running_with's order, plus the control cost.
+  __device__ void running_costs(int ci, const Consumers& con) const {
+    for (int e = con.ct; e < steps_of(ci) * R; e += con.nct) {
+      const int s = e / R, r = e % R;
+      if (r < valid) {
+        const float* tv = tq + (s * R + r) * TERMS;
+        float q = 0.0f;
+        for (int n = 0; n < TERMS; ++n) q += tv[n];
+        qb[(ci * chunk + s) * QS + r] = sanitize_cost(q + cc_at(ci, s)[r]);
+      }
+      hits[s * R + r] = 0u;
+    }
+  }
+
+  // One thread per rollout: the terminal cost at its vehicles' last (or frozen) states and its
+  // cost-to-go; S~(tau_0) and the crash flag to global memory.
+  __device__ void cost_to_go_per_rollout(float* S0, unsigned char* crashed_out) const {
+    if (tid >= valid) return;
     const int r = tid, last = nchunks - 1;
     const std::uint32_t m = mask[r];
     float x[M * VNX];
     for (int j = 0; j < M; ++j)
       lds_vec<VNX>(((m >> j) & 1u) != 0u ? xf + (r * M + j) * XS : xs_at(last, steps_of(last) - 1, r, j), x + j * VNX);
-    S0[k0 + r] = cost_to_go(table, r, T::terminal(p, x));
+    S0[k0 + r] = cost_to_go(table(), r, T::terminal(*p, x));
     crashed_out[k0 + r] = m != 0u;
   }
+};
+
+// S0: S~(tau_0,k), the first row of the cost-to-go (for rollout_costs()); sums: BlockSums.
+// kKeep: the controls are kept in u_keep for the update (else drawn again there).
+template <class T, bool kKeep>
+__global__ void __launch_bounds__(kTeamMaxThreads, 1)
+    rollout_chunked_team(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
+                         float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
+                         int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
+  extern __shared__ __align__(16) unsigned char smem[];
+  const TeamChunkedBlock<T, kKeep> b(in, plan, u_keep, K, horizon, chunk, dt, substeps, smem);
+  b.prologue(c);
+  griddep_wait();  // launched behind the device's obstacle grid: it is packed now
+  for (int ci = 0; ci < b.nchunks; ++ci) {
+    // The producer of chunk ci + 1 (none after the last chunk: every warp consumes).
+    const int producer = ci + 1 < b.nchunks ? producer_warp(ci + 1, b.slot, b.warps) : -1;
+    if (b.warp == producer) b.produce(ci + 1);
+    if (b.warps == 1 || b.warp != producer) b.consume(ci, producer, c);
+    __syncthreads();
+  }
+  griddep_launch_dependents();
+  b.cost_to_go_per_rollout(S0, crashed_out);
   __syncthreads();
-  weigh_block<NU, kKeep>(table, BlockRollouts{k0, valid, K}, plan, u_keep, key, c, inv_lambda, trajectory,
-                         [&](int r) { return mask[r] != 0u; }, BlockSums{pmin, part, stats_part});
+  weigh_block<T::kNu, kKeep>(b.table(), BlockRollouts{b.k0, b.valid, K}, plan, u_keep, b.key, c, inv_lambda,
+                             trajectory, [&](int r) { return b.mask[r] != 0u; }, BlockSums{pmin, part, stats_part});
 }
 
 }  // namespace mppi::cuda_detail

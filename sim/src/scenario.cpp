@@ -75,26 +75,27 @@ namespace {
 Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed);
 }  // namespace
 
-Scenario load_scenario(const std::string& path, std::uint64_t seed) {
-  const Context c{path};
+namespace {
+// The YAML document `load` reads, parsed as a scenario; a YAML error names `label`'s file.
+template <class Load>
+Scenario load_with(const std::string& label, std::uint64_t seed, Load load) {
+  const Context c{label};
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
+    root = load();
   } catch (const YAML::Exception& e) {
     c.fail("file", e.what());
   }
   return parse_scenario(c, root, seed);
 }
+}  // namespace
+
+Scenario load_scenario(const std::string& path, std::uint64_t seed) {
+  return load_with(path, seed, [&] { return YAML::LoadFile(path); });
+}
 
 Scenario load_scenario_text(const std::string& text, const std::string& label, std::uint64_t seed) {
-  const Context c{label};
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    c.fail("file", e.what());
-  }
-  return parse_scenario(c, root, seed);
+  return load_with(label, seed, [&] { return YAML::Load(text); });
 }
 
 namespace {

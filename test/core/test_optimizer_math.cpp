@@ -351,25 +351,35 @@ void check_update_matches(Weighting weighting) {
 TEST(UpdateLaw, TrajectoryWeightingMatchesRecomputation) { check_update_matches(Weighting::kTrajectory); }
 TEST(UpdateLaw, CostToGoWeightingMatchesRecomputation) { check_update_matches(Weighting::kCostToGo); }
 
-TEST(UpdateLaw, EssMatchesWeightsOnForestTask) {
+// Three cycles of the forest task from a cruising state under each weighting:
+// check(settings, optimizer, cycle, stats) after each cycle, done(optimizer) after the third.
+template <class Check, class Done>
+void three_forest_cycles(int rollouts, int horizon, Check check, Done done) {
   for (Weighting wt : {Weighting::kCostToGo, Weighting::kTrajectory}) {
-    MppiSettings s = forest_settings(200, 25);
+    MppiSettings s = forest_settings(rollouts, horizon);
     s.weighting = wt;
     auto mppi = make_mppi<QuadrotorForest>(s);
     const auto p = testing::forest_with_two_trunks();
     const auto x = testing::cruising_state();
     float u[4];
-    for (int c = 0; c < 3; ++c) {
-      const UpdateStats st = mppi->iterate(x.data(), p, u);
-      const auto costs = mppi->backend().rollout_costs();
-      const auto w = weights_of(std::vector<double>(costs.begin(), costs.end()), s.lambda);
-      const double ess = ess_of(w);
-      EXPECT_NEAR(st.ess, ess, 1e-4 * ess) << "cycle " << c;
-      EXPECT_GE(st.ess, 1.0f);
-      EXPECT_LE(st.ess, 200.0f);
-      EXPECT_LT(st.ess, 199.0f) << "costs differ, so the weights are not uniform";
-    }
+    for (int c = 0; c < 3; ++c) check(s, *mppi, c, mppi->iterate(x.data(), p, u));
+    done(s, *mppi);
   }
+}
+
+TEST(UpdateLaw, EssMatchesWeightsOnForestTask) {
+  three_forest_cycles(
+      200, 25,
+      [](const MppiSettings& s, auto& mppi, int c, const UpdateStats& st) {
+        const auto costs = mppi.backend().rollout_costs();
+        const auto w = weights_of(std::vector<double>(costs.begin(), costs.end()), s.lambda);
+        const double ess = ess_of(w);
+        EXPECT_NEAR(st.ess, ess, 1e-4 * ess) << "cycle " << c;
+        EXPECT_GE(st.ess, 1.0f);
+        EXPECT_LE(st.ess, 200.0f);
+        EXPECT_LT(st.ess, 199.0f) << "costs differ, so the weights are not uniform";
+      },
+      [](const MppiSettings&, auto&) {});
 }
 
 // ---------------------------------------------------------------------------------------
@@ -617,20 +627,12 @@ TEST(Improvement, ClosedLoopReachesTheHoldPoint) {
 TEST(Weightings, BothFiniteAndDifferent) {
   std::vector<float> plans[2];
   int n = 0;
-  for (Weighting wt : {Weighting::kCostToGo, Weighting::kTrajectory}) {
-    MppiSettings s = forest_settings(128, 30);
-    s.weighting = wt;
-    auto mppi = make_mppi<QuadrotorForest>(s);
-    const auto p = testing::forest_with_two_trunks();
-    const auto x = testing::cruising_state();
-    float u[4];
-    for (int c = 0; c < 3; ++c) {
-      const auto& st = mppi->iterate(x.data(), p, u);
-      EXPECT_TRUE(st.finite);
-    }
-    expect_inside_limits(mppi->plan(), s);
-    plans[n++] = mppi->plan();
-  }
+  three_forest_cycles(
+      128, 30, [](const MppiSettings&, auto&, int, const UpdateStats& st) { EXPECT_TRUE(st.finite); },
+      [&](const MppiSettings& s, auto& mppi) {
+        expect_inside_limits(mppi.plan(), s);
+        plans[n++] = mppi.plan();
+      });
   EXPECT_NE(plans[0], plans[1]);
 }
 

@@ -11,33 +11,24 @@ namespace {
 
 // Known-answer vectors of Philox4x32-10 published with Random123 (kat_vectors).
 TEST(Philox, KnownAnswers) {
+  struct Kat {
+    r123::Philox4x32::ctr_type ctr;
+    r123::Philox4x32::key_type key;
+    r123::Philox4x32::ctr_type expected;
+  };
+  const Kat kats[] = {
+      {{{0u, 0u, 0u, 0u}}, {{0u, 0u}}, {{0x6627e8d5u, 0xe169c58du, 0xbc57ac4cu, 0x9b00dbd8u}}},
+      {{{0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}},
+       {{0xffffffffu, 0xffffffffu}},
+       {{0x408f276du, 0x41c83b0eu, 0xa20bc7c6u, 0x6d5451fdu}}},
+      {{{0x243f6a88u, 0x85a308d3u, 0x13198a2eu, 0x03707344u}},
+       {{0xa4093822u, 0x299f31d0u}},
+       {{0xd16cfe09u, 0x94fdccebu, 0x5001e420u, 0x24126ea1u}}},
+  };
   r123::Philox4x32 gen;
-  {
-    const r123::Philox4x32::ctr_type c = {{0u, 0u, 0u, 0u}};
-    const r123::Philox4x32::key_type k = {{0u, 0u}};
-    const auto r = gen(c, k);
-    EXPECT_EQ(r[0], 0x6627e8d5u);
-    EXPECT_EQ(r[1], 0xe169c58du);
-    EXPECT_EQ(r[2], 0xbc57ac4cu);
-    EXPECT_EQ(r[3], 0x9b00dbd8u);
-  }
-  {
-    const r123::Philox4x32::ctr_type c = {{0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}};
-    const r123::Philox4x32::key_type k = {{0xffffffffu, 0xffffffffu}};
-    const auto r = gen(c, k);
-    EXPECT_EQ(r[0], 0x408f276du);
-    EXPECT_EQ(r[1], 0x41c83b0eu);
-    EXPECT_EQ(r[2], 0xa20bc7c6u);
-    EXPECT_EQ(r[3], 0x6d5451fdu);
-  }
-  {
-    const r123::Philox4x32::ctr_type c = {{0x243f6a88u, 0x85a308d3u, 0x13198a2eu, 0x03707344u}};
-    const r123::Philox4x32::key_type k = {{0xa4093822u, 0x299f31d0u}};
-    const auto r = gen(c, k);
-    EXPECT_EQ(r[0], 0xd16cfe09u);
-    EXPECT_EQ(r[1], 0x94fdccebu);
-    EXPECT_EQ(r[2], 0x5001e420u);
-    EXPECT_EQ(r[3], 0x24126ea1u);
+  for (const Kat& kat : kats) {
+    const auto r = gen(kat.ctr, kat.key);
+    for (int i = 0; i < 4; ++i) EXPECT_EQ(r[i], kat.expected[i]) << "word " << i << " of ctr " << kat.ctr[0];
   }
 }
 

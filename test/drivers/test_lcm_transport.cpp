@@ -25,7 +25,8 @@ using transport::Mode;
 
 namespace {
 
-bool wait_until(const std::function<bool()>& cond, int timeout_ms = 2000) {
+// A hang guard, not a timing assertion: generous enough for a sanitizer build on a loaded machine.
+bool wait_until(const std::function<bool()>& cond, int timeout_ms = 30000) {
   const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
   while (std::chrono::steady_clock::now() < end) {
     if (cond()) return true;
@@ -76,14 +77,20 @@ mppi_lcm::vehicle_state_t state_msg(std::int64_t seq, float fill = 0.0f) {
   return m;
 }
 
+// The loop on a fake clock behind the memq transport. It ages a state from its receipt on
+// that clock (daemon.latency.state_time: receive): a state's wall-clock time in flight inside
+// this process, long on a loaded machine under a sanitizer, is no part of what these tests
+// check (test/rt/test_inbox_time.cpp and test_latency.cpp test the sample-time age), and with
+// it a state received between two cycles is fresh by construction.
 struct LcmRig {
-  explicit LcmRig(Controller* c = nullptr)
-      : tx("memq://", {}, &clock, 4096), inbox(expect()) {
+  explicit LcmRig(Controller* c = nullptr) : tx("memq://", {}, &clock, 4096), inbox(expect()) {
     tx.lcm().subscribe("MPPI_COMMAND", &Listener::on_command, &listener);
     tx.lcm().subscribe("MPPI_STATUS", &Listener::on_status, &listener);
     EXPECT_EQ(tx.self_test(), "");
     controller = c ? c : &fake;
-    loop = std::make_unique<daemon::ControlLoop>(controller, &clock, &tx, &inbox, daemon::LoopSettings{});
+    daemon::LoopSettings settings;
+    settings.latency.use_sample_time = false;
+    loop = std::make_unique<daemon::ControlLoop>(controller, &clock, &tx, &inbox, settings);
     tx.start(&inbox);
   }
   ~LcmRig() { tx.stop(); }
@@ -279,6 +286,9 @@ TEST(LcmTransport, StopReturnsPromptlyOnAQuietBus) {
   EXPECT_LT(ms, 1000);
 }
 
+// The real controller (the forest task's MPPI on the CPU) behind the LCM transport: each
+// state that arrives over memq is answered by a normal command, finite and inside the limits,
+// that names it (LcmRig: on the fake clock every state is fresh, whatever the load).
 TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
   app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"});
@@ -290,10 +300,14 @@ TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
     r.cycle();
   }
   ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 20; }));
+  EXPECT_EQ(r.loop->counters().stale_cycles.load(), 0);
+  EXPECT_EQ(r.loop->counters().commands_normal.load(), 20);
   EXPECT_FALSE(r.listener.any_nonfinite());
   std::lock_guard<std::mutex> l(r.listener.mu);
-  for (const auto& c : r.listener.commands) {
+  for (std::size_t i = 0; i < r.listener.commands.size(); ++i) {
+    const auto& c = r.listener.commands[i];
     EXPECT_EQ(c.mode, mppi_lcm::command_t::MODE_NORMAL);
+    EXPECT_EQ(c.state_seq, static_cast<std::int64_t>(i + 1)) << "each command answers its state";
     ASSERT_EQ(c.n, 4);
     for (float v : c.u) {
       EXPECT_GE(v, 0.0f);
@@ -302,10 +316,13 @@ TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
   }
 }
 
+// A simulator's side of lock-step: publish state k, then tick k, wait for the command
+// answering state k, step. The pace is the ticks' alone: the loop answers each tick at once,
+// exactly once, and never waits on a clock (its clock is a fake that records every wait), so
+// a simulator runs as fast as the two can exchange messages. The wall time of the 100 steps
+// (2 s of sim time) is recorded, not asserted: a sanitizer on a loaded machine is slower.
 TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
-  // A simulator's side of lock-step: publish state k, then tick k, wait for the command
-  // answering state k, step. 100 steps of 20 ms sim time must take well under 2 s.
-  rt::MonotonicClock clock;
+  FakeClock clock;
   transport::LcmTransport tx("memq://", {}, &clock, 4096);
   transport::Inbox inbox(LcmRig::expect());
   Listener listener;
@@ -334,13 +351,15 @@ TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
   stop = true;
   runner.join();
   tx.stop();
-  EXPECT_LT(secs, 2.0);  // 2 s of sim time
+  RecordProperty("wall_ms_for_2s_of_sim", static_cast<int>(secs * 1000.0));
+  EXPECT_TRUE(clock.sleeps.empty()) << "the lock-step loop waited on its clock";
   std::lock_guard<std::mutex> l(listener.mu);
   ASSERT_EQ(listener.commands.size(), 100u);  // exactly one per tick
   for (std::size_t i = 0; i < listener.commands.size(); ++i) {
     EXPECT_EQ(listener.commands[i].state_seq, static_cast<std::int64_t>(i + 1));
     EXPECT_EQ(listener.commands[i].mode, mppi_lcm::command_t::MODE_NORMAL);
   }
+  EXPECT_EQ(loop.counters().repeated_ticks.load(), 0);
   EXPECT_EQ(loop.timing_total().misses, 0);
 }
 

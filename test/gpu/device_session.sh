@@ -13,12 +13,12 @@ mkdir -p "$OUT"
 export LD_LIBRARY_PATH=$PWD/.devdeps/lib:${LD_LIBRARY_PATH:-}
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
-row() {  # label, env..., -- timing-tool arguments
+row() {  # label, mppi.cuda.FIELD=VALUE..., -- timing-tool arguments
   local label=$1; shift
-  local envs=()
-  while [ "$1" != "--" ]; do envs+=("$1"); shift; done
+  local sets=()
+  while [ "$1" != "--" ]; do sets+=(--set "$1"); shift; done
   shift
-  env "${envs[@]}" "$TM" "$@" 2>&1 | grep -E '"task"|timing:' | sed -E "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 us p99 \4 us/"
+  "$TM" "${sets[@]}" "$@" 2>&1 | grep -E '"task"|timing:' | sed -E "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 us p99 \4 us/"
 }
 if [ "${1:-}" = build-ftz ]; then
   # The flushed-denormal variant (no LCM: only the tests and the timing tool); may run beside
@@ -32,25 +32,25 @@ TM="$B/bin/mppid-gpu-timing"
 [ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 {
   stamp "variants (median of the iterations)"
-  row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
-  row "chunked " MPPID_CUDA_KERNEL=chunked -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
+  row "lanes   " mppi.cuda.kernel=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
+  row "chunked " mppi.cuda.kernel=chunked -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
   for c in 2 4 8 16; do
     for w in 2 4 8; do
-      row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 300 quadrotor_forest:16384
+      row "chunk=$c warps=$w" mppi.cuda.chunk_steps=$c mppi.cuda.warps=$w -- --iters 300 quadrotor_forest:16384
     done
   done
-  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 300 quadrotor_forest:16384 quadrotor_rate_forest:16384
-  row "keep    " MPPID_CUDA_NOISE=keep -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
-  row "redraw  " MPPID_CUDA_NOISE=redraw -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
+  row "redraw  " mppi.cuda.controls=redraw -- --iters 300 quadrotor_forest:16384 quadrotor_rate_forest:16384
+  row "keep    " mppi.cuda.controls=keep -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
+  row "redraw  " mppi.cuda.controls=redraw -- --iters 100 quadrotor_forest:65536 quadrotor_forest:262144
   row "chunked " -- --iters 300 quadrotor_track:16384 quadrotor_rate_track:16384 racecar_ellipse:16384 cartpole_swingup:16384
-  row "lanes   " MPPID_CUDA_KERNEL=lanes -- --iters 30 --warmup 3 quadrotor_forest:1048576
+  row "lanes   " mppi.cuda.kernel=lanes -- --iters 30 --warmup 3 quadrotor_forest:1048576
   for c in 2 4 8; do
     for w in 4 8; do
-      row "chunk=$c warps=$w" MPPID_CUDA_CHUNK=$c MPPID_CUDA_WARPS=$w -- --iters 30 --warmup 3 quadrotor_forest:1048576
+      row "chunk=$c warps=$w" mppi.cuda.chunk_steps=$c mppi.cuda.warps=$w -- --iters 30 --warmup 3 quadrotor_forest:1048576
     done
   done
   row "chunked " -- --iters 1000 quadrotor_forest:16384 quadrotor_forest:1024 quadrotor_forest:256
-  row "graph off" MPPID_CUDA_GRAPH=0 -- --iters 500 quadrotor_forest:16384
+  row "graph off" mppi.cuda.graph=false -- --iters 500 quadrotor_forest:16384
   stamp "variants done"
 } 2>&1 | tee "$OUT/variants.txt"
 

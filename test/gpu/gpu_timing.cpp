@@ -1,7 +1,11 @@
 // mppid-gpu-timing: time one full CUDA update (state and plan up, sample, roll out, weigh,
 // update, plan down) with steady_clock around RolloutBackend::update(), and print JSON.
-//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench] CASE...
+//   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench]
+//                    [--set mppi.cuda.FIELD=VALUE]... CASE...
 //   CASE = task:K[:T]
+// --set mppi.cuda.FIELD=VALUE: the backend's launch settings (mppi/gpu/cuda_settings.hpp, as a
+// task file's `mppi.cuda` section: kernel, chunk_steps, warps, noise, controls, lanes, grid,
+// pdl, graph), e.g. --set mppi.cuda.kernel=lanes --set mppi.cuda.grid=host.
 // --period-us P: one update every P us on an absolute grid (the daemon's 20,000 at 50 Hz), the
 // GPU and this thread idle in between, instead of back to back: the tail an idle GPU adds.
 // --scene test (default): the parity tests' scenario (test/gpu/scenarios.hpp: 32 obstacles, the
@@ -9,7 +13,7 @@
 // --scene bench: mppid-bench's (the task file's settings, the offline forest with the 32
 // obstacles nearest the start, the plan after 20 cycles of the controller): the update alone
 // where mppid-bench times the whole Controller::iterate, so the two can be compared.
-// Forest tasks build the obstacle grid on the device, inside update() (MPPID_CUDA_GRID=host:
+// Forest tasks build the obstacle grid on the device, inside update() (mppi.cuda.grid=host:
 // the host's grid, built once here, as the optimizer would).
 // e.g. mppid-gpu-timing quadrotor_forest:16384 team9_forest:6000 team3_forest:1200
 #include <algorithm>
@@ -23,6 +27,8 @@
 #include <string>
 #include <thread>
 #include <vector>
+
+#include <yaml-cpp/yaml.h>
 
 #include "mppi/app/config.hpp"
 #include "mppi/controller.hpp"
@@ -78,9 +84,9 @@ Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, const typ
 
 // The parity tests' scenario.
 template <class T>
-Result time_test_scene(int k, int t, int iters, int warmup, bool grid, int period_us) {
+Result time_test_scene(int k, int t, const mppi::CudaSettings& cuda, int iters, int warmup, bool grid, int period_us) {
   auto sc = mppi::gpu_test::make_scenario<T>(k, t);
-  auto backend = mppi::make_cuda_backend<T>(sc.settings);
+  auto backend = mppi::make_cuda_backend<T>(sc.settings, cuda);
   const auto plan = mppi::gpu_test::initial_plan(sc.settings);
   if constexpr (T::kUsesPath) {
     if (grid) mppi::gpu_test::prepare(sc, plan);  // the host's obstacle grid (unless built on the device)
@@ -91,10 +97,12 @@ Result time_test_scene(int k, int t, int iters, int warmup, bool grid, int perio
 
 // mppid-bench's scene, through the controller mppid-bench times.
 template <class T>
-Result time_bench_scene(const std::string& task, int k, int t, int iters, int warmup, int period_us) {
-  const auto cfg = mppi::app::load_config(mppi::app::default_config_path(task),
-                                          {"backend=cuda", "mppi.rollouts=" + std::to_string(k),
-                                           "mppi.horizon=" + std::to_string(t)});
+Result time_bench_scene(const std::string& task, int k, int t, const std::vector<std::string>& sets, int iters,
+                        int warmup, int period_us) {
+  std::vector<std::string> overrides = {"backend=cuda", "mppi.rollouts=" + std::to_string(k),
+                                        "mppi.horizon=" + std::to_string(t)};
+  overrides.insert(overrides.end(), sets.begin(), sets.end());
+  const auto cfg = mppi::app::load_config(mppi::app::default_config_path(task), overrides);
   auto c = mppi::app::make_controller(cfg);
   auto* tc = dynamic_cast<mppi::TaskController<T>*>(c.get());
   if (tc == nullptr) throw std::runtime_error(task + ": not an MPPI controller");
@@ -111,51 +119,79 @@ Result time_bench_scene(const std::string& task, int k, int t, int iters, int wa
 
 }  // namespace
 
-int main(int argc, char** argv) {
+namespace {
+
+struct Options {
   int iters = 1000, warmup = 50, period_us = 0;
   bool grid = true;
   std::string scene = "test";
+  std::vector<std::string> sets;  // "mppi.cuda.FIELD=VALUE"
+  YAML::Node cuda{YAML::NodeType::Map};  // the same as the mppi.cuda section
   std::vector<std::string> cases;
+};
+
+// The command line; 0 to go on, else the exit status.
+int parse(int argc, char** argv, Options* o) {
   for (int a = 1; a < argc; ++a) {
     const std::string arg = argv[a];
-    if (arg == "--iters" && a + 1 < argc) iters = std::atoi(argv[++a]);
-    else if (arg == "--warmup" && a + 1 < argc) warmup = std::atoi(argv[++a]);
-    else if (arg == "--no-grid") grid = false;
-    else if (arg == "--period-us" && a + 1 < argc) period_us = std::atoi(argv[++a]);
-    else if (arg == "--scene" && a + 1 < argc) scene = argv[++a];
+    if (arg == "--iters" && a + 1 < argc) o->iters = std::atoi(argv[++a]);
+    else if (arg == "--warmup" && a + 1 < argc) o->warmup = std::atoi(argv[++a]);
+    else if (arg == "--no-grid") o->grid = false;
+    else if (arg == "--period-us" && a + 1 < argc) o->period_us = std::atoi(argv[++a]);
+    else if (arg == "--scene" && a + 1 < argc) o->scene = argv[++a];
+    else if (arg == "--set" && a + 1 < argc) o->sets.push_back(argv[++a]);
     else if (arg == "--help" || arg == "-h") {
       std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench] "
-                  "task:K[:T]...\n");
-      return 0;
-    } else cases.push_back(arg);
+                  "[--set mppi.cuda.FIELD=VALUE]... task:K[:T]...\n");
+      return -1;
+    } else o->cases.push_back(arg);
   }
-  if (cases.empty()) cases = {"quadrotor_forest:16384", "team9_forest:6000", "team3_forest:1200"};
-  if (iters < 1) iters = 1;
-  if (scene != "test" && scene != "bench") {
-    std::fprintf(stderr, "mppid-gpu-timing: --scene: test or bench, got %s\n", scene.c_str());
+  if (o->cases.empty()) o->cases = {"quadrotor_forest:16384", "team9_forest:6000", "team3_forest:1200"};
+  if (o->iters < 1) o->iters = 1;
+  if (o->scene != "test" && o->scene != "bench") {
+    std::fprintf(stderr, "mppid-gpu-timing: --scene: test or bench, got %s\n", o->scene.c_str());
     return 2;
   }
+  const std::string prefix = "mppi.cuda.";
+  for (const auto& set : o->sets) {
+    const auto eq = set.find('=');
+    if (set.rfind(prefix, 0) != 0 || eq == std::string::npos || eq == prefix.size()) {
+      std::fprintf(stderr, "mppid-gpu-timing: --set %s: expected mppi.cuda.FIELD=VALUE\n", set.c_str());
+      return 2;
+    }
+    o->cuda[set.substr(prefix.size(), eq - prefix.size())] = YAML::Load(set.substr(eq + 1));
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  if (const int rc = parse(argc, argv, &o); rc != 0) return rc < 0 ? 0 : rc;
   std::string why;
   if (!mppi::cuda_device_available(&why)) {
     std::fprintf(stderr, "mppid-gpu-timing: no CUDA device: %s\n", why.c_str());
     return 2;
   }
-  const char* graph = std::getenv("MPPID_CUDA_GRAPH");
-  // The kernel choices set from the environment (cuda_backend_impl.cuh), to label the run.
-  std::string env;
-  for (const char* k : {"MPPID_CUDA_KERNEL", "MPPID_CUDA_CHUNK", "MPPID_CUDA_WARPS", "MPPID_CUDA_NOISE", "MPPID_CUDA_LANES",
-                        "MPPID_CUDA_GRID"})
-    if (const char* v = std::getenv(k)) env += std::string(env.empty() ? "" : " ") + k + "=" + v;
+  // The launch settings asked for (every task: the same fields), to label the run.
+  mppi::CudaSettings asked;
+  try {
+    asked = mppi::app::read_cuda_settings(o.cuda, o.cases.empty() ? "" : o.cases.front().substr(0, o.cases.front().find(':')));
+  } catch (const mppi::app::ConfigError& e) {
+    std::fprintf(stderr, "mppid-gpu-timing: %s\n", e.what());
+    return 2;
+  }
   char date[32];
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   std::printf("{\n  \"device\": \"%s\",\n  \"date\": \"%s\",\n  \"cuda_graph\": %s,\n  \"iterations\": %d,\n"
-              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"scene\": \"%s\",\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"env\": \"%s\",\n  \"results\": [",
-              mppi::cuda_device_name().c_str(), date, graph != nullptr && std::string(graph) == "0" ? "false" : "true",
-              iters, warmup, period_us, scene.c_str(), grid ? "true" : "false", env.c_str());
+              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"scene\": \"%s\",\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"cuda\": \"%s\",\n  \"results\": [",
+              mppi::cuda_device_name().c_str(), date, asked.graph ? "true" : "false", o.iters, o.warmup, o.period_us,
+              o.scene.c_str(), o.grid ? "true" : "false", mppi::describe(asked).c_str());
   bool first = true;
   int status = 0;
-  for (const auto& c : cases) {
+  for (const auto& c : o.cases) {
     const auto p1 = c.find(':');
     const std::string name = c.substr(0, p1);
     const auto p2 = p1 == std::string::npos ? std::string::npos : c.find(':', p1 + 1);
@@ -165,8 +201,10 @@ int main(int argc, char** argv) {
     try {
       const bool known = mppi::visit_task(name, [&](auto tag) {
         using T = typename decltype(tag)::type;
-        r = scene == "bench" ? time_bench_scene<T>(name, k, t, iters, warmup, period_us)
-                             : time_test_scene<T>(k, t, iters, warmup, grid, period_us);
+        r = o.scene == "bench"
+                ? time_bench_scene<T>(name, k, t, o.sets, o.iters, o.warmup, o.period_us)
+                : time_test_scene<T>(k, t, mppi::app::read_cuda_settings(o.cuda, name), o.iters, o.warmup, o.grid,
+                                     o.period_us);
         r.task = name;
         r.k = k;
         r.t = t;

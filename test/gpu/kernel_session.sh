@@ -13,7 +13,7 @@
 #   timing       the issue's targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
 #   timing2      the same again (the spread between two runs)
 #   timing-ftz   the same on the FTZ build
-#   variants     block shapes and kernels at K = 16,384 (env overrides)
+#   variants     block shapes and kernels at K = 16,384 (mppi.cuda settings)
 #   ncu          Nsight Compute, full set with per-instruction samples, on the chunked kernel
 #   ncu-others   Nsight Compute on one update's kernels of each other target ($OUT/ncu-*.txt)
 #   sass         cuobjdump -sass of the quadrotor_forest instantiation ($OUT/sass.txt.gz)
@@ -55,12 +55,12 @@ timing() {  # build dir, label
   } >"$OUT/timing-$2.json" 2>&1
   sed -nE 's/^ *\{"task": "([^"]*)", "rollouts": ([0-9]*), .*"median_us": ([0-9.]*), "p99_us": ([0-9.]*).*/'"$2"' \1 K=\2 median \3 p99 \4/p' "$OUT/timing-$2.json"
 }
-row() {  # label, env..., -- timing args
+row() {  # label, mppi.cuda.FIELD=VALUE..., -- timing args
   local label=$1; shift
-  local envs=()
-  while [ "$1" != "--" ]; do envs+=("$1"); shift; done
+  local sets=()
+  while [ "$1" != "--" ]; do sets+=(--set "$1"); shift; done
   shift
-  env "${envs[@]}" "$B/bin/mppid-gpu-timing" "$@" 2>&1 |
+  "$B/bin/mppid-gpu-timing" "${sets[@]}" "$@" 2>&1 |
     sed -nE "s/^ *\{\"task\": \"([^\"]*)\", \"rollouts\": ([0-9]*), .*\"median_us\": ([0-9.]*), \"p99_us\": ([0-9.]*).*/$label \1 K=\2 median \3 p99 \4/p"
 }
 
@@ -113,41 +113,39 @@ for step in "$@"; do
     timing-fmad) timing "$B-fmad" fmad ;;
     variants)
       {
-        for c in 16 20; do row "team chunk=$c" MPPID_CUDA_CHUNK=$c -- --iters 1000 team3_forest:1200; done
-        row "lanes (v4 path)" MPPID_CUDA_KERNEL=lanes -- --iters 1000 quadrotor_forest:16384 team3_forest:1200
-        row "lanes redraw" MPPID_CUDA_NOISE=redraw -- --iters 100 --warmup 5 quadrotor_forest:1048576
+        for c in 16 20; do row "team chunk=$c" mppi.cuda.chunk_steps=$c -- --iters 1000 team3_forest:1200; done
+        row "lanes (v4 path)" mppi.cuda.kernel=lanes -- --iters 1000 quadrotor_forest:16384 team3_forest:1200
+        row "lanes redraw" mppi.cuda.controls=redraw -- --iters 100 --warmup 5 quadrotor_forest:1048576
       } | tee "$OUT/variants.txt" ;;
     ncu)
       command -v ncu >/dev/null || { echo "no ncu"; continue; }
-      export MPPID_CUDA_GRAPH=0
-      TM="$B/bin/mppid-gpu-timing"
+      TM=("$B/bin/mppid-gpu-timing" --set mppi.cuda.graph=false)
       NCU_CASE=${NCU_CASE:-quadrotor_forest:16384}
       stamp "ncu full, chunked $NCU_CASE"
       timeout 200 ncu --clock-control none --kernel-name regex:rollout_chunked --launch-skip 6 --launch-count 1 --set full \
-        --import-source no -f -o "$OUT/ncu-chunked" "$TM" --iters 3 --warmup 5 "$NCU_CASE" >"$OUT/ncu-chunked.log" 2>&1
+        --import-source no -f -o "$OUT/ncu-chunked" "${TM[@]}" --iters 3 --warmup 5 "$NCU_CASE" >"$OUT/ncu-chunked.log" 2>&1
       ncu --import "$OUT/ncu-chunked.ncu-rep" --page details >"$OUT/ncu-chunked.txt" 2>&1
       ncu --import "$OUT/ncu-chunked.ncu-rep" --page source --csv --print-source sass 2>/dev/null | gzip >"$OUT/ncu-chunked-sass.csv.gz"
       rm -f "$OUT/ncu-chunked.ncu-rep"
       grep -E "Duration|Executed Ipc A|Issue Slots Busy|No Eligible|Warp Cycles Per Issued|Executed Instructions  |Achieved Active Warps" "$OUT/ncu-chunked.txt"
       [ -n "${NCU_SKIP_4096:-}" ] || timeout 150 ncu --clock-control none --kernel-name regex:rollout_chunked --launch-skip 6 --launch-count 1 \
         --section SpeedOfLight --section WarpStateStats --section SourceCounters --section InstructionStats \
-        --import-source no -f -o "$OUT/ncu-4096" "$TM" --iters 3 --warmup 5 quadrotor_forest:4096 >"$OUT/ncu-4096.log" 2>&1
+        --import-source no -f -o "$OUT/ncu-4096" "${TM[@]}" --iters 3 --warmup 5 quadrotor_forest:4096 >"$OUT/ncu-4096.log" 2>&1
       ncu --import "$OUT/ncu-4096.ncu-rep" --page details >"$OUT/ncu-4096.txt" 2>&1
       ncu --import "$OUT/ncu-4096.ncu-rep" --page source --csv --print-source sass 2>/dev/null | gzip >"$OUT/ncu-4096-sass.csv.gz"
       rm -f "$OUT/ncu-4096.ncu-rep"
       grep -E "Duration|Executed Instructions  " "$OUT/ncu-4096.txt" | sed 's/^/4096: /'
       stamp "ncu done" ;;
     ncu-others)
-      export MPPID_CUDA_GRAPH=0
-      TM="$B/bin/mppid-gpu-timing"
+      TM=("$B/bin/mppid-gpu-timing" --set mppi.cuda.graph=false)
       stamp "ncu others"
       secs=(--section SpeedOfLight --section LaunchStats --section Occupancy --section WarpStateStats --section InstructionStats --section SchedulerStats)
       for c in quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000 quadrotor_forest:4096; do
         echo "==== $c"
-        timeout 120 ncu --clock-control none --launch-skip 12 --launch-count 5 "${secs[@]}" "$TM" --iters 3 --warmup 8 "$c"
+        timeout 120 ncu --clock-control none --launch-skip 12 --launch-count 5 "${secs[@]}" "${TM[@]}" --iters 3 --warmup 8 "$c"
       done >"$OUT/ncu-others.txt" 2>&1
       echo "==== quadrotor_forest:1048576" >>"$OUT/ncu-others.txt"
-      timeout 150 ncu --clock-control none --launch-skip 4 --launch-count 4 "${secs[@]}" "$TM" --iters 1 --warmup 2 quadrotor_forest:1048576 \
+      timeout 150 ncu --clock-control none --launch-skip 4 --launch-count 4 "${secs[@]}" "${TM[@]}" --iters 1 --warmup 2 quadrotor_forest:1048576 \
         >>"$OUT/ncu-others.txt" 2>&1
       grep -E '^  [a-zA-Z_].*\(|^==== |Duration|Executed Ipc A|Issue Slots Busy|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Executed Instructions  |Registers Per|Block Limit (Sh|Reg)|Theoretical Occ' \
         "$OUT/ncu-chunked.txt" "$OUT/ncu-others.txt" | sed 's/^[^:]*://' >"$OUT/ncu-summary.txt"

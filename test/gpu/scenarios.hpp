@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mppi/gpu/cuda_settings.hpp"
 #include "mppi/settings.hpp"
 #include "mppi/tasks.hpp"
 
@@ -16,6 +17,7 @@ namespace mppi::gpu_test {
 template <class T>
 struct Scenario {
   MppiSettings settings;
+  CudaSettings cuda;  // mppi.cuda: the launch choices (default: the backend's own)
   typename T::Params params{};
   std::vector<float> x0;
 };

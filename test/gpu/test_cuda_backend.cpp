@@ -123,7 +123,7 @@ void check_parity(const char* name, Weighting weighting, Tweak&& tweak) {
   MppiSettings scalar = sc.settings;
   scalar.simd = "off";  // the reference: one sample at a time, the C library's math
   CpuBackend<T> cpu(scalar);
-  auto gpu = make_cuda_backend<T>(sc.settings);
+  auto gpu = make_cuda_backend<T>(sc.settings, sc.cuda);
   auto plan = gpu_test::initial_plan(sc.settings);
   Errors worst;
   for (std::uint32_t cycle = 0; cycle < 3; ++cycle) {
@@ -152,6 +152,22 @@ void check_parity(const char* name, Weighting weighting, Tweak&& tweak) {
 template <class T>
 void check_parity(const char* name, Weighting weighting) {
   check_parity<T>(name, weighting, [](gpu_test::Scenario<T>&) {});
+}
+
+// mppi.cuda settings for a test: a tweak that sets them, and the common ones.
+template <class T>
+auto with_cuda(const CudaSettings& cuda) {
+  return [cuda](gpu_test::Scenario<T>& sc) { sc.cuda = cuda; };
+}
+CudaSettings kernel_of(CudaSettings::Kernel k) {
+  CudaSettings c;
+  c.kernel = k;
+  return c;
+}
+CudaSettings lanes_of(int lanes) {
+  CudaSettings c = kernel_of(CudaSettings::Kernel::kLanes);
+  c.lanes = lanes;
+  return c;
 }
 
 #define PARITY_TEST(T, name)                                                   \
@@ -207,6 +223,7 @@ TEST(CudaParity, EveryTaskFileAsFlown) {
       using T = typename decltype(tag)::type;
       check_parity<T>(name.c_str(), cfg.mppi.weighting, [&](gpu_test::Scenario<T>& sc) {
         sc.settings = cfg.mppi;
+        sc.cuda = cfg.cuda_launch;
         sc.settings.threads = 0;
         for (const auto& [key, value] : cfg.params) {
           const std::string err = set_task_param<T>(sc.params, key, value);
@@ -225,8 +242,9 @@ TEST(CudaParity, EveryTaskFileAsFlown) {
 // them: the chunked kernel, the lane kernel at one lane per rollout and the team kernel search
 // the cell's list (the CPU the same grid); the costs must stay the CPU's.
 template <class T>
-void check_parity_with_grid(const char* name) {
-  check_parity<T>(name, Weighting::kCostToGo, [name](gpu_test::Scenario<T>& sc) {
+void check_parity_with_grid(const char* name, const CudaSettings& cuda = {}) {
+  check_parity<T>(name, Weighting::kCostToGo, [name, cuda](gpu_test::Scenario<T>& sc) {
+    sc.cuda = cuda;
     gpu_test::prepare(sc, gpu_test::initial_plan(sc.settings));
     ASSERT_GT(sc.params.cost.obstacle_grid.nx, 0) << name << ": the scenario should have a grid";
     const auto& g = sc.params.cost.obstacle_grid;
@@ -241,27 +259,33 @@ TEST(CudaParity, ObstacleGridEveryKernel) {
   check_parity_with_grid<RateQuadrotorForest>("quadrotor_rate_forest+grid");
   check_parity_with_grid<Team3Forest>("team3_forest+grid");
   check_parity_with_grid<Team9Forest>("team9_forest+grid");
-  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
-  for (const char* lanes : {"1", "2"}) {
-    setenv("MPPID_CUDA_LANES", lanes, 1);
-    check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, lane kernel");
-  }
-  unsetenv("MPPID_CUDA_LANES");
-  unsetenv("MPPID_CUDA_KERNEL");
+  for (int lanes : {1, 2}) check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, lane kernel", lanes_of(lanes));
+}
+
+// The launch switches of mppi.cuda: the update launched stream by stream (no graph), plain
+// launches (no PDL), the host's obstacle grid: the same costs and plan.
+TEST(CudaParity, LaunchSwitches) {
+  SKIP_WITHOUT_CUDA();
+  CudaSettings plain;
+  plain.graph = false;
+  plain.pdl = CudaSettings::Switch::kOff;
+  check_parity<QuadrotorForest>("quadrotor_forest, no graph, no PDL", Weighting::kCostToGo,
+                                with_cuda<QuadrotorForest>(plain));
+  check_parity<Team9Forest>("team9_forest, no graph, no PDL", Weighting::kCostToGo, with_cuda<Team9Forest>(plain));
+  CudaSettings host;
+  host.grid = CudaSettings::Grid::kHost;
+  check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, the host's grid", host);
+  check_parity_with_grid<Team3Forest>("team3_forest+grid, the host's grid", host);
 }
 
 // The lane kernel (rollout_single, the fallback when the chunked kernel's shared memory does
 // not fit) splits the obstacle loop over G lanes per rollout; every G must give the CPU's costs.
 TEST(CudaParity, QuadrotorForestEveryLaneCount) {
   SKIP_WITHOUT_CUDA();
-  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
-  for (const char* lanes : {"1", "2", "4", "8"}) {
-    setenv("MPPID_CUDA_LANES", lanes, 1);
-    std::printf("[parity] lane kernel, lanes per rollout %s\n", lanes);
-    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo);
+  for (int lanes : {1, 2, 4, 8}) {
+    std::printf("[parity] lane kernel, lanes per rollout %d\n", lanes);
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo, with_cuda<QuadrotorForest>(lanes_of(lanes)));
   }
-  unsetenv("MPPID_CUDA_LANES");
-  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // The chunked kernel (the default for single vehicles) at chunk lengths that do and do not
@@ -269,49 +293,45 @@ TEST(CudaParity, QuadrotorForestEveryLaneCount) {
 // fix-up and the buffers' hand-over between chunks must give the CPU's costs every time.
 TEST(CudaParity, ChunkedKernelEveryChunkAndWarpCount) {
   SKIP_WITHOUT_CUDA();
-  for (const char* chunk : {"1", "7", "16", "100"}) {
-    setenv("MPPID_CUDA_CHUNK", chunk, 1);
-    std::printf("[parity] chunked kernel, %s steps a chunk\n", chunk);
-    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo);
-    check_parity<RateQuadrotorTrack>("quadrotor_rate_track", Weighting::kCostToGo);
+  for (int chunk : {1, 7, 16, 100}) {
+    std::printf("[parity] chunked kernel, %d steps a chunk\n", chunk);
+    CudaSettings cuda;
+    cuda.chunk_steps = chunk;
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kCostToGo, with_cuda<QuadrotorForest>(cuda));
+    check_parity<RateQuadrotorTrack>("quadrotor_rate_track", Weighting::kCostToGo, with_cuda<RateQuadrotorTrack>(cuda));
   }
-  unsetenv("MPPID_CUDA_CHUNK");
   // The update draws the noise again here (the default keeps the controls at this size).
-  setenv("MPPID_CUDA_NOISE", "redraw", 1);
-  for (const char* warps : {"1", "2", "8"}) {
-    setenv("MPPID_CUDA_WARPS", warps, 1);
-    std::printf("[parity] chunked kernel, %s warps a block, noise drawn again for the update\n", warps);
-    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kTrajectory);
+  for (int warps : {1, 2, 8}) {
+    std::printf("[parity] chunked kernel, %d warps a block, noise drawn again for the update\n", warps);
+    CudaSettings cuda;
+    cuda.warps = warps;
+    cuda.controls = CudaSettings::Controls::kRedraw;
+    check_parity<QuadrotorForest>("quadrotor_forest", Weighting::kTrajectory, with_cuda<QuadrotorForest>(cuda));
   }
-  unsetenv("MPPID_CUDA_WARPS");
-  unsetenv("MPPID_CUDA_NOISE");
 }
 
 // The chunked team kernel (the default for teams) at chunk lengths that do and do not divide
 // the horizon and 1, 2 and 8 warps a block; and the lane kernel (rollout_team) it replaced.
 TEST(CudaParity, ChunkedTeamKernelEveryChunkAndWarpCount) {
   SKIP_WITHOUT_CUDA();
-  for (const char* chunk : {"1", "7", "100"}) {
-    setenv("MPPID_CUDA_CHUNK", chunk, 1);
-    std::printf("[parity] chunked team kernel, %s steps a chunk\n", chunk);
-    check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo);
+  for (int chunk : {1, 7, 100}) {
+    std::printf("[parity] chunked team kernel, %d steps a chunk\n", chunk);
+    CudaSettings cuda;
+    cuda.chunk_steps = chunk;
+    check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo, with_cuda<Team3Forest>(cuda));
   }
-  unsetenv("MPPID_CUDA_CHUNK");
   // team9 flies the lane kernel by default; the chunked one, forced, must agree as well.
-  setenv("MPPID_CUDA_KERNEL", "chunked", 1);
-  setenv("MPPID_CUDA_NOISE", "redraw", 1);
-  for (const char* warps : {"1", "2", "4"}) {
-    setenv("MPPID_CUDA_WARPS", warps, 1);
-    std::printf("[parity] chunked team kernel, %s warps a block, noise drawn again for the update\n", warps);
-    check_parity<Team9Forest>("team9_forest", Weighting::kTrajectory);
+  for (int warps : {1, 2, 4}) {
+    std::printf("[parity] chunked team kernel, %d warps a block, noise drawn again for the update\n", warps);
+    CudaSettings cuda = kernel_of(CudaSettings::Kernel::kChunked);
+    cuda.warps = warps;
+    cuda.controls = CudaSettings::Controls::kRedraw;
+    check_parity<Team9Forest>("team9_forest", Weighting::kTrajectory, with_cuda<Team9Forest>(cuda));
   }
-  unsetenv("MPPID_CUDA_WARPS");
-  unsetenv("MPPID_CUDA_NOISE");
-  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
   std::printf("[parity] team lane kernel\n");
-  check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo);
-  check_parity<Team9Forest>("team9_forest", Weighting::kCostToGo);
-  unsetenv("MPPID_CUDA_KERNEL");
+  const CudaSettings lanes = kernel_of(CudaSettings::Kernel::kLanes);
+  check_parity<Team3Forest>("team3_forest", Weighting::kCostToGo, with_cuda<Team3Forest>(lanes));
+  check_parity<Team9Forest>("team9_forest", Weighting::kCostToGo, with_cuda<Team9Forest>(lanes));
 }
 
 // A crowded team3 (vehicles 0.35 m apart, crashes charged at every later step): many crashes,
@@ -330,15 +350,18 @@ TEST(CudaParity, ChunkedTeamKernelCrowdedCrashes) {
     sc.params.cost.crash_sticky = 1.0f;
     sc.settings.sigma.assign(12, 60.0f);
   };
-  for (const char* chunk : {"3", "4"}) {
-    setenv("MPPID_CUDA_CHUNK", chunk, 1);
-    std::printf("[parity] chunked team kernel, crowded, %s steps a chunk\n", chunk);
-    check_parity<Team3Forest>("team3_forest crowded", Weighting::kCostToGo, crowd);
+  for (int chunk : {3, 4}) {
+    std::printf("[parity] chunked team kernel, crowded, %d steps a chunk\n", chunk);
+    check_parity<Team3Forest>("team3_forest crowded", Weighting::kCostToGo, [&](gpu_test::Scenario<Team3Forest>& sc) {
+      crowd(sc);
+      sc.cuda.chunk_steps = chunk;
+    });
   }
-  unsetenv("MPPID_CUDA_CHUNK");
-  setenv("MPPID_CUDA_KERNEL", "lanes", 1);
-  check_parity<Team3Forest>("team3_forest crowded, lane kernel", Weighting::kCostToGo, crowd);
-  unsetenv("MPPID_CUDA_KERNEL");
+  check_parity<Team3Forest>("team3_forest crowded, lane kernel", Weighting::kCostToGo,
+                            [&](gpu_test::Scenario<Team3Forest>& sc) {
+                              crowd(sc);
+                              sc.cuda.kernel = CudaSettings::Kernel::kLanes;
+                            });
 }
 
 // Rollout counts that leave the last block of 32 partly empty, and many blocks to combine
@@ -346,12 +369,11 @@ TEST(CudaParity, ChunkedTeamKernelCrowdedCrashes) {
 // kernel).
 TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
   SKIP_WITHOUT_CUDA();
-  setenv("MPPID_CUDA_KERNEL", "chunked", 1);
   for (int k : {1, 33, 1000, 40000}) {
     auto sc = gpu_test::make_scenario<QuadrotorForest>(k, 100);
     sc.settings.seed = 7;
     CpuBackend<QuadrotorForest> cpu(sc.settings);
-    auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings);
+    auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings, kernel_of(CudaSettings::Kernel::kChunked));
     auto plan = gpu_test::initial_plan(sc.settings);
     const Errors e = compare_one_update(sc, cpu, *gpu, 5, &plan);
     std::printf("[parity] chunked K=%d: %d bit-identical, %d over tolerance, plan err %.3g\n", k, e.identical,
@@ -359,7 +381,6 @@ TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
     EXPECT_LE(e.over_tolerance, kDivergentFraction * k + 1) << "K=" << k;
     EXPECT_LE(e.plan, kPlanTolerance) << "K=" << k;
   }
-  unsetenv("MPPID_CUDA_KERNEL");
 }
 
 // Several cycles through the optimizer (update, shift) on a fresh backend each run.
@@ -484,6 +505,14 @@ TEST(CudaErrors, SettingsThatDoNotMatchTheTaskAreAClearError) {
   sc.settings.sigma.pop_back();
   const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings); });
   EXPECT_NE(msg.find("sigma"), std::string::npos) << msg;
+}
+
+TEST(CudaErrors, LaunchSettingsOutOfRangeAreAClearError) {
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(1024, 100);
+  CudaSettings cuda;
+  cuda.warps = 9;  // rollout_chunked has at most 8
+  const std::string msg = error_of([&] { make_cuda_backend<QuadrotorForest>(sc.settings, cuda); });
+  EXPECT_NE(msg.find("mppi.cuda.warps"), std::string::npos) << msg;
 }
 
 TEST(CudaBackend, ReportsItsMemoryAndName) {

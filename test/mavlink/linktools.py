@@ -15,6 +15,10 @@ from pymavlink import mavutil  # noqa: E402
 from mavtest import LCM_URL  # noqa: E402
 from mppi_mavlink import lcm_types  # noqa: E402
 
+# The simulated autopilot as an ArduCopter that lets mppid fly (GUID_OPTIONS bit 3: attitude
+# targets in GUIDED) with the hover thrust mppid's vehicle file says.
+ARDUPILOT = dict(autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
+
 
 class UdpTap:
     """vehicle --udp--> 127.0.0.1:listen  [tap]  --udp--> 127.0.0.1:forward (the bridge).

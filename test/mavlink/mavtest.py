@@ -25,9 +25,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-BRIDGE_DIR = ROOT / "drivers" / "mavlink"
-VEHICLE_DIR = ROOT / "sim" / "mavlink_vehicle"
-sys.path[:0] = [str(BRIDGE_DIR), str(VEHICLE_DIR), str(Path(__file__).resolve().parent)]
+# The bridge (mppi_mavlink) and the simulated autopilot (mavlink_vehicle) are the packages
+# installed into the venv (tools/setup.sh); the tests' own modules are beside this file.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 CLONE_NEWNET = 0x40000000
@@ -49,6 +49,16 @@ def find_binary(name: str) -> Path | None:
         if p.is_file() and os.access(p, os.X_OK):
             return p
     return None
+
+
+@pytest.fixture
+def tap(request, netns):
+    """A UDP tap between the bridge and the simulated autopilot (linktools.UdpTap) on the test
+    module's TAP_PORT, keeping every datagram."""
+    from linktools import UdpTap
+    t = UdpTap(request.module.TAP_PORT, 14540)
+    yield t
+    t.close()
 
 
 @pytest.fixture
@@ -85,8 +95,6 @@ class Procs:
 
     def start(self, name, cmd, env_extra=None):
         env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join([str(BRIDGE_DIR), str(VEHICLE_DIR)] +
-                                            ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
         env["PYTHONUNBUFFERED"] = "1"
         env.update(env_extra or {})
         log = open(self.out / f"{name}.log", "ab")

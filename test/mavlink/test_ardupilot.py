@@ -13,20 +13,12 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from mavtest import wait_for  # noqa: E402
-from linktools import StandInController, UdpTap  # noqa: E402
+from linktools import ARDUPILOT, StandInController  # noqa: E402
 from mavchain import Chain  # noqa: E402
 
 pytestmark = pytest.mark.timeout(90)
 mavlink = mavutil.mavlink
 TAP_PORT = 14561
-ARDUPILOT = dict(autopilot="ardupilot", vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
-
-
-@pytest.fixture
-def tap(netns):
-    t = UdpTap(TAP_PORT, 14540)
-    yield t
-    t.close()
 
 
 def _chain(procs, tmp_path, bridge_sets=(), vehicle_args=(), **kw):

@@ -7,18 +7,11 @@ import time
 import pytest
 
 from mavtest import wait_for
-from linktools import StandInController, UdpTap, all_finite
+from linktools import StandInController, all_finite
 from mavchain import Chain
 
 pytestmark = pytest.mark.timeout(90)
 TAP_PORT = 14560
-
-
-@pytest.fixture
-def tap(netns):
-    t = UdpTap(TAP_PORT, 14540)
-    yield t
-    t.close()
 
 
 def _chain(procs, tmp_path, **kw):

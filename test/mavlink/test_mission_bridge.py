@@ -41,3 +41,27 @@ def test_mission_tool_flies_the_simulated_ardupilot_through_the_bridge(netns, pr
     st = c.status()
     assert st["dropped_disengaged"] > 20 and st["setpoints_sent"] > 300 and not st["engaged"]
     c.stop_vehicle()
+
+
+def test_mission_tool_refuses_a_mppid_running_another_task(netns, procs, tmp_path):
+    """A forest mission against a mppid running the tracking task (its controller_status_t
+    says which; stood in for here) would be a straight line through the trees: the tool refuses
+    before anything is armed, naming both tasks."""
+    from linktools import StandInController
+    ctl = StandInController()  # status: task quadrotor_rate_track
+    try:
+        c = Chain(procs, tmp_path, autopilot="ardupilot", mppid=False,
+                  vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"]).start()
+        mission = {**MISSION, "task": "quadrotor_rate_forest"}
+        (tmp_path / "m.yaml").write_text(yaml.safe_dump(mission))
+        env_path = f"{ROOT / 'drivers' / 'mission'}:{ROOT / 'drivers' / 'mavlink'}"
+        p = subprocess.run([PYTHON, "-m", "mppi_mission", "fly", str(tmp_path / "m.yaml"), "--bridge", c.sock,
+                            "--lcm-url", LCM_URL, "--out", str(tmp_path)], capture_output=True, text=True,
+                           timeout=60, env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"}, cwd=ROOT)
+        summary = json.loads((tmp_path / "mission_summary.json").read_text())
+        assert p.returncode == 1, p.stdout + p.stderr
+        assert "'quadrotor_rate_track'" in summary["outcome"] and "'quadrotor_rate_forest'" in summary["outcome"]
+        assert not c.events("armed") and not c.status()["armed"]
+        c.stop_vehicle()
+    finally:
+        ctl.close()

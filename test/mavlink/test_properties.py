@@ -9,7 +9,7 @@ input, with no process and no network:
   into Bridge._on_mavlink: it never raises, and every vehicle_state_t it publishes is 13
   finite values with a unit quaternion (w >= 0);
 * command -> MAVLink: generated command_t (any kind, mode, size, values) and damaged
-  encodings into Bridge._on_command: it never raises, and the bytes it puts on the wire,
+  encodings into Bridge's forwarding (Forwarder.on_command): it never raises, and the bytes it puts on the wire,
   parsed afresh, are exactly one SET_ATTITUDE_TARGET per command the gate lets through,
   finite, thrust in [0, 1], rates the command's in FRD.
 
@@ -182,9 +182,9 @@ def make_bridge():
     b = bridge_mod.Bridge(s, lcm_url="memq://")
     b.lc = FakeLcm()
     b.wire = Wire()
-    b.mav = FakeConn(b.wire)
-    b.link_up, b.target_system, b.param_refusal = True, 1, ""
-    b.last_status_mono, b.last_status_healthy = bridge_mod.mono_us(), True
+    b.link.mav = FakeConn(b.wire)
+    b.ap.link_up, b.ap.target_system, b.checks.param_refusal = True, 1, ""
+    b.fwd.last_status_mono, b.fwd.last_status_healthy = bridge_mod.mono_us(), True
     return b
 
 
@@ -298,12 +298,12 @@ commands = st.tuples(st.sampled_from([2, 2, 2, 1, 3, -7]), st.sampled_from([0, 0
 def test_command_to_mavlink_is_finite_clamped_and_gated(cmds):
     b = make_bridge()
     mppi_lcm = b.mppi_lcm
-    b.state_times[7] = (bridge_mod.mono_us(), 0)  # a state the bridge published just now
+    b.states.times[7] = (bridge_mod.mono_us(), 0)  # a state the bridge published just now
     expected = []
     for i, (kind, mode, u, known, how, at, byte) in enumerate(cmds):
         data = command_bytes(mppi_lcm, 100 + i, kind, mode, u, 7 if known else 12345)
         bad = damaged(data, how, at, byte)
-        b._on_command("MPPI_COMMAND", bad)  # must not raise
+        b.fwd.on_command("MPPI_COMMAND", bad)  # must not raise
         if bad != data:
             continue  # damaged bytes may still decode to something; the checks below cover what goes out
         if kind == 2 and len(u) >= 4 and mode in (0, 1) and known and all(math.isfinite(c) for c in u[:4]):
@@ -326,8 +326,8 @@ def test_command_to_mavlink_is_finite_clamped_and_gated(cmds):
 def test_garbage_on_the_command_and_status_channels_is_counted(data):
     b = make_bridge()
     before = dict(b.counters)
-    b._on_command("MPPI_COMMAND", data)
-    b._on_status("MPPI_STATUS", data)
+    b.fwd.on_command("MPPI_COMMAND", data)
+    b.fwd.on_status("MPPI_STATUS", data)
     assert b.wire.messages() == []
     assert sum(b.counters.values()) == sum(before.values()) + 1  # the command: counted once, by reason
     assert b.counters["setpoints_sent"] == 0

@@ -1,7 +1,2 @@
-"""The mission tool's tests: its package on the path (drivers/mission, and drivers/mavlink
-for the LCM types and the bridge's control client)."""
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path[:0] = [str(ROOT / "drivers" / "mission"), str(ROOT / "drivers" / "mavlink")]
+"""The mission tool's tests: they import its package (mppi_mission, drivers/mission) and the
+bridge's (mppi_mavlink) as installed into the venv by tools/setup.sh."""

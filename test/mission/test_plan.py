@@ -1,5 +1,6 @@
 """Mission files: a bad one is refused naming the field; legs become the steps the runner
 flies (a curve starts at its point nearest the vehicle, reached along a line when far)."""
+import math
 from pathlib import Path
 
 import numpy as np
@@ -82,3 +83,64 @@ def test_the_forest_is_seeded_and_clear_of_start_and_goal():
     assert a == b and a != c and len(a) > 10
     assert min(np.hypot(x, y) - r for x, y, r in a) > 2.5
     assert min(np.hypot(x - 40, y) - r for x, y, r in a) > 2.5
+
+
+FENCE = {"shape": "cylinder", "center": [0, 0], "radius": 8, "min_z": 0.5, "max_z": 5}
+
+
+@pytest.mark.parametrize("legs, inside", [
+    ([{"circle": {"center": [-3, 0, 2], "radius": 3, "speed": 2}}], True),
+    ([{"circle": {"center": [-5, 0, 2], "radius": 5, "speed": 2}}], False),      # reaches x = -10
+    ([{"line": {"to": [7, 0, 2], "speed": 1}}], True),
+    ([{"line": {"to": [7.9, 0, 2], "speed": 1}}], False),                       # the vehicle's 0.2 m
+    ([{"hold": {"for": 1}}, {"goal": {"at": [0, 0, 6]}}], False),               # above max_z
+    ([{"waypoints": {"points": [[3, 3, 2], [3, -3, 2], [12, 0, 2]], "speed": 2}}], False)])
+def test_every_leg_is_checked_against_the_fence_before_flight(legs, inside):
+    doc = {"legs": legs, "takeoff": 2.0, "fence": FENCE}
+    if inside:
+        assert plan.from_dict(doc).fence.radius == 8
+    else:
+        with pytest.raises(plan.PlanError, match=r"^fence: legs\["):
+            plan.from_dict(doc)
+
+
+def test_a_bad_fence_names_the_field():
+    with pytest.raises(plan.PlanError, match="fence.radius"):
+        plan.from_dict({"legs": [{"hold": {}}], "fence": {"shape": "cylinder"}})
+
+
+def _yaws(m, heading=0.3):
+    here, out = np.array([0.0, 0.0, 2.0]), []
+    for i in range(len(m.legs)):
+        for st in plan.steps(m, i, here, np.zeros(3), heading):
+            out.append(round(st.ref["yaw"], 6))
+            heading, here = st.ref["yaw"], st.end
+    return out
+
+
+def test_yaw_holds_the_heading_at_the_hand_over_by_default():
+    m = _mission({"hold": {"for": 1}}, {"line": {"to": [0, 5, 2], "speed": 1}},
+                 {"circle": {"center": [0, 0, 2], "radius": 5, "speed": 2}})
+    assert set(_yaws(m, 0.3)) == {0.3}       # no turn to face east at the hand-over
+
+
+def test_yaw_in_degrees_and_along_the_path():
+    m = _mission({"waypoints": {"points": [[0, 5, 2], [5, 5, 2]], "speed": 1}}, {"goal": {"at": [5, 0, 2]}},
+                 {"hold": {"for": 1}}, {"circle": {"center": [0, 0, 2], "radius": 5, "speed": 2, "yaw": 45}},
+                 yaw="path")
+    north, east, south = round(math.pi / 2, 6), 0.0, round(-math.pi / 2, 6)
+    ys = _yaws(m)
+    # waypoints: north then east; the goal: south; the hold keeps it; the circle: its own 45 deg,
+    # reached along a transit line that faces along it (path).
+    assert ys[:4] == [north, east, south, south]
+    assert ys[-1] == round(math.radians(45), 6)
+
+
+@pytest.mark.parametrize("doc, field", [
+    ({"legs": [{"circle": {"center": [0, 0, 2], "radius": 5, "speed": 2}}], "yaw": "path"}, "legs[0].circle.yaw"),
+    ({"legs": [{"hold": {"yaw": "north"}}]}, "legs[0].hold.yaw"),
+    ({"legs": [{"hold": {}}], "yaw": 400}, "yaw")])
+def test_a_bad_yaw_names_the_field(doc, field):
+    with pytest.raises(plan.PlanError) as e:
+        plan.from_dict(doc)
+    assert str(e.value).startswith(field), str(e.value)

@@ -4,11 +4,15 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <functional>
+#include <mutex>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "mppi/controller.hpp"
@@ -40,6 +44,54 @@ class FakeClock final : public rt::Clock {
  private:
   std::atomic<std::int64_t> t_{1'000'000'000};  // read by receive threads too
 };
+
+// A fake clock two threads share: the loop's and the deadline guard's. The thread that made
+// it (the test's, which runs the loop) moves time: its sleeps jump to their end, as
+// FakeClock's do, and set()/advance() move it. Any other thread's sleep returns when the time
+// reaches its end, or after a millisecond of real time (as a signal would end it: callers
+// re-check, and see their quit flag). Nothing here depends on how fast the machine is.
+class SharedFakeClock final : public rt::Clock {
+ public:
+  std::int64_t now_ns() override { return t_.load(); }
+  void sleep_until(std::int64_t t) override {
+    if (std::this_thread::get_id() == driver_) {
+      if (t > t_.load()) set(t);
+      return;
+    }
+    std::unique_lock<std::mutex> lock(mu_);
+    moved_.wait_for(lock, std::chrono::milliseconds(1), [&] { return t_.load() >= t; });
+  }
+  bool sleep_until_or(rt::Wakeup& wake, std::int64_t t) override {
+    if (wake.try_wait()) return true;
+    sleep_until(t);
+    return false;
+  }
+  void set(std::int64_t t) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      t_.store(t);
+    }
+    moved_.notify_all();
+  }
+  void advance(std::int64_t ns) { set(t_.load() + ns); }
+
+ private:
+  std::atomic<std::int64_t> t_{1'000'000'000};
+  std::thread::id driver_ = std::this_thread::get_id();
+  std::mutex mu_;
+  std::condition_variable moved_;
+};
+
+// Waits (yielding) until `cond` holds; false if it did not within `seconds` of real time. A
+// guard against a hang, never a timing assertion: the tests' claims hold however long it takes.
+inline bool eventually(const std::function<bool()>& cond, double seconds = 60.0) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (!cond()) {
+    if (std::chrono::steady_clock::now() > end) return false;
+    std::this_thread::yield();
+  }
+  return true;
+}
 
 class RecordingTransport final : public transport::Transport {
  public:

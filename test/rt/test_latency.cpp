@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "fakes.hpp"
@@ -230,6 +231,35 @@ TEST(LatencyCompensation, ThePlanMovesOnByTheStepsThatReallyElapsed) {
   ASSERT_TRUE(r.loop.step_realtime(r.run));
   EXPECT_EQ(r.tx.commands.back().mode, Mode::kNormal);
   EXPECT_EQ(r.ctl.shifts, 2);
+}
+
+// A held step the gate refuses is not what acts: the failsafe went out instead, and the
+// command history the next state is predicted through must say so.
+TEST(LatencyCompensation, ARefusedHeldStepIsNotRememberedTheFailsafeIs) {
+  daemon::LoopSettings s = fixed_latency(5 * kMs, 0);
+  s.state_timeout_ns = 15 * kMs;
+  LoopRig r(s);
+  // Iteration 1's plan is past u_max (6000) from step 1 on: its command (step 0) passes the
+  // gate, the held plan's next step will not.
+  r.ctl.fault = [](int n, std::vector<float>* plan, UpdateStats*) {
+    if (n == 1) std::fill(plan->begin() + 4, plan->end(), 9000.0f);
+    return false;
+  };
+  const std::int64_t start = r.clock.now_ns();
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));  // fresh: 1010 goes out
+  ASSERT_TRUE(r.loop.step_realtime(r.run));  // 20 ms old: stale, the held 9000 is refused
+  ASSERT_EQ(r.tx.commands.size(), 2u);
+  EXPECT_EQ(r.tx.commands[1].mode, Mode::kFailsafe);
+  EXPECT_FLOAT_EQ(r.tx.commands[1].u[0], 3000.0f);  // u_init: the failsafe
+  // Cycle 3 at start + 40 ms from a state sampled at start + 39 ms: predicted to t_act =
+  // start + 45 ms through the command in effect since start + 20 ms, the failsafe's 3000/s.
+  r.clock.set(start + 39 * kMs);
+  r.state(0);
+  ASSERT_TRUE(r.loop.step_realtime(r.run));
+  EXPECT_EQ(r.tx.commands.back().mode, Mode::kNormal);
+  EXPECT_EQ(r.tx.commands.back().lead_us, 6000);
+  EXPECT_NEAR(r.ctl.last_x0[0], 3000.0f * 0.006f, 1e-3f) << "the refused held step (9000/s) was remembered";
 }
 
 TEST(LatencyCompensation, AStateFromTheFutureIsHandledAsStaleAndCounted) {

@@ -147,6 +147,9 @@ TEST(LiveUpdate, ChecksEveryFieldAndNamesItWithTheReason) {
   EXPECT_NE(apply("mppi.u_max", 7000, &s).find("mppi.u_max: not tunable at run time"), std::string::npos);
   EXPECT_NE(apply("mppi.simd", 1, &s).find("not tunable at run time"), std::string::npos);
   EXPECT_NE(apply("mppi.bogus", 1, &s).find("mppi.bogus: unknown field"), std::string::npos);
+  EXPECT_NE(apply("mppi.sigma[2", 1, &s).find("mppi.sigma[2: unknown field"), std::string::npos);  // not closed
+  EXPECT_EQ(apply("mppi.sigma[x]", 1, &s), "mppi.sigma[x]: the channel index must be in [0, 3]");
+  EXPECT_EQ(apply("mppi.sigma[]", 1, &s), "mppi.sigma[]: the channel index must be in [0, 3]");
   // Nothing refused changed anything.
   EXPECT_EQ(s.rollouts, before.rollouts);
   EXPECT_EQ(s.horizon, before.horizon);

@@ -1,6 +1,7 @@
 """Fixtures of the SITL tests: the binaries, the controller to fly."""
 from __future__ import annotations
 
+import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -8,8 +9,9 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
 
+# The harness (sitl_harness) and the LCM types (mppi_lcm) are the packages installed into the
+# venv by tools/setup.sh.
 from sitl_harness import paths  # noqa: E402
 
 
@@ -26,7 +28,7 @@ def sim_binary():
     b = paths.find_binary("mppid-sim")
     if b is None:
         missing("mppid-sim not built (cmake --build <build> --target mppid-sim)")
-    if paths.lcm_python_dir() is None:
+    if importlib.util.find_spec("mppi_lcm") is None:
         missing("mppi_lcm Python types not built (target mppi_lcm_python)")
     return b
 

@@ -71,9 +71,9 @@ def write_scenario(path: Path, name: str | None = "hold_short", duration: float 
 
 
 def scenario_runs(out: Path) -> dict:
-    import json
+    from sitl_harness.results import load_campaign
 
-    return {(r["scenario"], r["seed"]): r for r in json.loads((out / "summary.json").read_text())["runs"]}
+    return load_campaign(out).by_key()
 
 
 def need_module(name: str):

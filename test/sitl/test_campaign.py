@@ -65,8 +65,7 @@ def test_wilson_interval_holds_the_rate():
 
 def test_campaign_plot_with_no_success(tmp_path):
     """A scenario that never succeeded (0 of 11) and one that always did (6 of 6) draw."""
-    sys.path.insert(0, str(ROOT / "tools" / "plots"))
-    from sitl_campaign import plot_campaign
+    from sitl_harness.campaign_plot import plot_campaign
     runs = ([{"scenario": "never", "seed": s, "success": False, "min_clearance": -0.1} for s in range(11)] +
             [{"scenario": "always", "seed": s, "success": True, "time_to_goal": 5.0, "min_clearance": 1.0}
              for s in range(6)])
@@ -191,7 +190,7 @@ def test_local_engine_needs_no_ray(sim_binary, tmp_path):
     scen = write_scenario(tmp_path / "hold.yaml")
     block = ("import sys; sys.modules['ray'] = None; sys.argv[0] = 'sitl'; "
              "from sitl_harness.cli import main; sys.exit(main(sys.argv[1:]))")
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "tools"))
+    env = dict(os.environ)
     base = [sys.executable, "-c", block, "campaign", "--scenarios", str(scen), "--seeds", "1", "--controller", "standin"]
     p = subprocess.run(base + ["--out", str(tmp_path / "a")], cwd=ROOT, env=env, capture_output=True, text=True,
                        timeout=120)

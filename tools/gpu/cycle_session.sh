@@ -11,7 +11,7 @@
 #     cudatest  the CUDA tests of this tree (parity, device obstacle grid)
 #     bench     mppid-bench (Controller::iterate) and mppid-gpu-timing (the update alone) on the
 #               issue's three configurations, base and this tree interleaved, twice; this tree's
-#               update with the host's obstacle grid (MPPID_CUDA_GRID=host: the kernels against
+#               update with the host's obstacle grid (mppi.cuda.grid=host: the kernels against
 #               the base's) and on mppid-bench's scene (with either grid)
 #     daemon    daemon-bench --realtime --backend cuda K = 16384 (state trigger): base, this tree,
 #               this tree with daemon.spin
@@ -22,7 +22,7 @@
 #               all at once (the CUDA flights share the GPU), until --session-seconds after the
 #               session's start less 25 s; the table (rate_table.py) in summary.md
 #     pdl       this tree's update with and without programmatic dependent launches
-#               (MPPID_CUDA_PDL=0), test and bench scenes
+#               (mppi.cuda.pdl=off), test and bench scenes
 #     spin400   daemon-bench at 400 Hz (as in rates) with daemon.spin
 #     track     rate_track_circle_fast alone at 50/100/200/400 Hz on CUDA, 4 cores each, at once
 # Results: results/cycle-<time>/ (one log per step, summary.md last); with $OUT set (the device
@@ -117,11 +117,11 @@ if want bench; then
         >>"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "gpu-timing $LABEL"
     done
     # The kernels alone, base against this (both search the host's grid): rollout_chunked's phases.
-    MPPID_CUDA_GRID=host "$B_THIS/bin/mppid-gpu-timing" --iters 1000 "${cases[@]}" |
+    "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --set mppi.cuda.grid=host "${cases[@]}" |
       sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-hostgrid.json" 2>>"$RES/bench.err"
     "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
       sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene.json" 2>>"$RES/bench.err"
-    MPPID_CUDA_GRID=host "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench "${bench_cases[@]}" |
+    "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench --set mppi.cuda.grid=host "${bench_cases[@]}" |
       sed "s/^{/{\"tree\": \"this\", \"round\": $round,/" >>"$RES/gpu-timing-bench-scene-hostgrid.json" 2>>"$RES/bench.err"
   done
   "$PY" tools/gpu/cycle_tables.py bench "$RES" >>"$SUMMARY"
@@ -200,9 +200,10 @@ fi
 
 if want pdl; then
   for pdl in 1 0; do
-    MPPID_CUDA_PDL=$pdl "$B_THIS/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 \
+    sw=on; [[ $pdl == 0 ]] && sw=off
+    "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --set mppi.cuda.pdl=$sw quadrotor_forest:16384 quadrotor_rate_forest:16384 \
       team3_forest:1200 | sed "s/^{/{\"tree\": \"this-pdl$pdl\", \"round\": 1,/" >>"$RES/gpu-timing-pdl.json"
-    MPPID_CUDA_PDL=$pdl "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench quadrotor_forest:16384 \
+    "$B_THIS/bin/mppid-gpu-timing" --iters 1000 --scene bench --set mppi.cuda.pdl=$sw quadrotor_forest:16384 \
       quadrotor_rate_forest:16384 team3_forest:1200 | sed "s/^{/{\"tree\": \"this-pdl$pdl\", \"round\": 2,/" >>"$RES/gpu-timing-pdl.json"
   done 2>>"$RES/bench.err"
   "$PY" tools/gpu/cycle_tables.py bench "$RES" >>"$SUMMARY"

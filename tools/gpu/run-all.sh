@@ -144,8 +144,8 @@ if want timing; then
     "$B/bin/mppid-gpu-timing" --iters 1000 --no-grid "${cases[@]}"
     "$B/bin/mppid-gpu-timing" --iters 100 --warmup 5 quadrotor_forest:1048576 quadrotor_forest:65536
     "$B/bin/mppid-gpu-timing" --iters 100 --warmup 5 --no-grid quadrotor_forest:1048576
-    for w in 2 8; do MPPID_CUDA_WARPS=$w "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384; done
-    for c in 2 8; do MPPID_CUDA_CHUNK=$c "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384; done
+    for w in 2 8; do "$B/bin/mppid-gpu-timing" --iters 1000 --set mppi.cuda.warps=$w quadrotor_forest:16384 quadrotor_rate_forest:16384; done
+    for c in 2 8; do "$B/bin/mppid-gpu-timing" --iters 1000 --set mppi.cuda.chunk_steps=$c quadrotor_forest:16384 quadrotor_rate_forest:16384; done
   } >"$RES/gpu-timing-variants.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing variants"
   note ""
   note "| mppid-gpu-timing (test scenario) | K | grid | median us | p99 us |"
@@ -182,8 +182,8 @@ if want bench; then
     team9_forest:6000 >"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing"
   "$B/bin/mppid-gpu-timing" --iters $itbig --warmup 5 quadrotor_forest:1048576 >"$RES/gpu-timing-1m.json" \
     2>>"$RES/bench.err" || fail "mppid-gpu-timing 1M"
-  "$PY" tools/fig11.py assemble "$RES/bench.jsonl" --gpu "$(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)" \
-    --date "$(date -u +%F)" -o "$RES/fig11.json" >>"$LOG" 2>&1 && "$PY" tools/fig11.py plot "$RES/fig11.json" >>"$LOG" 2>&1 ||
+  "$PY" bench/figures/fig11.py assemble "$RES/bench.jsonl" --gpu "$(nvidia-smi --query-gpu=name --format=csv,noheader | head -1)" \
+    --date "$(date -u +%F)" -o "$RES/fig11.json" >>"$LOG" 2>&1 && "$PY" bench/figures/fig11.py plot "$RES/fig11.json" >>"$LOG" 2>&1 ||
     say "fig11 plot failed (see log)"
   note ""
   note "| bench (mppid-bench, config/tasks, T=100) | K | median us | p99 us |"

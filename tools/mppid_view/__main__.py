@@ -20,13 +20,6 @@ import time
 from pathlib import Path
 
 
-def _lcm_types_on_path() -> None:
-    here = Path(__file__).resolve().parents[1]
-    sys.path.insert(0, str(here))
-    from sitl_harness import paths
-    paths.add_lcm_types_to_path()
-
-
 def main(argv=None) -> int:
     os.environ.setdefault("RERUN_ANALYTICS", "0")  # offline; and nothing to send anyway
     ap = argparse.ArgumentParser(prog="tools/view", description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
@@ -56,7 +49,6 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
 
     if a.cmd == "live":
-        _lcm_types_on_path()
         from .live import LiveView
         view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid)
         print(f"view: {view.url}", flush=True)
@@ -64,7 +56,6 @@ def main(argv=None) -> int:
         print("view: drawn " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())), flush=True)
         return 0
     if a.cmd == "convert":
-        _lcm_types_on_path()
         from .convert import convert
         out = Path(a.out) if a.out else Path(a.log).with_suffix(".rrd")
         counts = convert(Path(a.log), out)

@@ -36,15 +36,6 @@ def _jsonl(p: Path) -> list[dict]:
     return out
 
 
-def _reference():
-    import sys
-    d = str(paths.ROOT / "drivers" / "mission")
-    if d not in sys.path:
-        sys.path.insert(0, d)
-    from mppi_mission import reference
-    return reference
-
-
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
     truth = [r for r in _jsonl(out / "truth.jsonl") if "x" in r]
@@ -89,7 +80,7 @@ def _truth_clock(truth, clock: str) -> np.ndarray:
 
 
 def _legs(mission, t_truth, X, est, settle) -> dict:
-    reference = _reference()
+    from mppi_mission import reference
     steps = [m for m in mission if m.get("event") == "step" and m["leg"] >= 0]
     legs = {}
     for i, s in enumerate(steps):

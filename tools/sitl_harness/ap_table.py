@@ -5,9 +5,10 @@ flights (max: the largest of any); `estimate` is the same against the autopilot'
 position estimate (what either controller saw)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from statistics import mean
+
+from .results import load_campaign
 
 
 def _m(vals, fmt="{:.3f}", agg=mean):
@@ -20,7 +21,7 @@ def _leg_key(r):
 
 
 def table(folders: list[Path], labels: list[str]) -> str:
-    camps = [(label, json.loads((Path(f) / "summary.json").read_text())["runs"]) for f, label in zip(folders, labels)]
+    camps = [(label, load_campaign(f).runs) for f, label in zip(folders, labels)]
     missions = list(dict.fromkeys(r["scenario"] for _, runs in camps for r in runs))  # first-seen order, once each
     lines = ["| mission | controller | flights | success | RMS error [m] | largest error [m] | RMS, estimate [m] "
              "| largest tilt [deg] | failures |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]

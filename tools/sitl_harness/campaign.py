@@ -3,7 +3,6 @@ process with its own network namespace and LCM URL, run by an engine (engine.py:
 processes, or Ray tasks); the summary is the same whatever the engine."""
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -12,6 +11,7 @@ import numpy as np
 
 from . import paths
 from .engine import FlightJob, Progress, make_engine, run_flights
+from .results import load_campaign, write_campaign
 
 
 def wilson(k: int, n: int, z: float = 1.96):
@@ -118,11 +118,10 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
         "ideal (no latency charged)" if ideal else f"fixed latency {latency:g} s" if latency is not None
         else "measured latency charged"))
     summary["scenario_files"] = {label: spec for spec, label in resolved}
-    (out / "summary.json").write_text(json.dumps({"summary": summary, "runs": sorted(results, key=lambda r: (r.get("scenario", ""), r.get("seed", 0)))}, indent=2))
+    write_campaign(out, summary, results)
     (out / "summary.md").write_text(markdown(summary))
     try:
-        sys.path.insert(0, str(paths.ROOT / "tools" / "plots"))
-        from sitl_campaign import plot_campaign
+        from .campaign_plot import plot_campaign
         plot_campaign(out)
     except Exception as e:  # the table is the result; the plot is a convenience
         print(f"sitl: campaign plot failed: {e!r}", file=sys.stderr)
@@ -218,10 +217,9 @@ def compare_campaigns(a: Path, b: Path, truth: bool = True) -> list[str]:
     """Differences between two campaign folders in what lock-step must reproduce: each
     run's outcome fields, the summary's rows less the timing columns, and (truth) each
     flight's path in truth.jsonl. [] when they agree."""
-    da, db = (json.loads((Path(x) / "summary.json").read_text()) for x in (a, b))
+    da, db = load_campaign(a), load_campaign(b)
     diffs = []
-    ra = {(r.get("scenario"), r.get("seed")): r for r in da["runs"]}
-    rb = {(r.get("scenario"), r.get("seed")): r for r in db["runs"]}
+    ra, rb = da.by_key(), db.by_key()
     if set(ra) != set(rb):
         diffs.append(f"runs differ: only in {a}: {sorted(set(ra) - set(rb))}; only in {b}: {sorted(set(rb) - set(ra))}")
     for k in sorted(set(ra) & set(rb), key=str):
@@ -230,8 +228,8 @@ def compare_campaigns(a: Path, b: Path, truth: bool = True) -> list[str]:
             if ra[k].get(key) != rb[k].get(key):
                 mine.append(f"{k[0]} seed {k[1]}: {key} {ra[k].get(key)!r} != {rb[k].get(key)!r}")
         if truth:
-            ta = _truth_path(Path(a) / k[0] / f"seed_{k[1]:04d}")
-            tb = _truth_path(Path(b) / k[0] / f"seed_{k[1]:04d}")
+            ta = _truth_path(da.flight_folder(*k))
+            tb = _truth_path(db.flight_folder(*k))
             if ta != tb:
                 mine.append(f"{k[0]} seed {k[1]}: truth.jsonl paths differ" +
                             ("" if ta is not None and tb is not None else " (missing)"))
@@ -241,7 +239,7 @@ def compare_campaigns(a: Path, b: Path, truth: bool = True) -> list[str]:
             if why:
                 mine = [m + f" [lock-step disturbed in {', '.join(why)}]" for m in mine]
         diffs += mine
-    sa, sb = da["summary"]["scenarios"], db["summary"]["scenarios"]
+    sa, sb = da.summary["scenarios"], db.summary["scenarios"]
     for scen in sorted(set(sa) | set(sb)):
         for key in SUMMARY_KEYS:
             va, vb = (s.get(scen, {}).get(key) for s in (sa, sb))

@@ -1,4 +1,5 @@
-"""tools/sitl: list scenarios, run one, run a campaign, re-plot a result folder."""
+"""tools/sitl: list scenarios, run one, run a campaign, re-plot a result folder. One parser
+and one function per subcommand (cmd_*); a UsageError is `sitl: <message>`, exit 2."""
 from __future__ import annotations
 
 import argparse
@@ -11,12 +12,44 @@ from pathlib import Path
 from . import paths
 
 
+class UsageError(Exception):
+    """Arguments that cannot be flown: printed as `sitl: <message>`, exit 2."""
+
+
 def main(argv=None) -> int:
+    a = build_parser().parse_args(argv)
+    try:
+        return a.func(a)
+    except UsageError as e:
+        print(f"sitl: {e}", file=sys.stderr)
+        return 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .tune import add_tune_parser
+
     ap = argparse.ArgumentParser(prog="sitl", description="mppid software-in-the-loop flights")
     sub = ap.add_subparsers(dest="cmd", required=True)
-    sub.add_parser("list", help="scenario names, then mission names (config/missions), one a line")
+    sub.add_parser("list", help="scenario names, then mission names (config/missions), one a line"
+                   ).set_defaults(func=cmd_list)
+    _add_run_parser(sub)
+    _add_campaign_parser(sub)
+    _add_report_parsers(sub)
+    _add_robustness_parser(sub)
+    o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
+    o.add_argument("file", type=Path)
+    o.set_defaults(func=cmd_overlay)
+    add_tune_parser(sub).set_defaults(func=cmd_tune)
+    p = sub.add_parser("plot", help="re-make the plots of a result folder")
+    p.add_argument("folder", type=Path)
+    p.set_defaults(func=cmd_plot)
+    return ap
 
+
+# ---- parsers -------------------------------------------------------------------------------
+def _add_run_parser(sub):
     r = sub.add_parser("run", help="fly one scenario; writes a result folder; exit 0 on success, 1 on failure")
+    r.set_defaults(func=cmd_run)
     r.add_argument("--scenario", required=True, help="a name from `sitl list` or a YAML file")
     r.add_argument("--seed", type=int, default=1)
     r.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
@@ -55,7 +88,10 @@ def main(argv=None) -> int:
     r.add_argument("--rrd", action="store_true", help="also write flight.rrd (the log in rerun's format, tools/view)")
     r.add_argument("--quiet", action="store_true")
 
+
+def _add_campaign_parser(sub):
     c = sub.add_parser("campaign", help="seeds x scenarios, summary table with Wilson intervals")
+    c.set_defaults(func=cmd_campaign)
     c.add_argument("--scenarios", required=True, help="comma-separated scenario names and/or YAML files")
     c.add_argument("--seeds", default="10", help="a count (from --first-seed) or seeds: 51-70, 1,4,9-12")
     c.add_argument("--first-seed", type=int, default=1)
@@ -86,26 +122,35 @@ def main(argv=None) -> int:
     c.add_argument("--no-plots", action="store_true",
                    help="no per-flight plots (faster; `tools/sitl plot FOLDER` makes them later)")
 
+
+def _add_report_parsers(sub):
     cmp_ = sub.add_parser("compare", help="two campaign folders: same outcomes? (lock-step: engine-independent)")
+    cmp_.set_defaults(func=cmd_compare)
     cmp_.add_argument("a", type=Path)
     cmp_.add_argument("b", type=Path)
     cmp_.add_argument("--no-truth", action="store_true", help="skip comparing each flight's truth.jsonl path")
 
     t = sub.add_parser("table", help="campaigns side by side (e.g. real time and lock-step): one row per scenario")
+    t.set_defaults(func=cmd_table)
     t.add_argument("folders", type=Path, nargs="+")
     t.add_argument("--names", default=None, help="comma-separated column names, one per folder")
 
     vs = sub.add_parser("versus", help="campaigns of different controllers side by side (markdown table)")
+    vs.set_defaults(func=cmd_versus)
     vs.add_argument("folders", type=Path, nargs="+", help="campaign folders (summary.json), same scenarios and seeds")
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
     apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter SITL side by side (markdown)")
+    apt.set_defaults(func=cmd_autopilot_table)
     apt.add_argument("folders", type=Path, nargs="+")
     apt.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
 
+
+def _add_robustness_parser(sub):
     rb = sub.add_parser("robustness", help="the robustness map: mass, motor constant, wind, delay, noise "
                                            "(docs/robustness.md)")
+    rb.set_defaults(func=cmd_robustness)
     rb.add_argument("--scenarios", default="forest_4m,rate_track_circle_fast",
                     help="comma-separated base scenarios (quadrotor plants)")
     rb.add_argument("--seeds", default="51-55", help="seeds per cell: 51-55, 1,4,9-12, or a count from 1")
@@ -116,182 +161,11 @@ def main(argv=None) -> int:
                     help="real-time flights at once, each pinned to its own 1/N of the cores (as campaign's)")
     rb.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="passed to mppid --set")
 
-    o = sub.add_parser("overlay", help="print a settings overlay's --set pairs (for mppid)")
-    o.add_argument("file", type=Path)
-
-    from .tune import add_tune_parser
-    add_tune_parser(sub)
-
-    p = sub.add_parser("plot", help="re-make the plots of a result folder")
-    p.add_argument("folder", type=Path)
-
-    a = ap.parse_args(argv)
-    if a.cmd == "list":
-        print("\n".join(paths.scenario_names() + paths.mission_names()))
-        return 0
-    if a.cmd in ("run", "campaign"):
-        why = _autopilot_check(a)
-        if why:
-            print(f"sitl: {why}", file=sys.stderr)
-            return 2
-    if a.cmd in ("run", "campaign", "overlay"):
-        from .overlay import OverlayError, load_sets
-        try:
-            over = [kv for f in ([a.file] if a.cmd == "overlay" else a.overlay) for kv in load_sets(f)]
-        except OverlayError as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        if a.cmd == "overlay":
-            print(" ".join(f"--set {kv}" for kv in over))
-            return 0
-        a.set = over + a.set
-    if a.cmd == "run":
-        from .flight import FlightSpec, fly, lcm_url_for_port, watch_parent, LCM_URL
-        out = a.out or paths.ROOT / "results" / f"{Path(a.scenario).stem}-s{a.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
-        try:
-            url = lcm_url_for_port(a.lcm_port) if a.lcm_port else LCM_URL
-        except ValueError as e:
-            print(f"sitl: --lcm-port: {e}", file=sys.stderr)
-            return 2
-        if (a.ideal or a.latency is not None) and a.realtime:
-            print("sitl: --ideal and --latency are lock-step options", file=sys.stderr)
-            return 2
-        spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
-                          ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
-                          kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
-                          params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, view=a.view,
-                          view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
-        try:
-            from .inject import parse_update
-            for u in a.param:
-                parse_update(u)
-        except ValueError as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        try:
-            paths.scenario_label(a.scenario)
-        except FileNotFoundError as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        if a.parent_pid:
-            watch_parent(a.parent_pid)
-        if a.niceness is not None:
-            # A Ray worker runs at niceness 15; its flight runs at the campaign's, like a local one.
-            try:
-                os.setpriority(os.PRIO_PROCESS, 0, a.niceness)
-            except OSError as e:
-                print(f"sitl: cannot set niceness {a.niceness} (kept {os.getpriority(os.PRIO_PROCESS, 0)}): {e}",
-                      file=sys.stderr)
-        try:
-            score = fly(spec)
-        except KeyboardInterrupt:
-            print("sitl: interrupted; flight stopped and cleaned up", file=sys.stderr)
-            return 130
-        if not a.quiet:
-            keys = ["success", "reason", "time_to_goal", "min_clearance", "tracking_rmse", "mean_speed",
-                    "deadline_misses", "compute_ms_p99", "wall_s"]
-            print(json.dumps({k: score.get(k) for k in keys}))
-            print(f"results: {out}")
-        return 0 if score.get("success") else 1
-    if a.cmd == "campaign":
-        from .campaign import parse_seeds, resolve_scenarios, run_campaign
-        from .flight import interrupt_on_stop_signals
-        interrupt_on_stop_signals()
-        names = [s.strip() for s in a.scenarios.split(",") if s.strip()]
-        try:
-            resolve_scenarios(names)
-            seeds = parse_seeds(a.seeds, a.first_seed)
-            if a.address and a.engine != "ray":
-                raise ValueError("--address needs --engine ray")
-        except (FileNotFoundError, ValueError) as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        if (a.ideal or a.latency is not None) and a.realtime:
-            print("sitl: --ideal and --latency are lock-step options", file=sys.stderr)
-            return 2
-        try:
-            summary = run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
-                                   realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
-                                   cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
-                                   realtime_jobs=a.realtime_jobs, plots=not a.no_plots, autopilot=a.autopilot,
-                                   ardupilot_bin=a.ardupilot_bin)
-        except KeyboardInterrupt:
-            print("\nsitl: campaign interrupted", file=sys.stderr)
-            return 130
-        except RuntimeError as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        print((Path(a.out) / "summary.md").read_text())
-        return 0
-    if a.cmd == "robustness":
-        from .campaign import parse_seeds
-        from .robustness import run_map
-        if a.realtime and a.latency is not None:
-            print("sitl: --latency is a lock-step option", file=sys.stderr)
-            return 2
-        try:
-            md = run_map([s.strip() for s in a.scenarios.split(",") if s.strip()], parse_seeds(a.seeds), a.out,
-                         a.realtime, sets=a.set, latency=a.latency, realtime_jobs=a.realtime_jobs)
-        except (FileNotFoundError, ValueError) as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:
-            print("\nsitl: robustness map interrupted", file=sys.stderr)
-            return 130
-        print(md.read_text())
-        return 0
-    if a.cmd == "compare":
-        from .campaign import compare_campaigns
-        diffs = compare_campaigns(a.a, a.b, truth=not a.no_truth)
-        runs = len(json.loads((a.a / "summary.json").read_text())["runs"])
-        for d in diffs:
-            print(d)
-        print(f"{runs} runs: " + ("identical outcomes" + ("" if a.no_truth else " and truth paths") if not diffs
-                                  else f"{len(diffs)} differences"))
-        return 0 if not diffs else 1
-    if a.cmd == "table":
-        from .sidebyside import table
-        names = [n.strip() for n in a.names.split(",")] if a.names else None
-        if names and len(names) != len(a.folders):
-            print("sitl: --names needs one name per folder", file=sys.stderr)
-            return 2
-        try:
-            print(table(a.folders, names))
-        except FileNotFoundError as e:
-            print(f"sitl: {e}", file=sys.stderr)
-            return 2
-        return 0
-    if a.cmd == "versus":
-        from .versus import versus
-        labels = a.labels.split(",") if a.labels else [f.name for f in a.folders]
-        try:
-            table, rows = versus(a.folders, labels)
-        except (ValueError, FileNotFoundError, KeyError) as e:
-            print(f"sitl: versus: {e}", file=sys.stderr)
-            return 2
-        print(table, end="")
-        if a.json:
-            a.json.write_text(json.dumps(rows, indent=2))
-        return 0
-    if a.cmd == "autopilot-table":
-        from .ap_table import table as ap_table
-        print(ap_table(a.folders, a.labels.split(",") if a.labels else [f.name for f in a.folders]), end="")
-        return 0
-    if a.cmd == "tune":
-        from .flight import interrupt_on_stop_signals
-        from .tune import main_tune
-        interrupt_on_stop_signals()
-        return main_tune(a)
-    if a.cmd == "plot":
-        from .plots import plot_flight
-        for f in plot_flight(a.folder):
-            print(f)
-        return 0
-    return 2
-
 
 def _autopilot_args(p):
-    p.add_argument("--autopilot", choices=["sim", "ardupilot"], default="sim",
+    from .flights import PLANTS
+
+    p.add_argument("--autopilot", choices=list(PLANTS), default="sim",
                    help="sim: mppid-sim (scenarios); ardupilot: ArduCopter SITL through the MAVLink bridge, flying "
                         "missions (config/missions) in real time")
     p.add_argument("--ardupilot-bin", default=None, metavar="PATH",
@@ -299,6 +173,7 @@ def _autopilot_args(p):
                         "$MPPID_ARDUPILOT_BIN)")
 
 
+# ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
     if a.controller == "guided" and a.autopilot != "ardupilot":
@@ -309,3 +184,211 @@ def _autopilot_check(a) -> str:
         if not a.realtime:
             return "--autopilot ardupilot flies in real time (ArduPilot's SITL runs on the wall clock): add --realtime"
     return ""
+
+
+def _overlay_sets(files) -> list[str]:
+    """The --set pairs of settings overlay files, in order."""
+    from .overlay import OverlayError, load_sets
+
+    try:
+        return [kv for f in files for kv in load_sets(f)]
+    except OverlayError as e:
+        raise UsageError(str(e)) from None
+
+
+def _flight_args(a) -> None:
+    """run and campaign: the autopilot options, the overlays before --set, the clock options."""
+    why = _autopilot_check(a)
+    if why:
+        raise UsageError(why)
+    a.set = _overlay_sets(a.overlay) + a.set
+
+
+def _lockstep_options_check(a) -> None:
+    if (a.ideal or a.latency is not None) and a.realtime:
+        raise UsageError("--ideal and --latency are lock-step options")
+
+
+# ---- the subcommands -----------------------------------------------------------------------
+def cmd_list(a) -> int:
+    print("\n".join(paths.scenario_names() + paths.mission_names()))
+    return 0
+
+
+def cmd_overlay(a) -> int:
+    print(" ".join(f"--set {kv}" for kv in _overlay_sets([a.file])))
+    return 0
+
+
+def _run_spec(a):
+    """The FlightSpec of `sitl run`'s arguments; UsageError when they cannot be flown."""
+    from .flights.base import LCM_URL, FlightSpec, lcm_url_for_port
+    from .inject import parse_update
+
+    out = a.out or paths.ROOT / "results" / f"{Path(a.scenario).stem}-s{a.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        url = lcm_url_for_port(a.lcm_port) if a.lcm_port else LCM_URL
+    except ValueError as e:
+        raise UsageError(f"--lcm-port: {e}") from None
+    _lockstep_options_check(a)
+    spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
+                      ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
+                      kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
+                      params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, view=a.view,
+                      view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
+    try:
+        for u in a.param:
+            parse_update(u)
+        paths.scenario_label(a.scenario)
+    except (ValueError, FileNotFoundError) as e:
+        raise UsageError(str(e)) from None
+    return spec
+
+
+def _set_niceness(niceness: int) -> None:
+    """A Ray worker runs at niceness 15; its flight runs at the campaign's, like a local one."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, niceness)
+    except OSError as e:
+        print(f"sitl: cannot set niceness {niceness} (kept {os.getpriority(os.PRIO_PROCESS, 0)}): {e}",
+              file=sys.stderr)
+
+
+def cmd_run(a) -> int:
+    from .fly import fly, watch_parent
+
+    _flight_args(a)
+    spec = _run_spec(a)
+    if a.parent_pid:
+        watch_parent(a.parent_pid)
+    if a.niceness is not None:
+        _set_niceness(a.niceness)
+    try:
+        score = fly(spec)
+    except KeyboardInterrupt:
+        print("sitl: interrupted; flight stopped and cleaned up", file=sys.stderr)
+        return 130
+    if not a.quiet:
+        keys = ["success", "reason", "time_to_goal", "min_clearance", "tracking_rmse", "mean_speed",
+                "deadline_misses", "compute_ms_p99", "wall_s"]
+        print(json.dumps({k: score.get(k) for k in keys}))
+        print(f"results: {spec.out}")
+    return 0 if score.get("success") else 1
+
+
+def _scenario_list(text: str) -> list[str]:
+    return [s.strip() for s in text.split(",") if s.strip()]
+
+
+def cmd_campaign(a) -> int:
+    from .campaign import parse_seeds, resolve_scenarios, run_campaign
+    from .fly import interrupt_on_stop_signals
+
+    _flight_args(a)
+    interrupt_on_stop_signals()
+    names = _scenario_list(a.scenarios)
+    try:
+        resolve_scenarios(names)
+        seeds = parse_seeds(a.seeds, a.first_seed)
+        if a.address and a.engine != "ray":
+            raise ValueError("--address needs --engine ray")
+    except (FileNotFoundError, ValueError) as e:
+        raise UsageError(str(e)) from None
+    _lockstep_options_check(a)
+    try:
+        run_campaign(names, seeds, a.out, jobs=a.jobs, backend=a.backend, controller=a.controller,
+                     realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
+                     cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
+                     realtime_jobs=a.realtime_jobs, plots=not a.no_plots, autopilot=a.autopilot,
+                     ardupilot_bin=a.ardupilot_bin)
+    except KeyboardInterrupt:
+        print("\nsitl: campaign interrupted", file=sys.stderr)
+        return 130
+    except RuntimeError as e:
+        raise UsageError(str(e)) from None
+    print((Path(a.out) / "summary.md").read_text())
+    return 0
+
+
+def cmd_robustness(a) -> int:
+    from .campaign import parse_seeds
+    from .robustness import run_map
+
+    if a.realtime and a.latency is not None:
+        raise UsageError("--latency is a lock-step option")
+    try:
+        md = run_map(_scenario_list(a.scenarios), parse_seeds(a.seeds), a.out, a.realtime, sets=a.set,
+                     latency=a.latency, realtime_jobs=a.realtime_jobs)
+    except (FileNotFoundError, ValueError) as e:
+        raise UsageError(str(e)) from None
+    except KeyboardInterrupt:
+        print("\nsitl: robustness map interrupted", file=sys.stderr)
+        return 130
+    print(md.read_text())
+    return 0
+
+
+def cmd_compare(a) -> int:
+    from .campaign import compare_campaigns
+    from .results import load_campaign
+
+    diffs = compare_campaigns(a.a, a.b, truth=not a.no_truth)
+    runs = len(load_campaign(a.a).runs)
+    for d in diffs:
+        print(d)
+    print(f"{runs} runs: " + ("identical outcomes" + ("" if a.no_truth else " and truth paths") if not diffs
+                              else f"{len(diffs)} differences"))
+    return 0 if not diffs else 1
+
+
+def cmd_table(a) -> int:
+    from .sidebyside import table
+
+    names = [n.strip() for n in a.names.split(",")] if a.names else None
+    if names and len(names) != len(a.folders):
+        raise UsageError("--names needs one name per folder")
+    try:
+        print(table(a.folders, names))
+    except FileNotFoundError as e:
+        raise UsageError(str(e)) from None
+    return 0
+
+
+def _labels(a) -> list[str]:
+    return a.labels.split(",") if a.labels else [f.name for f in a.folders]
+
+
+def cmd_versus(a) -> int:
+    from .versus import versus
+
+    try:
+        table, rows = versus(a.folders, _labels(a))
+    except (ValueError, FileNotFoundError, KeyError) as e:
+        raise UsageError(f"versus: {e}") from None
+    print(table, end="")
+    if a.json:
+        a.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+def cmd_autopilot_table(a) -> int:
+    from .ap_table import table
+
+    print(table(a.folders, _labels(a)), end="")
+    return 0
+
+
+def cmd_tune(a) -> int:
+    from .fly import interrupt_on_stop_signals
+    from .tune import main_tune
+
+    interrupt_on_stop_signals()
+    return main_tune(a)
+
+
+def cmd_plot(a) -> int:
+    from .plots import plot_flight
+
+    for f in plot_flight(a.folder):
+        print(f)
+    return 0

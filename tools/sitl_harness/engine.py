@@ -153,7 +153,6 @@ class LocalEngine:
         for stale in ("score.json", "pids.json", "harness.json"):
             (out / stale).unlink(missing_ok=True)
         cmd = [sys.executable, "-m", "sitl_harness", "run", *job.run_args(), "--parent-pid", str(os.getpid())]
-        env = dict(os.environ, PYTHONPATH=str(paths.ROOT / "tools"))
         cores = self.pins.get() if self.pins is not None else None
         try:
             if cores is not None:
@@ -164,7 +163,7 @@ class LocalEngine:
                 if task["cancel"]:
                     return {"cancelled": True}
                 with open(out / "harness.stderr", "wb") as err:
-                    task["proc"] = subprocess.Popen(cmd, env=env, cwd=paths.ROOT, start_new_session=True,
+                    task["proc"] = subprocess.Popen(cmd, cwd=paths.ROOT, start_new_session=True,
                                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
             rc = task["proc"].wait()
         finally:

@@ -4,12 +4,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from . import paths
-
 
 def read_lcm_log(path: Path, channels=None) -> dict[str, list]:
     """{channel: [(receive_utime, decoded message), ...]} for the mppi_lcm channels."""
-    paths.add_lcm_types_to_path()
     import lcm
     from mppi_lcm import (command_t, controller_status_t, obstacles_t, param_result_t, param_update_t, plan_t,
                           reference_t, rollouts_t, sim_clock_t, vehicle_state_t)

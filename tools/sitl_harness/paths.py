@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,22 +29,14 @@ def find_binary(name: str) -> Path | None:
     return None
 
 
-def lcm_python_dir() -> Path | None:
-    for d in build_dirs():
-        if (d / "python" / "mppi_lcm" / "__init__.py").is_file():
-            return d / "python"
-    return None
+def require_lcm_types() -> None:
+    """Checks that the LCM types (`mppi_lcm`, installed with the project's Python packages)
+    import; RuntimeError saying how to get them otherwise."""
+    import importlib.util
 
-
-def add_lcm_types_to_path() -> None:
-    """Makes `import mppi_lcm` work (generated into <build>/python by the build)."""
-    d = lcm_python_dir()
-    if d is not None:
-        if str(d) not in sys.path:
-            sys.path.insert(0, str(d))
-        return
-    raise RuntimeError("mppi_lcm Python types not found: build the mppi_lcm_python target "
-                       "(searched %s)" % ", ".join(str(d) for d in build_dirs()))
+    if importlib.util.find_spec("mppi_lcm") is None:
+        raise RuntimeError("mppi_lcm Python types not importable: install the project's Python packages "
+                           "(tools/setup.sh)")
 
 
 def scenario_path(name: str) -> Path:

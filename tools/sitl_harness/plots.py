@@ -44,25 +44,26 @@ def plot_flight(out: Path) -> list[Path]:
     return [p for p in made if p]
 
 
-def _path(out, world, t, X, ticks, events, model, nx, m):
+def _cartpole_path(out, world, t, X):
     fig = plt.figure(figsize=(11, 7.5))
-    if model == "cartpole":
-        ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
-        ax1.plot(t, X[:, 2], label="theta (0 = down)")
-        ax1.axhline(np.pi, ls="--", c="k", lw=0.8, label="upright")
-        ax1.axhline(-np.pi, ls="--", c="k", lw=0.8)
-        ax1.set_ylabel("pole angle [rad]")
-        ax1.legend()
-        ax2.plot(t, X[:, 0], label="cart x")
-        ax2.set_ylabel("cart position [m]")
-        ax2.set_xlabel("t [s]")
-        fig.suptitle(f"{world['scenario']} seed {world['seed']}")
-        p = out / "path.png"
-        fig.savefig(p, dpi=90)
-        plt.close(fig)
-        return p
-    ax1 = fig.add_subplot(3, 1, (1, 2))
-    ax2 = fig.add_subplot(3, 1, 3)
+    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
+    ax1.plot(t, X[:, 2], label="theta (0 = down)")
+    ax1.axhline(np.pi, ls="--", c="k", lw=0.8, label="upright")
+    ax1.axhline(-np.pi, ls="--", c="k", lw=0.8)
+    ax1.set_ylabel("pole angle [rad]")
+    ax1.legend()
+    ax2.plot(t, X[:, 0], label="cart x")
+    ax2.set_ylabel("cart position [m]")
+    ax2.set_xlabel("t [s]")
+    fig.suptitle(f"{world['scenario']} seed {world['seed']}")
+    p = out / "path.png"
+    fig.savefig(p, dpi=90)
+    plt.close(fig)
+    return p
+
+
+def _obstacles(ax1, world, ticks):
+    """The obstacles (moving ones orange, with their velocity) and the moving ones' tracks."""
     for ob in world.get("obstacles", []):
         moving = ob[3] != 0 or ob[4] != 0
         ax1.add_patch(plt.Circle((ob[0], ob[1]), ob[2], color="tab:orange" if moving else "tab:green", alpha=0.35 if moving else 0.7))
@@ -73,6 +74,15 @@ def _path(out, world, t, X, ticks, events, model, nx, m):
         arr = np.array(tr, float)
         for k in range(arr.shape[1]):
             ax1.plot(arr[:, k, 0], arr[:, k, 1], c="tab:orange", lw=0.3, alpha=0.35)
+
+
+def _path(out, world, t, X, ticks, events, model, nx, m):
+    if model == "cartpole":
+        return _cartpole_path(out, world, t, X)
+    fig = plt.figure(figsize=(11, 7.5))
+    ax1 = fig.add_subplot(3, 1, (1, 2))
+    ax2 = fig.add_subplot(3, 1, 3)
+    _obstacles(ax1, world, ticks)
     if model == "racecar":
         a = np.linspace(0, 2 * np.pi, 400)
         ax1.plot(13 * np.cos(a), 6 * np.sin(a), "k--", lw=0.8, label="track centre")

@@ -1,28 +1,26 @@
-"""One flight as a Ray task. Standard library only (and Ray, inside a worker): the function
-is shipped by value, so a worker needs no copy of the harness on its Python path, only the
-repository (built) at the same path as on the driver.
+"""One flight as a Ray task. Standard library only (and Ray, inside a worker): the module is
+shipped by value, so a worker needs no copy of the harness on its Python path, only the
+repository (built, its Python packages installed into .venv) at the same path as on the
+driver.
 
 The flight runs as its own `sitl run` process in its own session: its own network
-namespace and LCM URL (flight.py), a parent watch (`--parent-pid`) that stops and cleans
+namespace and LCM URL (sandbox.py), a parent watch (`--parent-pid`) that stops and cleans
 up the flight when this worker dies, and, when Ray cancels the task, a SIGTERM that does
 the same."""
 from __future__ import annotations
 
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
 
-def run_flight_task(payload: dict) -> dict:
-    import io
-    import json
-    import os
-    import signal
-    import subprocess
-    import sys
-    import tarfile
-    from pathlib import Path
 
-    root = Path(payload["root"])
-    out = Path(payload["out"])
-    python = root / ".venv" / "bin" / "python"
-    python = str(python) if python.is_file() else sys.executable
+def _prepare(payload: dict, out: Path) -> list[str]:
+    """Clears the folder of a previous attempt; `sitl run`'s arguments for this node."""
     args = list(payload["args"])
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("score.json", "pids.json", "harness.json"):
@@ -36,27 +34,30 @@ def run_flight_task(payload: dict) -> dict:
         local = out / "scenario.yaml"
         local.write_text(payload["scenario_text"])
         args[args.index(scen)] = str(local)
-    node_id = None
+    return args
+
+
+def _node_id():
     try:
         import ray
 
-        node_id = ray.get_runtime_context().get_node_id()
+        return ray.get_runtime_context().get_node_id()
     except Exception:  # noqa: BLE001 - called outside Ray (tests)
-        pass
-    (out / "worker.json").write_text(json.dumps({"pid": os.getpid(), "node_id": node_id,
-                                                 "attempt": payload.get("attempt", 1),
-                                                 "worker_niceness": os.getpriority(os.PRIO_PROCESS, 0)}))
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(root / "tools")
+        return None
+
+
+def _fly(root: Path, out: Path, args: list[str]) -> int:
+    """`sitl run` in its own session; on cancellation (Ray raises KeyboardInterrupt here) or
+    failure, SIGTERM (the flight cleans up), SIGKILL to its session after a grace period."""
+    python = root / ".venv" / "bin" / "python"
+    python = str(python) if python.is_file() else sys.executable
     cmd = [python, "-m", "sitl_harness", "run", *args, "--parent-pid", str(os.getpid())]
     with open(out / "harness.stderr", "wb") as err:
-        p = subprocess.Popen(cmd, cwd=str(root), env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        p = subprocess.Popen(cmd, cwd=str(root), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                              stderr=err, start_new_session=True)
     try:
-        rc = p.wait()
+        return p.wait()
     except BaseException:
-        # Cancelled (Ray raises KeyboardInterrupt here) or failing: the flight cleans up on
-        # SIGTERM; SIGKILL to its session if it does not within the grace period.
         try:
             p.send_signal(signal.SIGTERM)
             p.wait(timeout=30)
@@ -66,15 +67,29 @@ def run_flight_task(payload: dict) -> dict:
         except ProcessLookupError:
             pass
         raise
+
+
+def _tar(folder: Path) -> bytes:
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+        tar.add(str(folder), arcname=".")
+    return buf.getvalue()
+
+
+def run_flight_task(payload: dict) -> dict:
+    root = Path(payload["root"])
+    out = Path(payload["out"])
+    args = _prepare(payload, out)
+    node_id = _node_id()
+    (out / "worker.json").write_text(json.dumps({"pid": os.getpid(), "node_id": node_id,
+                                                 "attempt": payload.get("attempt", 1),
+                                                 "worker_niceness": os.getpriority(os.PRIO_PROCESS, 0)}))
+    rc = _fly(root, out, args)
     try:
         score = json.loads((out / "score.json").read_text())
     except (OSError, ValueError):
         score = None
     files = None
     if payload.get("driver_node_id") and node_id and node_id != payload["driver_node_id"]:
-        # Another machine: bring the result folder back to the driver.
-        buf = io.BytesIO()
-        with tarfile.open(fileobj=buf, mode="w:gz") as tar:
-            tar.add(str(out), arcname=".")
-        files = buf.getvalue()
+        files = _tar(out)  # another machine: bring the result folder back to the driver
     return {"rc": rc, "score": score, "files": files, "node_id": node_id, "pid": os.getpid()}

@@ -19,7 +19,6 @@ and OUT/robustness.md (the map, the command, the machine).
 from __future__ import annotations
 
 import datetime
-import json
 import os
 import platform
 import subprocess
@@ -29,6 +28,7 @@ from pathlib import Path
 import yaml
 
 from . import paths
+from .results import load_campaign
 
 # Per model: the mass and motor constant of core's defaults (what a scenario's plant has
 # when it does not say) and the drag the wind cells give a plant without one.
@@ -158,17 +158,14 @@ def run_map(bases: list[str], seeds: list[int], out: Path, realtime: bool, sets=
     run_campaign([str(p) for *_, p in files], seeds, out, realtime=realtime, sets=sets, latency=latency, plots=False,
                  realtime_jobs=realtime_jobs)
     load1 = os.getloadavg()
-    data = json.loads((out / "summary.json").read_text())
-    runs = {}
-    for r in data["runs"]:
-        runs.setdefault(r.get("scenario"), []).append(r)
-    body, totals = table(files, runs)
+    data = load_campaign(out)
+    body, totals = table(files, data.by_scenario())
     total_k = sum(k for k, _ in totals.values())
     total_n = sum(n for _, n in totals.values())
-    clock = "real time" if realtime else data["summary"]["clock"]
+    clock = "real time" if realtime else data.summary["clock"]
     command = " ".join(["tools/sitl"] + sys.argv[1:])
     text = (f"# Robustness map\n\n`{command}`\n\n"
-            f"{clock}; seeds {data['summary']['seeds'][0]}-{data['summary']['seeds'][-1]} "
+            f"{clock}; seeds {data.summary['seeds'][0]}-{data.summary['seeds'][-1]} "
             f"({len(seeds)} per cell); {total_n} flights; {started:%Y-%m-%d %H:%M} UTC; "
             f"load average {load0[0]:.1f} at the start, {load1[0]:.1f} at the end.\n\nMachine: {machine()}\n\n"
             + body + "\nSuccess over the map: " +

@@ -13,6 +13,7 @@ error to upright over the hold window (swingup), the ellipse residual d (laps); 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +27,8 @@ QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 def reference_eval(ref: dict, t: np.ndarray):
     """core's Reference::eval, vectorised (the mission tool's mirror of it): positions
     (len(t), 3)."""
-    from .ap_score import _reference
-    return _reference().evaluate({"center": [0, 0, 2], **ref}, t)[0]
+    from mppi_mission import reference
+    return reference.evaluate({"center": [0, 0, 2], **ref}, t)[0]
 
 
 def _wrap(a):
@@ -41,10 +42,7 @@ def _controller_stats(status, commands=()):
     if not msgs:
         # No status in the log (a lock-step flight can end within one status period): the
         # per-cycle figures still come from the commands.
-        t = timing.flight_timing([], [m for _, m in commands])
-        t.pop("compute_samples_ms", None)
-        t.pop("state_to_command_samples_ms", None)
-        return t
+        return _timing_figures([], commands)
     last = msgs[-1]
     res = {
         "backend": last.backend,
@@ -57,22 +55,52 @@ def _controller_stats(status, commands=()):
         "status_messages": len(msgs),
         "rejected": int(last.rejected_nan + last.rejected_stale + last.rejected_out_of_order + last.rejected_undecodable),
     }
+    res.update(_timing_figures(msgs, commands))
+    return res
+
+
+def _timing_figures(msgs, commands) -> dict:
+    """timing.py's figures of the flight, without the samples they come from."""
     t = timing.flight_timing(msgs, [m for _, m in commands])
     t.pop("compute_samples_ms", None)
     t.pop("state_to_command_samples_ms", None)
-    res.update(t)
-    return res
+    return t
 
 
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
     scen = yaml.safe_load(paths.scenario_path(spec.scenario).read_text())
-    crit = scen.get("success", {"type": "goal"})
     world = logs.read_json(out / "world.json") or {}
     summary = logs.read_json(out / "sim_summary.json") or {}
-    ticks, events = logs.read_truth(out)
+    ticks, _events = logs.read_truth(out)
     lcm = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND", "MPPI_STATUS", "MPPI_PARAM_RESULT"})
-    model = scen["plant"]["model"]
+    res = _flight_record(spec, info, world, summary, lcm)
+    res.update(_controller_stats(lcm.get("MPPI_STATUS", []), lcm.get("MPPI_COMMAND", [])))
+    res.update(_log_figures(spec, ticks, lcm))
+    X = None
+    if ticks:
+        t = np.array([tk["t"] for tk in ticks])
+        X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
+        res["mean_speed"] = _mean_speed(scen["plant"]["model"], world, X)
+    res["reason"] = _not_the_vehicles_failure(info, summary, res["collisions"])
+    if res["reason"] is not None or not ticks:
+        res["reason"] = res["reason"] or "no truth log"
+        return res
+    crit = scen.get("success", {"type": "goal"})
+    kind = crit.get("type", "goal")
+    judge = CRITERIA.get(kind)
+    if judge is None:
+        res["reason"] = f"unknown success.type {kind}"
+        return res
+    duration = float(world.get("duration", 0))
+    full = summary.get("outcome") == "duration" and abs(t[-1] - duration) < 0.05
+    judge(res, crit, Flown(out=out, world=world, outcome=summary.get("outcome"), t=t, X=X, full=full,
+                           duration=duration))
+    return res
+
+
+def _flight_record(spec, info: dict, world: dict, summary: dict, lcm: dict) -> dict:
+    """What the flight was and what the simulator said of it, before any judgement."""
     res = {
         "scenario": paths.scenario_label(spec.scenario),
         "seed": spec.seed,
@@ -104,7 +132,13 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     if summary.get("commands") is not None:
         # Commands the simulator received but the logger did not record (should be 0).
         res["log_commands_missing"] = max(0, int(summary["commands"]) - res["commands"])
-    res.update(_controller_stats(lcm.get("MPPI_STATUS", []), lcm.get("MPPI_COMMAND", [])))
+    return res
+
+
+def _log_figures(spec, ticks, lcm: dict) -> dict:
+    """From the truth's answer times and the log: answer and command period p99, the answers
+    to parameter updates, the commands by mode."""
+    res = {}
     lat = [tk["lat_ms"] for tk in ticks if tk.get("lat_ms") is not None]
     if lat:
         res["answer_ms_p99"] = float(np.percentile(lat, 99))  # state published -> command received (lock-step)
@@ -120,84 +154,104 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     if modes:
         res["commands_hold"] = int(sum(1 for m in modes if m == 1))
         res["commands_failsafe"] = int(sum(1 for m in modes if m == 2))
+    return res
 
-    if ticks:
-        t = np.array([tk["t"] for tk in ticks])
-        X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
-        nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
-        if model in QUAD_MODELS:
-            speeds = [np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)]
-            res["mean_speed"] = float(np.nanmean(speeds))
-        elif model == "cartpole":
-            res["mean_speed"] = float(np.nanmean(np.abs(X[:, 1])))
-        else:
-            res["mean_speed"] = float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
 
-    # Failures that are not the vehicle's.
+def _mean_speed(model: str, world: dict, X: np.ndarray) -> float:
+    nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
+    if model in QUAD_MODELS:
+        speeds = [np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)]
+        return float(np.nanmean(speeds))
+    if model == "cartpole":
+        return float(np.nanmean(np.abs(X[:, 1])))
+    return float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
+
+
+def _not_the_vehicles_failure(info: dict, summary: dict, collisions: list) -> str | None:
+    """Failures that are not the vehicle's (and collisions), else None."""
     ho = info.get("harness_outcome")
     so = summary.get("outcome")
     if info.get("error"):
-        res["reason"] = "harness error: " + info["error"]
-    elif ho is not None:
-        res["reason"] = ho
-    elif so is None:
-        res["reason"] = "no simulator summary"
-    elif summary.get("rejected_commands"):
-        res["reason"] = f"{summary['rejected_commands']} malformed commands (wrong size, kind or not finite)"
-    elif so == "controller_timeout":
-        res["reason"] = "controller stopped answering (lock-step timeout)"
-    elif so in ("interrupted", "error"):
-        res["reason"] = "simulator " + so
-    elif res["collisions"]:
-        c = res["collisions"][0]
-        res["reason"] = f"collision with {c['with']} (vehicle {c['vehicle']}) at t={c['t']:.2f} s"
-    if res["reason"] is not None or not ticks:
-        res["reason"] = res["reason"] or "no truth log"
-        return res
+        return "harness error: " + info["error"]
+    if ho is not None:
+        return ho
+    if so is None:
+        return "no simulator summary"
+    if summary.get("rejected_commands"):
+        return f"{summary['rejected_commands']} malformed commands (wrong size, kind or not finite)"
+    if so == "controller_timeout":
+        return "controller stopped answering (lock-step timeout)"
+    if so in ("interrupted", "error"):
+        return "simulator " + so
+    if collisions:
+        c = collisions[0]
+        return f"collision with {c['with']} (vehicle {c['vehicle']}) at t={c['t']:.2f} s"
+    return None
 
-    kind = crit.get("type", "goal")
-    duration = float(world.get("duration", 0))
-    full = so == "duration" and abs(t[-1] - duration) < 0.05
-    if kind == "goal":
-        res["success"] = so == "goal"
-        res["reason"] = "goal reached" if res["success"] else f"goal not reached in {duration:g} s"
-    elif kind == "tracking":
-        ref = world.get("reference", {})
-        sel = t >= float(crit.get("settle", 0.0))
-        err = np.linalg.norm(X[sel, 0:3] - reference_eval(ref, t[sel]), axis=1)
-        res["tracking_rmse"] = float(np.sqrt(np.mean(err ** 2))) if err.size else None
-        ok = res["tracking_rmse"] is not None and res["tracking_rmse"] <= float(crit.get("max_rmse", 0.5))
-        res["success"] = bool(full and ok)
-        res["reason"] = "tracked" if res["success"] else f"tracking RMSE {res['tracking_rmse']:.3f} m > {crit.get('max_rmse', 0.5)}"
-    elif kind == "mission":
-        # The mission tool flew it (the scenario's `mission`): done, and its paths tracked.
-        ms = logs.read_json(out / "mission_summary.json") or {}
-        rms = [leg["rmse"] for leg in ms.get("legs", []) if "rmse" in leg and leg["kind"] != "hold"]
-        res["tracking_rmse"] = max(rms) if rms else None
-        ok = ms.get("outcome") == "done" and (res["tracking_rmse"] or 0.0) <= float(crit.get("max_rmse", 0.5))
-        res["success"] = bool(ok)
-        res["reason"] = "mission done" if ok else f"mission {ms.get('outcome')}, path RMSE {res['tracking_rmse']}"
-    elif kind == "swingup":
-        th, w = X[:, 2], X[:, 3]
-        err = np.abs(_wrap(th - np.pi))
-        upright = (err < float(crit.get("angle_tol", 0.3))) & (np.abs(w) < float(crit.get("rate_tol", 2.0)))
-        hold = t >= t[-1] - float(crit.get("hold", 2.0))
-        res["tracking_rmse"] = float(np.sqrt(np.mean(err[hold] ** 2)))
-        # Time to goal: from when the pole stays upright to the end.
-        idx = np.where(~upright)[0]
-        first_stay = (idx[-1] + 1) if idx.size else 0
-        res["time_to_goal"] = float(t[first_stay]) if first_stay < len(t) else None
-        res["success"] = bool(full and upright[hold].all())
-        res["reason"] = "swung up and held" if res["success"] else "pole not held upright over the last %.1f s" % float(crit.get("hold", 2.0))
-    elif kind == "laps":
-        d = (X[:, 0] / 13.0) ** 2 + (X[:, 1] / 6.0) ** 2 - 1.0
-        ang = np.unwrap(np.arctan2(X[:, 1] / 6.0, X[:, 0] / 13.0))
-        laps = abs(ang[-1] - ang[0]) / (2 * np.pi)
-        res["laps"] = float(laps)
-        res["tracking_rmse"] = float(np.sqrt(np.mean(d ** 2)))
-        ok = laps >= float(crit.get("min_laps", 1)) and res["mean_speed"] >= float(crit.get("min_mean_speed", 0))
-        res["success"] = bool(full and ok)
-        res["reason"] = "lapped" if res["success"] else f"{laps:.2f} laps at {res['mean_speed']:.2f} m/s mean"
-    else:
-        res["reason"] = f"unknown success.type {kind}"
-    return res
+
+@dataclass
+class Flown:
+    """What the success criteria judge: the truth (t, X) and how the simulation ended."""
+    out: Path
+    world: dict
+    outcome: str | None
+    t: np.ndarray
+    X: np.ndarray
+    full: bool          # flown to the scenario's full duration
+    duration: float
+
+
+def _goal(res: dict, crit: dict, f: Flown) -> None:
+    res["success"] = f.outcome == "goal"
+    res["reason"] = "goal reached" if res["success"] else f"goal not reached in {f.duration:g} s"
+
+
+def _tracking(res: dict, crit: dict, f: Flown) -> None:
+    ref = f.world.get("reference", {})
+    sel = f.t >= float(crit.get("settle", 0.0))
+    err = np.linalg.norm(f.X[sel, 0:3] - reference_eval(ref, f.t[sel]), axis=1)
+    res["tracking_rmse"] = float(np.sqrt(np.mean(err ** 2))) if err.size else None
+    ok = res["tracking_rmse"] is not None and res["tracking_rmse"] <= float(crit.get("max_rmse", 0.5))
+    res["success"] = bool(f.full and ok)
+    res["reason"] = "tracked" if res["success"] else f"tracking RMSE {res['tracking_rmse']:.3f} m > {crit.get('max_rmse', 0.5)}"
+
+
+def _mission(res: dict, crit: dict, f: Flown) -> None:
+    # The mission tool flew it (the scenario's `mission`): done, and its paths tracked.
+    ms = logs.read_json(f.out / "mission_summary.json") or {}
+    rms = [leg["rmse"] for leg in ms.get("legs", []) if "rmse" in leg and leg["kind"] != "hold"]
+    res["tracking_rmse"] = max(rms) if rms else None
+    ok = ms.get("outcome") == "done" and (res["tracking_rmse"] or 0.0) <= float(crit.get("max_rmse", 0.5))
+    res["success"] = bool(ok)
+    res["reason"] = "mission done" if ok else f"mission {ms.get('outcome')}, path RMSE {res['tracking_rmse']}"
+
+
+def _swingup(res: dict, crit: dict, f: Flown) -> None:
+    t, X = f.t, f.X
+    th, w = X[:, 2], X[:, 3]
+    err = np.abs(_wrap(th - np.pi))
+    upright = (err < float(crit.get("angle_tol", 0.3))) & (np.abs(w) < float(crit.get("rate_tol", 2.0)))
+    hold = t >= t[-1] - float(crit.get("hold", 2.0))
+    res["tracking_rmse"] = float(np.sqrt(np.mean(err[hold] ** 2)))
+    # Time to goal: from when the pole stays upright to the end.
+    idx = np.where(~upright)[0]
+    first_stay = (idx[-1] + 1) if idx.size else 0
+    res["time_to_goal"] = float(t[first_stay]) if first_stay < len(t) else None
+    res["success"] = bool(f.full and upright[hold].all())
+    res["reason"] = "swung up and held" if res["success"] else "pole not held upright over the last %.1f s" % float(crit.get("hold", 2.0))
+
+
+def _laps(res: dict, crit: dict, f: Flown) -> None:
+    X = f.X
+    d = (X[:, 0] / 13.0) ** 2 + (X[:, 1] / 6.0) ** 2 - 1.0
+    ang = np.unwrap(np.arctan2(X[:, 1] / 6.0, X[:, 0] / 13.0))
+    laps = abs(ang[-1] - ang[0]) / (2 * np.pi)
+    res["laps"] = float(laps)
+    res["tracking_rmse"] = float(np.sqrt(np.mean(d ** 2)))
+    ok = laps >= float(crit.get("min_laps", 1)) and res["mean_speed"] >= float(crit.get("min_mean_speed", 0))
+    res["success"] = bool(f.full and ok)
+    res["reason"] = "lapped" if res["success"] else f"{laps:.2f} laps at {res['mean_speed']:.2f} m/s mean"
+
+
+# success.type -> its judge (the scenario file's criterion, module docstring).
+CRITERIA = {"goal": _goal, "tracking": _tracking, "mission": _mission, "swingup": _swingup, "laps": _laps}

@@ -9,21 +9,15 @@ over flights, and the smallest clearance of any flight.
 """
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
-
-def _load(folder: Path) -> dict:
-    f = Path(folder) / "summary.json"
-    if not f.is_file():
-        raise FileNotFoundError(f"{folder}: no summary.json (not a finished campaign)")
-    return json.loads(f.read_text())
+from .results import CampaignResults, load_campaign
 
 
-def _label(summary: dict) -> str:
-    s = summary["summary"]
-    runs = summary["runs"]
+def _label(results: CampaignResults) -> str:
+    s = results.summary
+    runs = results.runs
     backend = runs[0].get("backend", "?") if runs else "?"
     return f"{s.get('clock', '?')}, {backend}"
 
@@ -59,12 +53,9 @@ def _median(v: list) -> float | None:
 
 def rows(folder: Path) -> dict:
     """Per scenario: success, runs, merit, compute p99 median/worst, misses, clearance."""
-    summary = _load(folder)
-    by = {}
-    for r in summary["runs"]:
-        by.setdefault(r["scenario"], []).append(r)
+    results = load_campaign(folder)
     out = {}
-    for scen, runs in by.items():
+    for scen, runs in results.by_scenario().items():
         p99 = [r.get("compute_ms_p99") for r in runs]
         clear = [r.get("min_clearance") for r in runs if r.get("min_clearance") is not None]
         sep = [r.get("min_separation") for r in runs if r.get("min_separation") is not None]
@@ -79,7 +70,7 @@ def rows(folder: Path) -> dict:
             "min_separation": min(sep) if sep else None,
             "failures": _count_kinds([r.get("reason") or "?" for r in runs if not r.get("success")]),
         }
-    return {"label": _label(summary), "seeds": summary["summary"].get("seeds", []), "rows": out}
+    return {"label": _label(results), "seeds": results.summary.get("seeds", []), "rows": out}
 
 
 def _count_kinds(reasons: list) -> list:

@@ -22,7 +22,6 @@ def main(argv=None) -> int:
     ap.add_argument("--lcm-url", default="")
     ap.add_argument("--die-after", type=float, default=0.0, help="exit after this many seconds (tests)")
     a = ap.parse_args(argv)
-    paths.add_lcm_types_to_path()
     import lcm
     from mppi_lcm import command_t, controller_status_t, vehicle_state_t
 

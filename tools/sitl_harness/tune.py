@@ -535,8 +535,6 @@ def _objective(st: Study, study, trial, eng, optuna):
 
 
 def _write_outputs(st: Study, study):
-    from optuna.trial import TrialState
-
     best = _best(study)
     trials = study.get_trials(deepcopy=False)
     lines = [f"# study {st.a.study}", "",

@@ -13,11 +13,12 @@ Per scenario and controller:
 """
 from __future__ import annotations
 
-import json
 import math
 from collections import Counter
 from pathlib import Path
 from statistics import mean, median
+
+from .results import load_campaign
 
 
 def _num(v):
@@ -25,7 +26,7 @@ def _num(v):
 
 
 def load_runs(folder: Path) -> list[dict]:
-    return json.loads((Path(folder) / "summary.json").read_text())["runs"]
+    return load_campaign(folder).runs
 
 
 def _fmt(v, digits=2):

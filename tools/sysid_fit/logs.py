@@ -19,14 +19,12 @@
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "drivers" / "mavlink"))
 
 STATE_CHANNEL, COMMAND_CHANNEL, CLOCK_CHANNEL, LINK_CHANNEL = "MPPI_STATE", "MPPI_COMMAND", "MPPI_SIM_CLOCK", "MPPI_MAVLINK_LINK"
 RATE_MODEL, THRUST_RATES, MODE_FAILSAFE = 2, 2, 2

@@ -122,7 +122,7 @@ void read_mppi(const YAML::Node& m, MppiSettings& s) {
   static const std::set<std::string> known = {
       "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
       "control_cost_scale", "weighting", "smoothing_window", "seed", "threads", "simd", "chunk_rollouts",
-      "min_rollouts", "noise_groups"};
+      "min_rollouts", "noise_groups", "cuda"};
   const Fields f(m, "mppi", known);
   f.require({"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"});
   f.read("rollouts", s.rollouts);
@@ -245,6 +245,42 @@ std::shared_ptr<const VehicleFile> vehicle_of(const YAML::Node& root, const YAML
 }
 
 }  // namespace
+
+namespace {
+
+// An enumerated field of mppi.cuda, by its names (cuda_settings.hpp).
+template <class E>
+void read_choice(const YAML::Node& m, const char* field, const char* names, E* out) {
+  if (!m[field]) return;
+  const std::string path = std::string("mppi.cuda.") + field;
+  const YAML::Node& n = m[field];
+  // `on`/`off`/`true`/`false` read as the text given (yaml-cpp keeps the scalar's text).
+  if (!parse_cuda_setting(scalar<std::string>(n, path), out)) fail(path, std::string("must be ") + names);
+}
+
+}  // namespace
+
+CudaSettings read_cuda_settings(const YAML::Node& m, const std::string& task) {
+  CudaSettings s;
+  if (!m || m.IsNull()) return s;
+  if (!m.IsMap()) fail("mppi.cuda", "expected a map");
+  static const std::set<std::string> known = {"kernel", "chunk_steps", "warps", "noise", "controls",
+                                              "lanes",  "grid",        "pdl",   "graph"};
+  const Fields f(m, "mppi.cuda", known);
+  read_choice(m, "kernel", "auto, chunked or lanes", &s.kernel);
+  f.read("chunk_steps", s.chunk_steps);
+  f.read("warps", s.warps);
+  read_choice(m, "noise", "auto, prepass or inline", &s.noise);
+  read_choice(m, "controls", "auto, keep or redraw", &s.controls);
+  f.read("lanes", s.lanes);
+  read_choice(m, "grid", "device or host", &s.grid);
+  read_choice(m, "pdl", "auto, on or off", &s.pdl);
+  f.read("graph", s.graph);
+  int vehicles = 1;
+  visit_task(task, [&](auto tag) { vehicles = decltype(tag)::type::kVehicles; });
+  if (const std::string err = validate(s, vehicles); !err.empty()) throw ConfigError("mppi.cuda." + err);
+  return s;
+}
 
 std::string default_config_path(const std::string& task) {
   return std::string(MPPID_SOURCE_DIR) + "/config/tasks/" + task + ".yaml";
@@ -381,6 +417,8 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");
   if (c.backend != "cpu" && c.backend != "cuda" && c.backend != "auto") fail("backend", "must be cpu, cuda or auto");
   read_mppi(root["mppi"], c.mppi);
+  const YAML::Node& mppi_section = root["mppi"];
+  c.cuda_launch = read_cuda_settings(mppi_section["cuda"], c.task);
   if (root["controller"]) c.controller = scalar<std::string>(root["controller"], "controller");
   if (c.controller != "mppi" && c.controller != "ddp") fail("controller", "must be mppi or ddp");
   if (const YAML::Node d = root["ddp"]; d && !d.IsNull()) {

@@ -34,7 +34,7 @@ std::unique_ptr<Controller> make_task_controller(const AppConfig& config, [[mayb
   const typename T::Params params = task_params<T>(config);
   std::unique_ptr<RolloutBackend<T>> b;
 #ifdef MPPID_HAVE_CUDA
-  if (backend == "cuda") b = make_cuda_backend<T>(config.mppi);
+  if (backend == "cuda") b = make_cuda_backend<T>(config.mppi, config.cuda_launch);
 #endif
   if (!b) {
     try {

@@ -13,15 +13,6 @@ void ControlLoop::answer_param(const transport::ParamUpdate& p, bool applied, co
   tx_->publish_param_result(transport::answer_to(p, applied, why, cycle_index_));
 }
 
-bool ControlLoop::forward_live_param(const transport::ParamUpdate& p) {
-  if (live_ == nullptr || !is_live_key(p.key)) return false;
-  if (live_->request(p)) return true;
-  counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
-  spdlog::warn("parameter update seq {} rejected: the optimizer builder is busy", p.seq);
-  answer_param(p, false, std::string(p.key) + ": the optimizer builder is busy (64 updates queued); send it again");
-  return true;
-}
-
 void ControlLoop::service_live() {
   if (OptimizerBundle* b = live_->take_ready()) swap_in(b);
   transport::ParamResult r;
@@ -50,14 +41,8 @@ void ControlLoop::swap_in(OptimizerBundle* b) {
     live_->retire(b);
     return;
   }
-  const int t_old = horizon_, t_new = next->horizon();
-  const double dt_old = c_->dt(), dt_new = next->dt();
-  // The optimizer's plan, through the bundle's held buffer as scratch, then the held plan.
-  resample_plan(c_->plan().data(), t_old, dt_old, b->held.data(), t_new, dt_new, nu_, u_init_.data());
-  next->set_plan(b->held.data());
-  resample_plan(held_.data(), t_old, dt_old, b->held.data(), t_new, dt_new, nu_, u_init_.data());
-  held_.swap(b->held);
-  guard_plan_.swap(b->guard);
+  plan_.rebase(next, b->held);  // both plans onto the new horizon; b->held takes the old one
+  if (guard_ != nullptr) guard_->swap_plan(b->guard);
   const int threads_before = live_->current_threads();
   live_->swap_current(b);  // b now holds the old controller
   c_ = next;
@@ -65,10 +50,8 @@ void ControlLoop::swap_in(OptimizerBundle* b) {
   // a live update that is not a pointer swap; only when mppi.threads changed).
   if (live_->current_threads() != threads_before && std::strncmp(c_->backend(), "cpu", 3) == 0)
     resize_worker_team(live_->current_threads());
-  horizon_ = t_new;
-  dt_ns_ = std::llround(dt_new * 1e9);
   status_.rollouts = c_->settings().rollouts;
-  status_.horizon = t_new;
+  status_.horizon = c_->horizon();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();
   for (int i = 0; i < b->count; ++i) {

@@ -38,62 +38,126 @@ std::string integer(const std::string& key, double v, double lo, double hi, cons
   return {};
 }
 
+// What bounds a live update: daemon.live's limits, the CPUs and the control size.
+struct LiveLimits {
+  int max_rollouts, max_horizon, max_threads, nu;
+};
+
+// The optimizer's part of the parameter table (the loop routes mppi.* here, loop_params.cpp):
+// one row per setting a live update may change, {name, check and set}; a name ending in '['
+// is a prefix (sigma[j]); the last row takes the rest.
+struct LiveField {
+  const char* name;
+  std::string (*set)(MppiSettings* n, const std::string& key, double v, const LiveLimits& l);
+};
+
+std::string unknown_field(MppiSettings*, const std::string& key, double, const LiveLimits&) {
+  return key + ": unknown field (tunable at run time: rollouts, horizon, dt, substeps, lambda, nu, sigma, "
+               "sigma[j], control_cost_scale, smoothing_window, seed, threads, chunk_rollouts, min_rollouts)";
+}
+
+std::string fixed_for_a_run(MppiSettings*, const std::string& key, double, const LiveLimits&) {
+  return key + ": not tunable at run time (the command limits, the failsafe and the backend are fixed for a "
+               "run; restart with --set)";
+}
+
+std::string sigma_channel(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  if (key.back() != ']') return unknown_field(n, key, v, l);
+  const std::size_t open = key.find('[');
+  const std::string index = key.substr(open + 1, key.size() - open - 2);
+  char* end = nullptr;
+  const long j = std::strtol(index.c_str(), &end, 10);
+  if (index.empty() || *end != '\0' || j < 0 || j >= l.nu)
+    return key + ": the channel index must be in [0, " + std::to_string(l.nu - 1) + "]";
+  n->sigma[static_cast<std::size_t>(j)] = static_cast<float>(v);
+  return {};
+}
+
+std::string seed(MppiSettings* n, const std::string& key, double v, const LiveLimits&) {
+  if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) return key + ": must be an integer in [0, 2^53]";
+  n->seed = static_cast<std::uint64_t>(v);
+  return {};
+}
+
+// A float setting: any finite value here; validate() checks the snapshot afterwards.
+template <float MppiSettings::*field>
+std::string real(MppiSettings* n, const std::string&, double v, const LiveLimits&) {
+  n->*field = static_cast<float>(v);
+  return {};
+}
+
+std::string sigma(MppiSettings* n, const std::string&, double v, const LiveLimits&) {
+  std::fill(n->sigma.begin(), n->sigma.end(), static_cast<float>(v));
+  return {};
+}
+
+// An integer setting in the constant range [lo, hi]; the rows below name the daemon's limits.
+template <int MppiSettings::*field, int lo, int hi>
+std::string whole(MppiSettings* n, const std::string& key, double v, const LiveLimits&) {
+  return integer(key, v, lo, hi, "", &(n->*field));
+}
+std::string rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  return integer(key, v, 1, l.max_rollouts, " (daemon.live.max_rollouts)", &n->rollouts);
+}
+std::string horizon(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  return integer(key, v, 2, l.max_horizon, " (daemon.live.max_horizon)", &n->horizon);
+}
+std::string threads(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  return integer(key, v, 0, l.max_threads, " (the CPUs this process may use)", &n->threads);
+}
+std::string chunk_rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  return integer(key, v, 0, l.max_rollouts, "", &n->chunk_rollouts);
+}
+std::string min_rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
+  return integer(key, v, 0, l.max_rollouts, "", &n->min_rollouts);
+}
+
+const LiveField& live_field(const std::string& name) {
+  using S = MppiSettings;
+  static const LiveField kFields[] = {
+      {"rollouts", &rollouts},
+      {"horizon", &horizon},
+      {"substeps", &whole<&S::substeps, 1, 1000>},
+      {"smoothing_window", &whole<&S::smoothing_window, 1, 1001>},
+      {"threads", &threads},
+      {"chunk_rollouts", &chunk_rollouts},
+      {"min_rollouts", &min_rollouts},
+      {"seed", &seed},
+      {"dt", &real<&S::dt>},
+      {"lambda", &real<&S::lambda>},
+      {"nu", &real<&S::nu>},
+      {"control_cost_scale", &real<&S::control_cost_scale>},
+      {"sigma", &sigma},
+      {"sigma[", &sigma_channel},
+      {"u_min", &fixed_for_a_run},
+      {"u_max", &fixed_for_a_run},
+      {"u_init", &fixed_for_a_run},
+      {"u_nominal", &fixed_for_a_run},
+      {"simd", &fixed_for_a_run},
+      {"weighting", &fixed_for_a_run},
+      {"", &unknown_field},
+  };
+  for (const LiveField& f : kFields) {
+    const std::size_t len = std::strlen(f.name);
+    const bool prefix = len == 0 || f.name[len - 1] == '[';
+    if (prefix ? name.compare(0, len, f.name) == 0 : name == f.name) return f;
+  }
+  return kFields[sizeof(kFields) / sizeof(kFields[0]) - 1];
+}
+
 thread_local bool t_builder = false;
 
 int resolved_threads(const MppiSettings& s) { return s.threads > 0 ? s.threads : omp_get_max_threads(); }
 
 }  // namespace
 
-bool is_live_key(const char* key) { return std::strncmp(key, "mppi.", 5) == 0; }
-
 std::string apply_live_update(MppiSettings* s, const std::string& key, double v, int nu, const LiveSettings& lim) {
   if (!std::isfinite(v)) return key + ": must be finite";
   MppiSettings n = *s;
   const std::string name = key.rfind("mppi.", 0) == 0 ? key.substr(5) : key;
-  std::string err;
-  const int max_threads = lim.max_threads > 0 ? lim.max_threads : omp_get_num_procs();
-  if (name == "rollouts") {
-    err = integer(key, v, 1, lim.max_rollouts, " (daemon.live.max_rollouts)", &n.rollouts);
-  } else if (name == "horizon") {
-    err = integer(key, v, 2, lim.max_horizon, " (daemon.live.max_horizon)", &n.horizon);
-  } else if (name == "substeps") {
-    err = integer(key, v, 1, 1000, "", &n.substeps);
-  } else if (name == "smoothing_window") {
-    err = integer(key, v, 1, 1001, "", &n.smoothing_window);
-  } else if (name == "threads") {
-    err = integer(key, v, 0, max_threads, " (the CPUs this process may use)", &n.threads);
-  } else if (name == "chunk_rollouts") {
-    err = integer(key, v, 0, lim.max_rollouts, "", &n.chunk_rollouts);
-  } else if (name == "min_rollouts") {
-    err = integer(key, v, 0, lim.max_rollouts, "", &n.min_rollouts);
-  } else if (name == "seed") {
-    if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) return key + ": must be an integer in [0, 2^53]";
-    n.seed = static_cast<std::uint64_t>(v);
-  } else if (name == "dt") {
-    n.dt = static_cast<float>(v);
-  } else if (name == "lambda") {
-    n.lambda = static_cast<float>(v);
-  } else if (name == "nu") {
-    n.nu = static_cast<float>(v);
-  } else if (name == "control_cost_scale") {
-    n.control_cost_scale = static_cast<float>(v);
-  } else if (name == "sigma") {
-    std::fill(n.sigma.begin(), n.sigma.end(), static_cast<float>(v));
-  } else if (name.rfind("sigma[", 0) == 0 && name.back() == ']') {
-    const std::string index = name.substr(6, name.size() - 7);
-    char* end = nullptr;
-    const long j = std::strtol(index.c_str(), &end, 10);
-    if (index.empty() || *end != '\0' || j < 0 || j >= nu)
-      return key + ": the channel index must be in [0, " + std::to_string(nu - 1) + "]";
-    n.sigma[static_cast<std::size_t>(j)] = static_cast<float>(v);
-  } else if (name == "u_min" || name == "u_max" || name == "u_init" || name == "u_nominal" || name == "simd" ||
-             name == "weighting") {
-    return key + ": not tunable at run time (the command limits, the failsafe and the backend are fixed for a "
-                 "run; restart with --set)";
-  } else {
-    return key + ": unknown field (tunable at run time: rollouts, horizon, dt, substeps, lambda, nu, sigma, "
-                 "sigma[j], control_cost_scale, smoothing_window, seed, threads, chunk_rollouts, min_rollouts)";
-  }
+  const LiveLimits limits{lim.max_rollouts, lim.max_horizon, lim.max_threads > 0 ? lim.max_threads : omp_get_num_procs(),
+                          nu};
+  const std::string err = live_field(name).set(&n, key, v, limits);
   if (!err.empty()) return err;
   const std::string invalid = validate(n, nu);
   if (!invalid.empty()) {

@@ -2,6 +2,8 @@
 // The main thread owns signals (blocked everywhere else, taken with sigtimedwait), the
 // systemd watchdog and STATUS= line; the loop thread owns the controller and publishes.
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <spdlog/async.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -17,8 +19,10 @@
 #include <iostream>
 #include <optional>
 #include <thread>
+#include <type_traits>
 
 #include "mppi/app/config.hpp"
+#include "mppi/tasks.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
@@ -40,7 +44,7 @@ constexpr int kExitRuntime = 1;
 struct Options {
   std::string config_path, vehicle_path, backend, controller_kind, lcm_url, log_level = "info";
   std::vector<std::string> sets;
-  bool lockstep = false, realtime = false, require_realtime = false, stats = false;
+  bool lockstep = false, realtime = false, require_realtime = false, stats = false, self_test = false;
   double duration_s = 0.0;
 };
 
@@ -62,6 +66,9 @@ std::optional<int> parse_options(int argc, char** argv, Options* o) {
   app.add_option("--duration", o->duration_s, "Stop after this many seconds (0 = until a signal)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--log-level", o->log_level, "trace | debug | info | warn | error");
+  app.add_flag("--self-test", o->self_test,
+               "Load the settings, build the controller, run a few cycles from rest, check the command is "
+               "finite and print the compute time; exit 0 if so (no LCM, no real time)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -360,6 +367,67 @@ void print_stats(const ControlLoop& loop, const DaemonSettings& ds, const mppi::
   std::cout << mppi::daemon::format_stats(f, loop, inbox.counters) << std::flush;
 }
 
+// The loop thread's real-time set-up and warm-up done (else it is joined, and false), and
+// the real-time report given (where it was required and refused, the thread is stopped).
+bool await_warm_up(LoopThread* lt, std::thread* loop_thread, const Options& opt,
+                   const mppi::rt::RealtimeResult& rt_result, const DaemonSettings& ds) {
+  while (lt->ready.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  if (lt->ready.load() < 0) {
+    loop_thread->join();
+    spdlog::error("backend warm-up failed: {}", lt->warmup_error);
+    return false;
+  }
+  if (opt.realtime && !report_realtime(rt_result, ds, opt.require_realtime)) {
+    lt->stop = true;
+    loop_thread->join();
+    return false;
+  }
+  return true;
+}
+
+// --self-test: a resting state (zeros, the identity attitude where the model has a
+// quaternion), kSelfTestCycles cycles from it after the warm-up; the command must be finite
+// and inside the limits. Prints the compute time against the loop's period, so a board
+// shows before its first flight whether the settings fit it.
+constexpr int kSelfTestCycles = 20;
+
+std::vector<float> rest_state(const mppi::Controller& c) {
+  std::vector<float> x(static_cast<std::size_t>(c.nx()), 0.0f);
+  mppi::visit_task(c.task(), [&](auto tag) {
+    using Vehicle = typename decltype(tag)::type::Vehicle;
+    if constexpr (std::is_same_v<Vehicle, mppi::QuadrotorRate>)
+      for (int v = 0; v < c.vehicles(); ++v) x[static_cast<std::size_t>(v * Vehicle::kNx + Vehicle::QW)] = 1.0f;
+  });
+  return x;
+}
+
+int run_self_test(mppi::Controller& c, const DaemonSettings& ds) {
+  const std::vector<float> x0 = rest_state(c);
+  std::vector<float> u(static_cast<std::size_t>(c.nu()));
+  for (int i = 0; i < ds.warmup_iterations; ++i) c.iterate(x0.data(), u.data());
+  std::vector<double> ms;
+  for (int i = 0; i < kSelfTestCycles; ++i) {
+    const std::int64_t t0 = mppi::rt::monotonic_ns();
+    const mppi::UpdateStats& st = c.iterate(x0.data(), u.data());
+    ms.push_back(static_cast<double>(mppi::rt::monotonic_ns() - t0) * 1e-6);
+    const bool finite = std::all_of(u.begin(), u.end(), [](float v) { return std::isfinite(v); });
+    if (!st.finite || !finite) {
+      spdlog::error("self-test FAILED: cycle {} gave a non-finite {}", i + 1, finite ? "update" : "command");
+      return kExitRuntime;
+    }
+  }
+  std::sort(ms.begin(), ms.end());
+  const double period_ms = 1e3 / ds.loop.rate_hz;
+  spdlog::info("self-test passed: task {} on {}, K={} T={}: {} cycles from rest, command finite; compute median "
+               "{:.2f} ms, max {:.2f} ms of the {:.1f} ms period",
+               c.task(), c.backend(), c.settings().rollouts, c.horizon(), kSelfTestCycles, ms[ms.size() / 2],
+               ms.back(), period_ms);
+  if (ms[ms.size() / 2] > 0.5 * period_ms)
+    spdlog::warn("compute takes over half the period on this machine: fewer rollouts (mppi.rollouts) leave room "
+                 "for the bridge and the recorder (docs/first-flight.md, latency budget)");
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -378,6 +446,7 @@ int main(int argc, char** argv) {
   mppi::rt::RealtimeResult rt_result;
   std::unique_ptr<mppi::Controller> controller;
   if (const int rc = build_controller(opt, &cfg, &ds, &rt_result, &controller); rc != 0) return rc;
+  if (opt.self_test) return run_self_test(*controller, ds);
   mppi::rt::MonotonicClock clock(ds.spin && !ds.loop.lockstep);
   std::unique_ptr<mppi::transport::LcmTransport> tx;
   if (const int rc = open_transport(ds, *controller, &clock, &tx); rc != 0) return rc;
@@ -391,17 +460,7 @@ int main(int argc, char** argv) {
   // ---- loop thread: real-time set-up, warm-up, then cycles -------------------------------
   LoopThread lt(&loop, initial, &ds, opt.realtime, &rt_result);
   std::thread loop_thread([&lt] { lt.main(); });
-  while (lt.ready.load() == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  if (lt.ready.load() < 0) {
-    loop_thread.join();
-    spdlog::error("backend warm-up failed: {}", lt.warmup_error);
-    return kExitRuntime;
-  }
-  if (opt.realtime && !report_realtime(rt_result, ds, opt.require_realtime)) {
-    lt.stop = true;
-    loop_thread.join();
-    return kExitRuntime;
-  }
+  if (!await_warm_up(&lt, &loop_thread, opt, rt_result, ds)) return kExitRuntime;
 
   // ---- run ---------------------------------------------------------------------------------
   // States and ticks must be taken in while the optimizer fills the cores.

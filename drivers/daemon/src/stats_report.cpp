@@ -14,9 +14,9 @@ std::string json(const char* name, const rt::DurationSummary& d) {
   return fmt::format("\"{}\":{{\"n\":{},\"min_ms\":{:.4f},\"mean_ms\":{:.4f},\"p99_ms\":{:.4f},\"max_ms\":{:.4f}}}", name,
                      d.count, d.min_ms, d.mean_ms, d.p99_ms, d.max_ms);
 }
-}  // namespace
 
-std::string format_stats(const RunFacts& f, const ControlLoop& loop, const transport::InboxCounters& in) {
+// The report for people: one line per kind of count.
+std::string text_stats(const RunFacts& f, const ControlLoop& loop, const transport::InboxCounters& in) {
   const rt::TimingSummary t = loop.timing_total();
   const LoopCounters& c = loop.counters();
   auto v = [](const std::atomic<std::int64_t>& a) { return a.load(); };
@@ -59,7 +59,15 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
   out += fmt::format("  params applied={} rejected={} dropped={}  status={} plans={}\n", v(c.params_applied),
                      v(c.params_rejected), v(in.params_dropped), v(c.status_published), v(c.plans_published));
   out += fmt::format("  rss start={} kB end={} kB\n", f.rss_start_kb, f.rss_end_kb);
-  out += "mppid-stats {";
+  return out;
+}
+
+// The same for tools: one JSON object on a line of its own.
+std::string json_stats(const RunFacts& f, const ControlLoop& loop, const transport::InboxCounters& in) {
+  const rt::TimingSummary t = loop.timing_total();
+  const LoopCounters& c = loop.counters();
+  auto v = [](const std::atomic<std::int64_t>& a) { return a.load(); };
+  std::string out = "mppid-stats {";
   out += fmt::format(
       "\"task\":\"{}\",\"backend\":\"{}\",\"rollouts\":{},\"horizon\":{},\"rate_hz\":{},\"seconds\":{:.3f},"
       "\"lockstep\":{},\"realtime\":{},\"cycles\":{},\"misses\":{},\"late_start_misses\":{},"
@@ -87,6 +95,11 @@ std::string format_stats(const RunFacts& f, const ControlLoop& loop, const trans
       v(in.rejected_time), v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected),
       v(c.holds_without_goal), loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), f.rss_start_kb, f.rss_end_kb);
   return out;
+}
+}  // namespace
+
+std::string format_stats(const RunFacts& f, const ControlLoop& loop, const transport::InboxCounters& in) {
+  return text_stats(f, loop, in) + json_stats(f, loop, in);
 }
 
 }  // namespace mppi::daemon

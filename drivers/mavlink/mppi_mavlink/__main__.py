@@ -35,17 +35,25 @@ def main(argv=None) -> int:
                            help="1 (default): start mppid's identification manoeuvre; 0: stop it")
     a = ap.parse_args(argv)
     if a.cmd != "run":
-        from .control import request
-        line = a.cmd + (f" {a.altitude}" if getattr(a, "altitude", None) is not None else "")
-        line += f" {a.on}" if a.cmd == "identify" else ""
-        try:
-            reply = request(a.socket, line, a.timeout)
-        except OSError as e:
-            print(f"mppid-mavlink-bridge {a.cmd}: cannot reach the bridge at {a.socket}: {e}", file=sys.stderr)
-            return 2
-        print(json.dumps(reply, indent=2) if a.cmd == "status" else reply["message"])
-        return 0 if reply.get("ok") else 1
+        return _control(a)
+    return _run(a)
 
+
+def _control(a) -> int:
+    """A control request to a running bridge; its answer on stdout."""
+    from .control import request
+    line = a.cmd + (f" {a.altitude}" if getattr(a, "altitude", None) is not None else "")
+    line += f" {a.on}" if a.cmd == "identify" else ""
+    try:
+        reply = request(a.socket, line, a.timeout)
+    except OSError as e:
+        print(f"mppid-mavlink-bridge {a.cmd}: cannot reach the bridge at {a.socket}: {e}", file=sys.stderr)
+        return 2
+    print(json.dumps(reply, indent=2) if a.cmd == "status" else reply["message"])
+    return 0 if reply.get("ok") else 1
+
+
+def _run(a) -> int:
     logging.basicConfig(level=a.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s.%(msecs)03d %(levelname)s %(message)s", datefmt="%H:%M:%S")
     sets = list(a.set)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import yaml
 
+from . import autopilots, fence
 from . import vehicle as vehicle_file
 
 DEFAULTS = {
@@ -56,6 +57,7 @@ DEFAULTS = {
         "max_state_age_s": 0.25,          # a command answering an older state is not forwarded
         "forward_hold_plan": True,        # MODE_HOLD_PLAN commands (deadline guard) are forwarded
         "restart_gap_s": 1.0,             # a seq step back after this long a silence: mppid restarted
+        "disengage_after_s": 0.5,         # engaged, nothing forwarded this long: disengage (failsafe.py)
     },
     "telemetry": {
         "request": True,                  # ask for the streams below on every link-up (ArduPilot sends none unasked)
@@ -71,6 +73,12 @@ DEFAULTS = {
         "takeoff_wait_s": 30.0,           # ArduPilot: how long `offboard` waits for a take-off to end
     },
     "takeoff": {"altitude": 2.0},         # m above home
+    # The geofence (fence.py), in the autopilot's local frame, ENU: engaged and outside it, the
+    # bridge disengages and holds (failsafe.py); `offboard` outside it is refused.
+    "fence": {"shape": None,              # box | cylinder | None (no fence)
+              "center": None, "radius": None,       # cylinder: [x, y], m
+              "min": None, "max": None,             # box: [x, y] corners, m
+              "min_z": None, "max_z": None},        # m, either shape
     "control": {"socket": "/run/mppid-mavlink/control.sock"},
     "trace": {"file": None},              # JSONL of every forwarded setpoint (latency measurement)
 }
@@ -163,8 +171,9 @@ def validate(s: dict):
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or not (lo <= v <= hi):
             raise SettingsError(f"{sec}.{key}: must be a number in [{lo}, {hi}], got {v!r}")
 
-    if s["mavlink"]["dialect"] not in ("px4", "ardupilot"):
-        raise SettingsError(f"mavlink.dialect: must be px4 or ardupilot, got {s['mavlink']['dialect']!r}")
+    if s["mavlink"]["dialect"] not in autopilots.available():
+        raise SettingsError(f"mavlink.dialect: must be one of {', '.join(autopilots.available())} "
+                            f"(a file in mppi_mavlink/autopilots/), got {s['mavlink']['dialect']!r}")
     num("mavlink", "system_id", 1, 255)
     num("mavlink", "component_id", 1, 255)
     num("mavlink", "target_component", 0, 255)
@@ -184,6 +193,7 @@ def validate(s: dict):
     num("forwarding", "status_timeout_s", 0.05, 60)
     num("forwarding", "max_state_age_s", 0.005, 10)
     num("forwarding", "restart_gap_s", 0.0, 60)
+    num("forwarding", "disengage_after_s", 0.1, 10)
     num("offboard", "min_rate_hz", 2.0001, 1000)
     num("offboard", "prestream_s", 1.0, 60)
     num("offboard", "wait_s", 0.0, 60)
@@ -198,6 +208,10 @@ def validate(s: dict):
         raise SettingsError(f"telemetry.min_state_hz ({s['telemetry']['min_state_hz']:g}) must not exceed "
                             f"telemetry.state_hz ({s['telemetry']['state_hz']:g})")
     num("takeoff", "altitude", 0.1, 1000)
+    try:
+        fence.parse({k: v for k, v in s["fence"].items() if v is not None})
+    except fence.FenceError as e:
+        raise SettingsError(str(e)) from None
     num("mavlink", "signing_link_id", 0, 255)
     if not isinstance(s["mavlink"]["signing_link_id"], int):
         raise SettingsError("mavlink.signing_link_id: must be an integer in [0, 255]")

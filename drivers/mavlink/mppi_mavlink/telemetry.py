@@ -18,20 +18,14 @@ from pymavlink import mavutil
 
 mavlink = mavutil.mavlink
 
-# What each dialect builds its states from (bridge._on_odometry / _on_attitude).
-STATE_MESSAGES = {
-    "px4": (mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
-            mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
-    # ArduPilot sends no ODOMETRY: the bridge pairs the attitude with the latest position.
-    "ardupilot": (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
-}
 STATUS_MESSAGES = (mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE)
 
 
-def requests(dialect: str, state_hz: float, status_hz: float) -> list[tuple[int, str, int]]:
-    """(message id, name, interval in us) for MAV_CMD_SET_MESSAGE_INTERVAL, states first."""
+def requests(state_messages, state_hz: float, status_hz: float) -> list[tuple[int, str, int]]:
+    """(message id, name, interval in us) for MAV_CMD_SET_MESSAGE_INTERVAL, states first;
+    `state_messages`: what the autopilot's profile builds states from (autopilots/)."""
     out = []
-    for ids, hz in ((STATE_MESSAGES[dialect], state_hz), (STATUS_MESSAGES, status_hz)):
+    for ids, hz in ((state_messages, state_hz), (STATUS_MESSAGES, status_hz)):
         for mid in ids:
             out.append((mid, mavlink.mavlink_map[mid].msgname, int(round(1e6 / hz))))
     return out

@@ -2,7 +2,7 @@
 """State on the MAVLink wire -> setpoint on the wire, through bridge and mppid, on this
 machine: p50, p99 (and more) as one JSON document.
 
-    drivers/mavlink/tools/latency.py [--seconds 20] [--rollouts 512] [--no-rt] [--out DIR]
+    .venv/bin/python drivers/mavlink/tools/latency.py [--seconds 20] [--rollouts 512] [--no-rt] [--out DIR]
 
 Runs, in a private network namespace (unshare -n; root), the simulated autopilot, the
 bridge and mppid (--realtime, as in service), flies a hover (offboard, arm, hold), and
@@ -27,8 +27,10 @@ import tempfile
 import time
 from pathlib import Path
 
+from mppi_mavlink.control import request
+
 ROOT = Path(__file__).resolve().parents[3]
-PY = str(ROOT / ".venv" / "bin" / "python") if (ROOT / ".venv" / "bin" / "python").exists() else sys.executable
+PY = sys.executable  # has the bridge and the simulated autopilot (tools/setup.sh installs them into .venv)
 LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
 
 
@@ -51,8 +53,6 @@ def find_mppid():
 
 
 def ctl(sock, line):
-    sys.path.insert(0, str(ROOT / "drivers" / "mavlink"))
-    from mppi_mavlink.control import request
     return request(sock, line, 30)
 
 
@@ -71,8 +71,7 @@ def main():
         sys.exit("latency: unshare(CLONE_NEWNET) failed: run as root")
     subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
     subprocess.run(["ip", "route", "add", "224.0.0.0/4", "dev", "lo"], check=True)
-    env = dict(os.environ, PYTHONPATH=f"{ROOT / 'drivers' / 'mavlink'}:{ROOT / 'sim' / 'mavlink_vehicle'}",
-               PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
     rt = [] if a.no_rt else ["chrt", "-f", "85"]
     sock = str(out / "bridge.sock")
     procs = []

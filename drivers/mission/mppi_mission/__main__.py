@@ -7,6 +7,8 @@ the command line, against mppid-sim or a real autopilot (through the MAVLink bri
     mppid-mission circle --center X,Y,Z --radius 5 --speed 3 [--laps 2] [--ramp S]
     mppid-mission figure-eight --center X,Y,Z --radius 5 --speed 3 [--laps 1]
     mppid-mission waypoints X,Y,Z X,Y,Z ... [--speed 2]
+    mppid-mission check [--seconds S] [--hover-thrust N]   propellers off: mppid's answer to the
+                                                           attitude, beside it (check.py)
     common: [--lcm-url URL] [--bridge SOCKET] [--takeoff M] [--obstacles FILE.yaml]
             [--frame start|local] [--guided MAVLINK_URL] [--quiet]
 
@@ -70,6 +72,10 @@ def _parser():
         c.add_argument("--center", type=_point, required=True)
         c.add_argument("--radius", type=float, required=True)
         c.add_argument("--laps", type=float, default=1.0)
+    k = sub.add_parser("check", help="propellers off: what mppid would command against what the autopilot reports")
+    k.add_argument("--lcm-url", default=LCM_URL)
+    k.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: at Ctrl-C)")
+    k.add_argument("--hover-thrust", type=float, metavar="N", help="the vehicle's mass x g, to show thrust against it")
     for p in (w, sub.choices["circle"], sub.choices["figure-eight"]):
         p.add_argument("--speed", type=float, required=p is not w, default=None if p is not w else 1.0)
         p.add_argument("--ramp", type=float, help="seconds to reach full speed (default speed / 1 m/s^2)")
@@ -97,6 +103,9 @@ def _one_leg(a) -> dict:
 
 def main(argv=None) -> int:
     a = _parser().parse_args(argv)
+    if a.cmd == "check":
+        from .check import run
+        return run(a.lcm_url, a.seconds, a.hover_thrust)
     try:
         mission = plan_mod.load(a.mission) if a.cmd == "fly" else plan_mod.from_dict(_one_leg(a), a.cmd)
     except (plan_mod.PlanError, OSError, yaml.YAMLError) as e:

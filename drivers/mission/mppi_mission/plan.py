@@ -9,6 +9,10 @@ or built from the command line. Validated at load; an error names the field.
     takeoff: 2.0          # arm and take off with the autopilot's own take-off (through the bridge)
     land: true            # land at the end (default: when it took off)
     vehicle_radius: 0.2
+    yaw: hold             # the heading: hold (default: the one the vehicle has at the hand-over),
+                          # path (facing along each line, waypoint segment or towards a goal), or
+                          # degrees (0: +x, counter-clockwise); a leg's own `yaw` overrides it.
+                          # Curves take hold or degrees: mppid's reference carries one held yaw.
     obstacles:            # virtual trees: only mppid knows them (published on MPPI_OBSTACLES)
       trees: [[x, y, r], ...]
       forest: {spacing: 4, jitter: 0.5, radius: 0.3, radius_jitter: 0.1, x_range: [4, 26],
@@ -21,6 +25,11 @@ or built from the command line. Validated at load; an error names the field.
       - circle: {center: [-5, 0, 2], radius: 5, speed: 3, laps: 2}
       - figure_eight: {center: [0, 0, 2], radius: 5, speed: 3, laps: 1}
     score: {settle: 3.0}  # tracking error counts this long after a path reaches full speed
+    fence: {shape: cylinder, center: [0, 0], radius: 30, min_z: 0.5, max_z: 10}
+                          # or {shape: box, min: [x, y], max: [x, y], ...}: every leg is checked
+                          # against it before flight, vehicle_radius inside (the mission's frame;
+                          # the start taken at x, y = 0 at the take-off altitude); the bridge
+                          # holds the vehicle at its own (config/bridge: fence)
 
 Every path starts at rest, ramps to its speed over `ramp` seconds (default: speed / 1 m/s²,
 at least 1 s) and ramps down to rest at its end, from the point where the previous leg ended;
@@ -37,18 +46,21 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mppi_mavlink import fence as fence_mod
+
 from . import forest, reference
 
 LEG_KEYS = {
-    "hold": {"at", "for"},
-    "goal": {"at", "radius", "timeout"},
-    "line": {"to", "speed", "ramp"},
-    "waypoints": {"points", "speed", "ramp"},
-    "circle": {"center", "radius", "speed", "ramp", "laps"},
-    "figure_eight": {"center", "radius", "speed", "ramp", "laps"},
+    "hold": {"at", "for", "yaw"},
+    "goal": {"at", "radius", "timeout", "yaw"},
+    "line": {"to", "speed", "ramp", "yaw"},
+    "waypoints": {"points", "speed", "ramp", "yaw"},
+    "circle": {"center", "radius", "speed", "ramp", "laps", "yaw"},
+    "figure_eight": {"center", "radius", "speed", "ramp", "laps", "yaw"},
 }
 TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
-            "score"}
+            "score", "fence", "yaw"}
+CURVES = ("circle", "figure_eight")
 TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it
 ON_PATH = 0.5        # m: closer than this to a curve's start point needs no transit
 
@@ -68,6 +80,8 @@ class Mission:
     obstacles: dict = field(default_factory=dict)
     settle: float = 3.0
     task: str | None = None
+    fence: fence_mod.Fence | None = None
+    yaw: str | float = "hold"
 
     def trees(self, origin_xy, seed: int) -> list[tuple[float, float, float]]:
         """The virtual trees in local coordinates (the forest seeded by `seed`)."""
@@ -95,8 +109,12 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     legs = doc.get("legs")
     if not isinstance(legs, list) or not legs:
         raise PlanError("legs: a list of at least one leg")
+    yaw = doc.get("yaw", "hold")
+    _check_yaw("yaw", yaw)
     for i, leg in enumerate(legs):
         _check_leg(i, leg)
+        kind, a = next(iter(leg.items()))
+        _check_yaw(f"legs[{i}].{kind}.yaw", a.get("yaw", yaw), kind)
     frame = doc.get("frame", "start")
     if frame not in ("start", "local"):
         raise PlanError(f"frame: start or local, got {frame!r}")
@@ -116,14 +134,53 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     vr = doc.get("vehicle_radius", 0.2)
     if not _num(vr, 0, 5):
         raise PlanError("vehicle_radius: metres in [0, 5]")
-    return Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
-                   takeoff=None if takeoff is None else float(takeoff),
-                   land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
-                   obstacles=obstacles, settle=float(settle), task=doc.get("task"))
+    try:
+        fence = fence_mod.parse(doc.get("fence"))
+    except fence_mod.FenceError as e:
+        raise PlanError(str(e)) from None
+    m = Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
+                takeoff=None if takeoff is None else float(takeoff),
+                land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
+                obstacles=obstacles, settle=float(settle), task=doc.get("task"), fence=fence, yaw=yaw)
+    check_fence(m)
+    return m
+
+
+def check_fence(m: Mission, dt: float = 0.05):
+    """Every leg inside the mission's fence, vehicle_radius inside it, sampled every `dt` s of
+    its reference; the first point outside names its leg."""
+    if m.fence is None:
+        return
+    first_z = next((leg_a[k][2] for leg in m.legs for leg_a in leg.values() for k in ("at", "to", "center")
+                    if k in (leg_a or {})), 0.0)
+    here = np.array([0.0, 0.0, m.takeoff if m.takeoff is not None else first_z])
+    for i in range(len(m.legs)):
+        for step in steps(m, i, here, np.zeros(3)):
+            if step.duration is None or step.kind in ("hold", "goal"):
+                pts = [np.asarray(step.ref["center"], float)]
+            else:
+                pts = reference.evaluate(step.ref, np.arange(0.0, step.duration + dt, dt))[0]
+            for p in pts:
+                why = m.fence.breach(p, m.vehicle_radius)
+                if why:
+                    raise PlanError(f"fence: legs[{i}].{step.kind} leaves it at ({p[0]:.1f}, {p[1]:.1f}, "
+                                    f"{p[2]:.1f}): {why}")
+            here = step.end
 
 
 def _num(v, lo=-1e6, hi=1e6) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
+
+
+def _check_yaw(where: str, v, kind: str = ""):
+    if _num(v, -360, 360) or v == "hold":
+        return
+    if v == "path":
+        if kind in CURVES:
+            raise PlanError(f"{where}: path faces along lines only: mppid's reference carries one held heading, "
+                            f"so a {kind} takes hold or degrees")
+        return
+    raise PlanError(f"{where}: hold, path or degrees in [-360, 360], got {v!r}")
 
 
 def _point(v) -> bool:
@@ -195,12 +252,35 @@ def default_ramp(speed: float) -> float:
     return max(1.0, speed / 1.0)
 
 
-def steps(mission: Mission, leg_index: int, here, origin) -> list[Step]:
-    """The steps of one leg, started where the previous one ended (`here`, local ENU);
-    `origin` maps the mission's x, y to local ones (frame: start)."""
+def steps(mission: Mission, leg_index: int, here, origin, heading: float = 0.0) -> list[Step]:
+    """The steps of one leg, started where the previous one ended (`here`, local ENU, with the
+    heading `heading`, rad); `origin` maps the mission's x, y to local ones (frame: start).
+    Each step's reference carries its yaw (rad, ENU)."""
     kind, a = next(iter(mission.legs[leg_index].items()))
-    here = np.asarray(here, float)
+    out = _steps(mission, leg_index, kind, a, np.asarray(here, float), origin)
+    spec = a.get("yaw", mission.yaw)
+    for st in out:
+        st.ref["yaw"] = _yaw(spec, st, heading)
+        heading = st.ref["yaw"]
+    return out
 
+
+def _yaw(spec, step: Step, heading: float) -> float:
+    """The step's heading: held, in degrees, or along the step's line (towards its goal)."""
+    if spec == "hold":
+        return float(heading)
+    if spec != "path":
+        return math.radians(float(spec))
+    if step.kind == "line":
+        d = np.asarray(step.ref["end"], float) - np.asarray(step.ref["center"], float)
+    elif step.kind == "goal":
+        d = np.asarray(step.ref["center"], float) - np.asarray(step.ref.get("from", step.ref["center"]), float)
+    else:
+        return float(heading)
+    return float(math.atan2(d[1], d[0])) if math.hypot(d[0], d[1]) > 1e-6 else float(heading)
+
+
+def _steps(mission: Mission, leg_index: int, kind: str, a: dict, here, origin) -> list[Step]:
     def loc(p):
         p = np.asarray(p, float).copy()
         p[:2] += origin[:2]
@@ -211,7 +291,7 @@ def steps(mission: Mission, leg_index: int, here, origin) -> list[Step]:
         return [Step(leg_index, "hold", {"kind": "hold", "center": at.tolist()}, a.get("for"))]
     if kind == "goal":
         at = loc(a["at"])
-        return [Step(leg_index, "goal", {"kind": "hold", "center": at.tolist()}, None,
+        return [Step(leg_index, "goal", {"kind": "hold", "center": at.tolist(), "from": here.tolist()}, None,
                      goal_radius=float(a.get("radius", 1.0)), timeout=a.get("timeout", 60.0))]
     speed = float(a.get("speed", 1.0))
     ramp = float(a.get("ramp", default_ramp(speed)))

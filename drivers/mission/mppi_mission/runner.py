@@ -32,6 +32,7 @@ class Runner:
         self.t0_us = 0
         self.trees = []
         self.err2 = []            # squared errors at speed, this step
+        self.heading = 0.0        # rad, ENU: the yaw of the reference flown last
         self.stop = threading.Event()
         self.summary = {"mission": mission.name, "seed": seed, "legs": [], "outcome": None}
 
@@ -72,15 +73,21 @@ class Runner:
 
     # ---- the mission ----------------------------------------------------------------------
     def hold_here(self):
-        p = self.link.position()
-        self._set(plan_mod.Step(-1, "hold", {"kind": "hold", "center": p.tolist()}, None), self.link.now_us())
-        self.say(f"holding at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f})")
+        """mppid holds where the vehicle is, facing where it faces (a mission's `yaw: hold`
+        keeps that heading, so the hand-over turns nothing)."""
+        p, h = self.link.position(), self.link.heading()
+        if h is not None:
+            self.heading = h
+        ref = {"kind": "hold", "center": p.tolist(), "yaw": self.heading}
+        self._set(plan_mod.Step(-1, "hold", ref, None), self.link.now_us())
+        self.say(f"holding at ({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}), heading {math.degrees(self.heading):.0f} deg")
 
     def run(self) -> dict:
         pub = threading.Thread(target=self._publisher, name="mission-publish", daemon=True)
         t_start = time.monotonic()
         try:
             self.link.wait_state()
+            self.link.check_task(self.m.task)
             origin = self.link.position() if self.m.frame == "start" else np.zeros(3)
             self.trees = self.m.trees(origin[:2], self.seed)
             if self.trees:
@@ -127,8 +134,9 @@ class Runner:
         kind = next(iter(self.m.legs[i]))
         res = {"leg": i, "kind": kind, "ok": False}
         rmse = []
-        for step in plan_mod.steps(self.m, i, here, origin):
+        for step in plan_mod.steps(self.m, i, here, origin, self.heading):
             self._set(step, self.link.now_us())
+            self.heading = step.ref["yaw"]
             ok, why = self._until_done(step, i)
             if not step.transit:
                 with self.lock:

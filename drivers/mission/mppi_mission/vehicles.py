@@ -62,10 +62,20 @@ class StateClock:
     def __init__(self):
         self.lock = threading.Lock()
         self.state = None
+        self.yaw = None
 
-    def _set_state(self, t_us: int, p):
+    def _set_state(self, t_us: int, p, yaw=None):
         with self.lock:
             self.state = (t_us, p, time.monotonic())
+            self.yaw = yaw if yaw is not None else self.yaw
+
+    def heading(self):
+        """The vehicle's yaw (rad, ENU: 0 east, counter-clockwise), or None when not known."""
+        with self.lock:
+            return self.yaw
+
+    def check_task(self, task):
+        """Whether the controller flies the task the mission was written for (mppid: below)."""
 
     def now_us(self) -> int | None:
         """The state stream's clock: the newest sample time plus the wall time since it came."""
@@ -98,9 +108,11 @@ class MppidLink(StateClock):
         super().__init__()
         self.t = lcm_types.import_mppi_lcm()
         self.ch = {"state": "MPPI_STATE", "reference": "MPPI_REFERENCE", "obstacles": "MPPI_OBSTACLES",
-                   **(channels or {})}
+                   "status": "MPPI_STATUS", **(channels or {})}
         self.lc = lcm.LCM(lcm_url)
         self.lc.subscribe(self.ch["state"], self._on_state)
+        self.lc.subscribe(self.ch["status"], self._on_status)
+        self.task = None
         self.socket = bridge_socket
         self.what = f"a vehicle state on {self.ch['state']}"
         self.seq = 0
@@ -119,7 +131,28 @@ class MppidLink(StateClock):
             return
         if m.n < 3 or not all(math.isfinite(c) for c in m.x[:3]):
             return
-        self._set_state(m.sample_utime, np.array(m.x[:3], float))
+        yaw = None
+        if m.n >= 10 and all(math.isfinite(c) for c in m.x[6:10]):
+            w, x, y, z = m.x[6:10]  # ENU/FLU attitude: the heading of the body x axis
+            yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        self._set_state(m.sample_utime, np.array(m.x[:3], float), yaw)
+
+    def _on_status(self, ch, data):
+        try:
+            self.task = self.t.controller_status_t.decode(data).task
+        except ValueError:
+            pass
+
+    def check_task(self, task, timeout=10.0):
+        """Refuses a mppid that runs another task than the mission's (its controller_status_t
+        says which): a forest mission flown by the tracking task is a straight line through its
+        trees. A mission that names no task flies with any."""
+        if task is None:
+            return
+        _wait(lambda: self.task is not None, timeout, f"mppid's status on {self.ch['status']} (is mppid running?)")
+        if self.task != task:
+            raise FlightError(f"mppid runs the task {self.task!r}, the mission is written for {task!r}: refusing to "
+                              f"fly it (start mppid with config/tasks/{task}.yaml)")
 
     # ---- the flight, through the bridge ---------------------------------------------------
     def request(self, line: str, timeout=60.0) -> str:
@@ -165,7 +198,7 @@ class MppidLink(StateClock):
                  "line": m.KIND_LINE}
         m.kind = kinds[ref["kind"]]
         m.center = [float(c) for c in ref["center"]]
-        m.radius, m.speed, m.yaw = float(ref.get("radius", 0.0)), float(ref.get("speed", 0.0)), 0.0
+        m.radius, m.speed, m.yaw = float(ref.get("radius", 0.0)), float(ref.get("speed", 0.0)), float(ref.get("yaw", 0.0))
         m.ramp_s, m.phase = float(ref.get("ramp", 0.0)), float(ref.get("phase", 0.0))
         m.end_s = float(ref.get("end_s", 0.0))
         m.t0_utime = int(t0_us)
@@ -278,10 +311,11 @@ class GuidedLink(StateClock):
         p, v, a = (x[0] for x in reference.evaluate(ref, [(now - t0_us) * 1e-6]))
         ml = self.mavlink
         mask = (ml.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
-        # ENU -> NED: (x, y, z)_NED = (y, x, -z)_ENU; heading north-east as mppid's yaw 0 (east).
+        # ENU -> NED: (x, y, z)_NED = (y, x, -z)_ENU; the heading as mppid's (ENU yaw 0: east,
+        # NED yaw pi/2).
         self.conn.mav.set_position_target_local_ned_send(
             0, self.target, 1, ml.MAV_FRAME_LOCAL_NED, mask, p[1], p[0], -p[2], v[1], v[0], -v[2],
-            a[1], a[0], -a[2], math.pi / 2, 0.0)
+            a[1], a[0], -a[2], math.pi / 2 - float(ref.get("yaw", 0.0)), 0.0)
 
     def close(self):
         self.stop.set()

@@ -12,6 +12,31 @@
 #include "mppi/app/config.hpp"
 #include "mppi/offline/offline.hpp"
 
+namespace {
+
+// score.json, obstacles.csv and trajectory.csv in folder `out`.
+void write_files(const std::string& out, const std::string& json, const mppi::offline::Scenario& scenario,
+                 const mppi::offline::Result& result) {
+  std::filesystem::create_directories(out);
+  std::ofstream(out + "/score.json") << json << "\n";
+  std::ofstream obs(out + "/obstacles.csv");
+  obs << "x,y,radius\n";
+  for (const auto& c : scenario.forest) obs << c.x << "," << c.y << "," << c.radius << "\n";
+  std::ofstream tr(out + "/trajectory.csv");
+  tr << "t";
+  for (int i = 0; i < result.nx; ++i) tr << ",x" << i;
+  for (int i = 0; i < result.nu; ++i) tr << ",u" << i;
+  tr << ",ess\n";
+  for (std::size_t n = 0; n < result.t.size(); ++n) {
+    tr << result.t[n];
+    for (int i = 0; i < result.nx; ++i) tr << "," << result.x[n * result.nx + i];
+    for (int i = 0; i < result.nu; ++i) tr << "," << result.u[n * result.nu + i];
+    tr << "," << result.ess[n] << "\n";
+  }
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   CLI::App app{"Fly an mppid task offline against its model integrated with RK4"};
   std::string task = "quadrotor_forest", config, out, backend;
@@ -54,24 +79,7 @@ int main(int argc, char** argv) {
             std::to_string(cfg.mppi.rollouts) + ",\"horizon\":" + std::to_string(cfg.mppi.horizon) +
             ",\"seed\":" + std::to_string(seed) + ",\"wall_s\":" + std::to_string(wall) + "}";
     std::cout << json << std::endl;
-    if (!out.empty()) {
-      std::filesystem::create_directories(out);
-      std::ofstream(out + "/score.json") << json << "\n";
-      std::ofstream obs(out + "/obstacles.csv");
-      obs << "x,y,radius\n";
-      for (const auto& c : scenario.forest) obs << c.x << "," << c.y << "," << c.radius << "\n";
-      std::ofstream tr(out + "/trajectory.csv");
-      tr << "t";
-      for (int i = 0; i < result.nx; ++i) tr << ",x" << i;
-      for (int i = 0; i < result.nu; ++i) tr << ",u" << i;
-      tr << ",ess\n";
-      for (std::size_t n = 0; n < result.t.size(); ++n) {
-        tr << result.t[n];
-        for (int i = 0; i < result.nx; ++i) tr << "," << result.x[n * result.nx + i];
-        for (int i = 0; i < result.nu; ++i) tr << "," << result.u[n * result.nu + i];
-        tr << "," << result.ess[n] << "\n";
-      }
-    }
+    if (!out.empty()) write_files(out, json, scenario, result);
     return result.success ? 0 : 3;
   } catch (const mppi::app::ConfigError& e) {
     std::cerr << "mppid-offline: bad settings: " << e.what() << std::endl;

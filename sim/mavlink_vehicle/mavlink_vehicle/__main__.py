@@ -66,8 +66,6 @@ def main(argv=None) -> int:
     world = mission = None
     start = (0.0, 0.0, 0.0)
     if a.world:
-        drivers = Path(__file__).resolve().parents[3] / "drivers"
-        sys.path[:0] = [str(drivers / "mavlink"), str(drivers / "mission")]
         from mppi_mavlink import lcm_types
         import lcm
         from .world import Mission, load_world

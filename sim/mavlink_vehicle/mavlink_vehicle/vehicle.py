@@ -30,6 +30,8 @@ mavlink = mavutil.mavlink
 # PX4 custom mode: main mode in bits 16..23, sub mode in bits 24..31.
 PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "OFFBOARD": (6, 0), "AUTO.TAKEOFF": (4, 2),
              "AUTO.LOITER": (4, 3), "AUTO.LAND": (4, 6)}
+# PX4's COM_OBL_RC_ACT values this stand-in has (others: land).
+OFFBOARD_LOSS_ACTIONS = {0: "POSCTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
 # ArduPilot Copter custom modes.
 APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
 
@@ -53,8 +55,19 @@ class Vehicle:
             # only messages signed with the key (pymavlink's own implementation, not the
             # bridge's: the test checks one against the other).
             self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
+        # COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
+        # 4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
+        # The battery failsafe (PX4 COM_LOW_BAT_ACT 2 or 3: land at BAT_CRIT_THR; ArduPilot
+        # BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
+        # capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
+        # ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
+        # without a ground station's HEARTBEAT, once one was heard, armed).
         self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
-                       "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0}
+                       "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
+                       "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
+                       "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0}
+        self.battery = 90.0                # % remaining
+        self.last_gcs_t = None
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
         self.params.update(params or {})
         hover = self.params["MOT_THST_HOVER" if autopilot == "ardupilot" else "MPC_THR_HOVER"]
@@ -83,6 +96,7 @@ class Vehicle:
         self.wire = open(os.path.join(out, "wire.jsonl"), "w") if out else None
         self.truth = open(os.path.join(out, "truth.jsonl"), "w") if out else None
         self.gcs_seen = set()
+        self.text_parts = {}               # STATUSTEXT chunks by id
         # ArduPilot: message id -> [interval s, next send time], set by SET_MESSAGE_INTERVAL.
         self.streams = {}
         self.taking_off = False
@@ -136,6 +150,9 @@ class Vehicle:
                         self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
                 elif msg.type == mavlink.MAV_TYPE_GCS:
                     self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
+                    self.last_gcs_t = self.t
+            elif t == "STATUSTEXT":  # a companion's, which an autopilot routes to the ground station
+                self.on_statustext(msg)
             elif t == "COMMAND_LONG":
                 self._wire({"mono_us": now, "type": t, "command": msg.command,
                             "params": [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
@@ -153,6 +170,18 @@ class Vehicle:
                 if name in self.params and math.isfinite(msg.param_value):
                     self.params[name] = float(msg.param_value)
                 self.send_param(name)
+
+    def on_statustext(self, m):
+        """Recorded as a ground station shows it: MAVLink 2 chunks (one id, 50 characters each
+        but the last) joined."""
+        text, cid = _pid(m.text), getattr(m, "id", 0)
+        if cid:
+            parts = self.text_parts.setdefault(cid, [])
+            parts.append(text)
+            if len(text) == 50:
+                return
+            text = "".join(self.text_parts.pop(cid))
+        self.event("statustext", text=text, severity=m.severity, src=m.get_srcComponent())
 
     def _wire(self, rec):
         if self.wire:
@@ -356,15 +385,36 @@ class Vehicle:
             return [0.0, 0.0, 0.0, 0.0]  # armed, idle on the ground
         return self.position_control(self.hold_sp)
 
+    def other_failsafes(self):
+        """The battery and the ground station (the constructor's comment), at the physics rate."""
+        landing = self.mode in ("AUTO.LAND", "LAND")
+        if self.armed:
+            self.battery = max(0.0, self.battery - self.params["SIM_BATT_DRAIN"] * self.dt)
+        if self.ap == "px4":
+            low = int(self.params["COM_LOW_BAT_ACT"]) in (2, 3) and self.battery <= 100 * self.params["BAT_CRIT_THR"]
+        else:
+            low = int(self.params["BATT_FS_LOW_ACT"]) == 1 and self.battery <= self.params["BATT_LOW_PCT"]
+        gcs = (self.ap == "ardupilot" and int(self.params["FS_GCS_ENABLE"]) == 5 and self.last_gcs_t is not None
+               and self.t - self.last_gcs_t > self.params["FS_GCS_TIMEOUT"])
+        if self.armed and not landing and (low or gcs):
+            reason = "battery low" if low else "ground station lost"
+            self.counters["failsafes"] += 1
+            self.hold_sp = list(self.plant.x[0:3])
+            self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", reason)
+            self.event("failsafe", reason=reason, action=self.mode)
+            self.statustext(f"Failsafe: {reason}, landing", mavlink.MAV_SEVERITY_CRITICAL)
+
     def supervise(self):
         """Failsafe, take-off completion, auto-disarm; at the physics rate."""
+        self.other_failsafes()
         if self.mode == "OFFBOARD" and self.setpoint_t is not None and not self.fresh_setpoint():
             self.counters["failsafes"] += 1
             self.hold_sp = list(self.plant.x[0:3])
-            self.set_mode("AUTO.LAND", "offboard lost")
-            self.event("failsafe", reason="offboard setpoints lost",
+            action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
+            self.set_mode(action, "offboard lost")
+            self.event("failsafe", reason="offboard setpoints lost", action=action,
                        last_setpoint_age_s=round(self.t - self.setpoint_t, 4))
-            self.statustext("Failsafe: offboard lost, landing", mavlink.MAV_SEVERITY_CRITICAL)
+            self.statustext(f"Failsafe: offboard lost, {action}", mavlink.MAV_SEVERITY_CRITICAL)
         if self.mode == "OFFBOARD" and self.setpoint_t is None and not self.plant.on_ground:
             pass
         if self.mode == "AUTO.TAKEOFF" and self.takeoff_alt is not None and \
@@ -413,7 +463,8 @@ class Vehicle:
     def send_slow(self):
         sensors = 0x7FFF
         if self.streaming(mavlink.MAVLINK_MSG_ID_SYS_STATUS):
-            self.conn.mav.sys_status_send(sensors, sensors, sensors, 100, 15800, -1, 90, 0, 0, 0, 0, 0, 0)
+            self.conn.mav.sys_status_send(sensors, sensors, sensors, 100, 15800, -1, int(self.battery), 0, 0, 0, 0, 0,
+                                          0)
         if self.streaming(mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE):
             self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, self.landed_state())
 

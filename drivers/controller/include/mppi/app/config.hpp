@@ -15,6 +15,7 @@
 #include "mppi/app/vehicle.hpp"
 #include "mppi/controller.hpp"
 #include "mppi/ddp/settings.hpp"
+#include "mppi/gpu/cuda_settings.hpp"
 #include "mppi/settings.hpp"
 
 namespace mppi::app {
@@ -28,6 +29,8 @@ struct AppConfig {
   std::string task;                                  // a name of mppi::task_names()
   std::string backend = "auto";                      // cpu | cuda | auto
   MppiSettings mppi;
+  // mppi.cuda: the CUDA backend's launch choices (mppi/gpu/cuda_settings.hpp; defaults: its own).
+  CudaSettings cuda_launch;
   // The optimizer: "mppi" (the default) or "ddp", the MPC-DDP baseline, which plans with the
   // `ddp:` section's settings over mppi.horizon, mppi.dt and the limits of mppi.
   std::string controller = "mppi";
@@ -78,6 +81,10 @@ struct AppConfig {
 AppConfig load_config(const std::string& file, const std::vector<std::string>& overrides = {});
 // The same from a tree; a relative vehicle file is looked up in `dir` (else the working folder).
 AppConfig parse_config(YAML::Node root, const std::vector<std::string>& overrides = {}, const std::string& dir = "");
+
+// A task's `mppi.cuda` section (null or missing: every default), validated for the task;
+// errors name the field ("mppi.cuda.warps: ...").
+CudaSettings read_cuda_settings(const YAML::Node& section, const std::string& task);
 
 // The default settings file of a task, config/tasks/<task>.yaml in the source tree.
 std::string default_config_path(const std::string& task);

@@ -12,21 +12,24 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/command_out.hpp"
 #include "mppi/daemon/cycle_outcome.hpp"
+#include "mppi/daemon/deadline_guard.hpp"
 #include "mppi/daemon/delay_estimator.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/loop_counters.hpp"
+#include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
-#include "mppi/held_plan.hpp"
 #include "mppi/rt/clock.hpp"
-#include "mppi/rt/command_gate.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/latency_estimator.hpp"
 #include "mppi/rt/schedule.hpp"
@@ -97,43 +100,14 @@ struct LoopSettings {
   FanSettings rollouts;
 };
 
-// Counters since start (the loop thread writes, others read).
-struct LoopCounters {
-  std::atomic<std::int64_t> commands_normal{0};
-  std::atomic<std::int64_t> commands_hold{0};
-  std::atomic<std::int64_t> commands_failsafe{0};
-  std::atomic<std::int64_t> commands_blocked{0};  // failed the gate with no safe substitute
-  std::atomic<std::int64_t> optimizer_nonfinite{0};
-  std::atomic<std::int64_t> optimizer_errors{0};  // exceptions
-  std::atomic<std::int64_t> gate_rejects{0};      // optimizer output outside limits
-  std::atomic<std::int64_t> late_holds{0};        // deadline missed: held plan published
-  std::atomic<std::int64_t> stale_cycles{0};      // state older than state_timeout
-  std::atomic<std::int64_t> params_applied{0};
-  std::atomic<std::int64_t> params_rejected{0};
-  std::atomic<std::int64_t> status_published{0};
-  std::atomic<std::int64_t> plans_published{0};
-  std::atomic<std::int64_t> failsafe_entries{0};
-  std::atomic<std::int64_t> publish_failures{0};  // the transport could not send a command
-  std::atomic<std::int64_t> guard_takeovers{0};   // stalls the deadline guard covered
-  std::atomic<std::int64_t> guard_commands{0};    // held-plan commands it published
-  std::atomic<std::int64_t> future_states{0};     // sample time ahead of now: handled as stale
-  std::atomic<std::int64_t> plan_skips{0};        // extra control steps the plan was shifted by
-  std::atomic<std::int64_t> latency_rejected{0};  // cycle durations the estimator refused
-  std::atomic<std::int64_t> repeated_ticks{0};    // lock-step ticks already answered, dropped
-  std::atomic<std::int64_t> partial_updates{0};   // anytime: updates from fewer than K rollouts
-  std::atomic<std::int64_t> anytime_holds{0};     // anytime: below min_rollouts, held plan published
-  std::atomic<std::int64_t> state_triggered{0};   // trigger state: cycles a state started
-  std::atomic<std::int64_t> clock_triggered{0};   // trigger state: cycles started without one (grace ran out)
-  std::atomic<std::int64_t> holds_without_goal{0};  // no goal or reference yet: held where the first state was
-  std::atomic<std::int64_t> actuation_delay_ns{0};  // the actuation delay flown with (estimated, when on)
-};
-
 class ControlLoop {
  public:
   // clock: CLOCK_MONOTONIC in service, a fake in tests. In lock-step the schedule comes
-  // from the inbox's ticks and `clock` only measures compute time.
+  // from the inbox's ticks and `clock` only measures compute time. guard_clock: the deadline
+  // guard's (its thread sleeps on it); null: a CLOCK_MONOTONIC of its own. A test gives both
+  // one fake clock that threads can share.
   ControlLoop(Controller* controller, rt::Clock* clock, transport::Transport* transport,
-              transport::Inbox* inbox, LoopSettings settings);
+              transport::Inbox* inbox, LoopSettings settings, rt::Clock* guard_clock = nullptr);
   ~ControlLoop();
   ControlLoop(const ControlLoop&) = delete;
   ControlLoop& operator=(const ControlLoop&) = delete;
@@ -175,8 +149,6 @@ class ControlLoop {
   std::int64_t heartbeat_ns() const { return heartbeat_ns_.load(std::memory_order_relaxed); }
   bool loop_healthy() const { return loop_healthy_.load(std::memory_order_relaxed); }
   const LoopSettings& settings() const { return s_; }
-  // Parameter keys handled by the loop itself (the rest go to the controller).
-  static bool is_loop_param(const std::string& key);
 
   // Live optimizer updates (control_loop_live.cpp): with `live` set (before the first
   // cycle; its current() must be the loop's controller), mppi.* updates go to its builder
@@ -204,40 +176,77 @@ class ControlLoop {
     std::int64_t t_act_ns = 0;    // when this cycle's command acts
     std::int64_t lead_ns = 0;     // t_act - sample time, with latency compensation; else 0
   };
+  // One row of the parameter table (loop_params.cpp): the key (a prefix when it ends in
+  // '.'; "" matches every key), whether a live optimizer's builder takes it instead, the
+  // check (nullptr: none) and the change (nullptr: none); each returns "" or "key: why".
+  struct ParamRoute {
+    const char* key;
+    bool live;
+    std::string (ControlLoop::*validate)(const std::string& key, double v) const;
+    std::string (ControlLoop::*apply)(const std::string& key, double v);
+  };
+  static const ParamRoute& route_for(const char* key);
+
+  // The trigger (loop_trigger.cpp).
   bool step_state_triggered(const std::atomic<bool>& stop);
+  // The cycle and its paths (control_loop.cpp): the state check's failsafe (starting over on
+  // entry), the stale state's hold and the fresh state's update, each saying what the cycle
+  // publishes; then the sends, and the bookkeeping after the command.
   void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
-  CycleState read_state(std::int64_t now_state_ns, bool lockstep) const;
-  // The state check's paths: the failsafe (starting over on entry), the stale state's hold,
-  // and the fresh state's update, each saying what the cycle publishes.
   Outcome enter_failsafe();
   Outcome hold_stale(const CycleState& s);
   Outcome optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep);
-  const float* predict_to_act(const CycleState& s);
-  void clear_anytime_stop(bool guarded);
   bool run_optimizer(const float* x0);
   void take_back_from_guard(int steps, bool good, std::int64_t deadline_ns);
-  // Publishing: stamp the timing, publish, remember what went out (the command history).
   transport::Mode send_failsafe(const CycleState& s, std::int64_t t0);
   transport::Mode send_held(const CycleState& s, std::int64_t t0);
   transport::Mode send_fresh(const CycleState& s, std::int64_t t0, bool lockstep);
-  // After the command: timing, health, status, plan.
-  void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published, bool lockstep);
-  // The state's sample time on the loop's timeline (now_state_ns's), and whether it lies
-  // further in the future than the tolerance.
-  std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
-  // Shift the optimizer's and the held plan by the control steps between the plan's first
-  // step and t_act, so step 0 is what acts at t_act.
-  void align_plan(std::int64_t t_act_ns);
+  bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
+  bool publish_failsafe(std::int64_t state_seq);
+  // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
+  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void remember(std::int64_t sent_ns, const float* u);
-  // What a new state teaches the loop: the external acceleration and the mass (the
-  // disturbance observer), and the actuation delay the vehicle really has.
+  void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published, bool lockstep);
+  void apply_between_cycles();
+
+  // The act-time prediction (act_time.cpp): the newest state on the loop's timeline and
+  // when this cycle's command acts; the state predicted to then.
+  CycleState read_state(std::int64_t now_state_ns, bool lockstep) const;
+  // The state's sample time on the loop's timeline, and whether it lies further in the
+  // future than the tolerance.
+  std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
+  const float* predict_to_act(const CycleState& s);
+
+  // The adaptation (adaptation.cpp): what a new state teaches the loop (the external
+  // acceleration and the mass through the disturbance observer, the actuation delay).
   void adapt_to(const float* x, std::int64_t t_state_ns);
   void forget_estimates();   // on failsafe and on restart_estimates
   void restart_estimates();  // daemon.restart_estimates
-  void apply_between_cycles();
+
+  // The task inputs (task_inputs.cpp): reference, goals and the nearest obstacles.
+  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
+  void hold_where_the_state_is(const transport::StateSample& x);
+  void select_obstacles(const transport::StateSample& x);
+
+  // The status publishing (loop_status.cpp): mode changes, status, the display plan.
+  void set_mode(transport::Mode m);
+  void maybe_status(bool force);
+  void maybe_plan(std::int64_t state_seq, const float* x0);
+
+  // Parameters (loop_params.cpp): the table's checks and changes.
   std::string apply_param(const transport::ParamUpdate& p);
+  std::string check_state_timeout(const std::string& key, double v) const;
+  std::string check_failsafe_timeout(const std::string& key, double v) const;
+  std::string check_identify(const std::string& key, double v) const;
+  std::string refuse_daemon_key(const std::string& key, double v) const;
+  std::string refuse_optimizer_key(const std::string& key, double v) const;
+  std::string set_state_timeout(const std::string& key, double v);
+  std::string set_failsafe_timeout(const std::string& key, double v);
+  std::string set_identify(const std::string& key, double v);
+  std::string set_restart_estimates(const std::string& key, double v);
+  std::string set_task_param(const std::string& key, double v);
   // Live updates (control_loop_live.cpp): the answer to one update on the reply channel;
   // forward an mppi.* update to the builder (true when taken); answer the builder's
   // refusals and swap in a controller it built.
@@ -245,21 +254,6 @@ class ControlLoop {
   bool forward_live_param(const transport::ParamUpdate& p);
   void service_live();
   void swap_in(OptimizerBundle* b);
-  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
-  void hold_where_the_state_is(const transport::StateSample& x);
-  void select_obstacles(const transport::StateSample& x);
-  bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
-  void send_command(transport::Command* msg, transport::Mode mode, const float* u, std::int64_t state_seq);
-  // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
-  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
-  bool publish_failsafe(std::int64_t state_seq);
-  void maybe_status(bool force);
-  void maybe_plan(std::int64_t state_seq, const float* x0);
-  void set_mode(transport::Mode m);
-  void guard_arm(std::int64_t deadline_ns, std::int64_t state_seq);
-  int guard_disarm();  // 0 when the loop kept the cycle, else the guard's command count
-  void guard_main();
-  void guard_publish(int step);
 
   Controller* c_;
   rt::Clock* clock_;
@@ -267,15 +261,15 @@ class ControlLoop {
   transport::Inbox* in_;
   LoopSettings s_;
   int nu_;
-  int horizon_;
   std::int64_t period_ns_;
   std::int64_t status_every_;
   std::int64_t plan_every_;
   RolloutPublisher rollouts_;
+  LoopCounters counters_;
 
   rt::PeriodicSchedule schedule_;
   rt::DeadlineMonitor monitor_;
-  rt::CommandGate gate_;
+  CommandOut out_;  // the gate, the sequence and the transport: shared with the guard
   bool started_ = false;
 
   TaskInputs inputs_;
@@ -287,10 +281,9 @@ class ControlLoop {
   bool holding_ = false;  // goals set from the first state (no goal or reference yet)
   bool have_obstacles_ = false;
 
-  HeldPlan held_;               // the plan to fall back on: T x nu, step 0 = next command
+  PlanTimeline plan_;           // the held plan, the warm start and when their step 0 acts
   std::vector<float> u_;        // this cycle's command
   std::vector<float> failsafe_;
-  std::vector<float> u_init_;
   transport::Command cmd_;
   transport::StatusReport status_;
   UpdateStats last_stats_;
@@ -305,9 +298,6 @@ class ControlLoop {
   // Latency compensation (loop thread only).
   rt::LatencyEstimator latency_;
   CommandHistory history_;
-  std::int64_t plan_t0_ns_ = 0;   // when the plan's step 0 acts, on the loop's timeline
-  bool plan_timed_ = false;       // plan_t0_ns_ is meaningful
-  std::int64_t dt_ns_;
   std::vector<float> x_pred_;
   DisturbanceObserver observer_;
   DelayEstimator delays_;
@@ -316,28 +306,8 @@ class ControlLoop {
   bool observe_ = false;  // the model takes an external acceleration and estimation is on
   std::atomic<std::int64_t> latency_estimate_ns_{0};
 
-  std::atomic<std::int64_t> cmd_seq_{0};  // shared by the loop and the guard
-
-  // Deadline guard. word = (cycle id << 2) | phase; phases: idle, armed (the loop is in
-  // the optimizer), guard waiting (it has taken the cycle over, between publishes), guard
-  // publishing. The loop writes guard_plan_ only while idle; the guard reads it only
-  // after taking over, so the buffer itself needs no lock.
-  enum : std::uint64_t { kIdle = 0, kArmed = 1, kGuardWaiting = 2, kGuardPublishing = 3 };
-  std::atomic<std::uint64_t> guard_word_{0};
-  std::atomic<std::int64_t> guard_deadline_{0};
-  std::atomic<int> guard_steps_{0};
-  std::atomic<bool> guard_quit_{false};
-  std::uint64_t guard_id_ = 0;
-  std::int64_t guard_state_seq_ = -1;
-  std::vector<float> guard_plan_;
-  transport::Command guard_cmd_;
-  rt::Wakeup guard_wake_;
-  std::thread guard_thread_;
-  // Anytime: the stop flag of cycle id is anytime_stop_[id & 1]. The loop clears it before
-  // arming the cycle; the guard sets it at deadline - margin if the cycle is still armed. Two
-  // flags, so a guard preempted between that check and its store cannot stop the next cycle.
-  bool anytime_ = false;
-  std::atomic<bool> anytime_stop_[2] = {false, false};
+  rt::MonotonicClock own_guard_clock_;  // the guard's clock unless one is given
+  std::unique_ptr<DeadlineGuard> guard_;  // real time with deadline_guard on; else null
 
   std::atomic<transport::Mode> mode_{transport::Mode::kFailsafe};
   transport::Mode last_status_mode_ = transport::Mode::kFailsafe;
@@ -345,7 +315,6 @@ class ControlLoop {
   std::atomic<bool> loop_healthy_{true};
   std::atomic<std::int64_t> snap_cycles_{0}, snap_misses_{0}, snap_consecutive_{0};
   std::atomic<double> snap_rate_{0.0};
-  LoopCounters counters_;
 
   LiveOptimizer* live_ = nullptr;
   std::int64_t expected_override_ns_ = -1;

@@ -38,9 +38,6 @@ struct LiveSettings {
   int max_threads = 0;      // 0: the CPUs this process may run on
 };
 
-// True for the keys the builder handles ("mppi.*").
-bool is_live_key(const char* key);
-
 // Applies `key = value` to `s` if the key may change at run time and the result is valid
 // (mppi::validate, and the limits); else leaves `s` as it was and returns "key: reason".
 std::string apply_live_update(MppiSettings* s, const std::string& key, double value, int nu,

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Per-flight race-car figures from SITL result folders (truth.jsonl + score.json).
 
-    .venv/bin/python tools/racecar_flights.py results/rc/racecar_ellipse/seed_*
+    .venv/bin/python bench/figures/racecar_flights.py results/rc/racecar_ellipse/seed_*
 
 mean speed: the harness's (|(vx, vy)| over the flight); mean vx: the body's forward speed
 alone (the paper's model moves the car sideways by vy, which its tires do not see); max |d|:

@@ -3,9 +3,9 @@
 for one, three and nine quadrotors (quadrotor_forest, team3_forest, team9_forest), with the
 20 ms real-time line.
 
-  tools/fig11.py assemble BENCH.jsonl --gpu NAME --date DATE [--note TEXT] -o RESULT.json
+  bench/figures/fig11.py assemble BENCH.jsonl --gpu NAME --date DATE [--note TEXT] -o RESULT.json
       gather mppid-bench's JSON lines (one per configuration) into one result file
-  tools/fig11.py plot RESULT.json [-o FIG.png]
+  bench/figures/fig11.py plot RESULT.json [-o FIG.png]
       draw it (default: the JSON's name with .png)
 """
 import argparse

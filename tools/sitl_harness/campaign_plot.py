@@ -1,12 +1,12 @@
 """Plots of a SITL campaign folder (summary.json from `tools/sitl campaign`): success rate
-per scenario with its Wilson 95 % interval, and time to goal / min clearance per run.
+per scenario with its Wilson 95 % interval, and time to goal / min clearance per run
+(summary.png).
 
-    .venv/bin/python tools/plots/sitl_campaign.py RESULTS/campaign [--out FILE.png]
+    .venv/bin/python -m sitl_harness.campaign_plot RESULTS/campaign [--out FILE.png]
 """
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import matplotlib
@@ -15,11 +15,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .results import load_campaign  # noqa: E402
+
 
 def plot_campaign(folder: Path, out: Path | None = None) -> Path:
-    data = json.loads((Path(folder) / "summary.json").read_text())
-    rows = data["summary"]["scenarios"]
-    runs = data["runs"]
+    data = load_campaign(folder)
+    rows = data.summary["scenarios"]
+    runs = data.runs
     names = list(rows)
     fig, axes = plt.subplots(1, 3, figsize=(14, 4))
     rate = np.array([rows[n]["success_rate"] for n in names])

@@ -9,7 +9,7 @@ pass: v(s) <= sqrt(mu g / kappa), then forward with the acceleration the frictio
 leaves, then backward for braking. It ignores the bicycle's yaw and the paper's model's
 decoupled lateral velocity, so it bounds a car that drives the line, not the simulator.
 
-    .venv/bin/python tools/racecar_bound.py
+    .venv/bin/python bench/figures/racecar_bound.py
 """
 import numpy as np
 

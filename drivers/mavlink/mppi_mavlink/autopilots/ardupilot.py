@@ -1,0 +1,65 @@
+"""ArduPilot Copter: GUIDED with attitude/rate targets. GUIDED takes any SET_ATTITUDE_TARGET
+over its own take-off, so nothing is streamed before `offboard` (no pre-stream) and `offboard`
+waits for a take-off to end. The thrust is read as thrust only with GUID_OPTIONS bit 3. A lost
+stream in GUIDED only levels the vehicle after GUID_TIMEOUT and holds its altitude, drifting:
+so the bridge hands it to LOITER itself (`hand_back`, failsafe.py)."""
+from __future__ import annotations
+
+from .base import CUSTOM, AutopilotProfile, mavlink
+
+GUIDED = 4
+LOITER = 5
+LAND = 9
+GUID_OPTIONS_THRUST_AS_THRUST = 8
+
+
+class ArduPilot(AutopilotProfile):
+    name = "ardupilot"
+    mav_autopilot = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+    hover_param = "MOT_THST_HOVER"
+    prestream = False
+    # ArduPilot sends no ODOMETRY: the bridge pairs the attitude with the latest position.
+    state_messages = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+
+    def flight_check(self, read_param) -> str:
+        g = int(read_param("GUID_OPTIONS"))
+        if g & GUID_OPTIONS_THRUST_AS_THRUST:
+            return ""
+        return (f"GUID_OPTIONS={g}: bit 3 (value 8, 'SetAttitudeTarget interprets Thrust As Thrust') "
+                f"is not set, so ArduPilot would read the thrust as a climb rate; refusing to fly. "
+                f"Set GUID_OPTIONS={g | 8} on the autopilot")
+
+    def offboard_mode(self, custom_mode) -> bool:
+        return custom_mode == GUIDED
+
+    def before_offboard(self, engagement, wait_takeoff_s: float) -> None:
+        engagement.wait_takeoff_done(wait_takeoff_s)
+
+    def _guided(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, GUIDED], "mode GUIDED")
+
+    def takeoff(self, ap, engagement, altitude: float) -> None:
+        # ArduPilot flies any attitude target in GUIDED instead of its take-off.
+        engagement.disengage("takeoff requested: the autopilot's own take-off flies")
+        if ap.custom_mode != GUIDED:
+            self._guided(ap)
+        ap.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, [0, 0, 0, 0, 0, 0, altitude], "takeoff")
+        engagement.takeoff_started()
+
+    def offboard(self, ap) -> str:
+        self._guided(ap)
+        ap.wait_mode(lambda: ap.custom_mode == GUIDED, "mode GUIDED")
+        return "GUIDED, attitude/rate targets"
+
+    def land(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LAND], "mode LAND")
+
+    def hold(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LOITER], "mode LOITER")
+
+    def hand_back(self, ap) -> str:
+        self.hold(ap)
+        return "LOITER"
+
+
+PROFILE = ArduPilot()

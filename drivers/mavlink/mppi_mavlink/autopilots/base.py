@@ -1,0 +1,60 @@
+"""What the bridge needs to know of one autopilot, in one place: an `AutopilotProfile`.
+
+A profile answers the questions the bridge used to answer with `if dialect == ...`: whether
+mppid's setpoints are streamed before `offboard` (the pre-stream), which parameter holds the
+hover thrust and how its PARAM_VALUE is decoded, which telemetry states are built from, and
+the take-off / offboard / land / hold sequences. It holds no state of its own: the sequences
+act through the `Autopilot` (autopilot.py: commands, parameters, the mode the HEARTBEAT
+reports) and the `Engagement` (engagement.py) they are given. Adding an autopilot is adding
+a file beside px4.py and ardupilot.py that defines `PROFILE`.
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+mavlink = mavutil.mavlink
+CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+
+class AutopilotProfile:
+    name = ""                 # the settings' mavlink.dialect
+    mav_autopilot = 0         # MAV_AUTOPILOT_* in its HEARTBEAT
+    hover_param = ""          # the hover thrust fraction (0..1) parameter
+    prestream = False         # mppid's setpoints go to the wire before the first `offboard`
+    state_messages = ()       # message ids the states are built from (telemetry.py asks for them)
+
+    def decode_param(self, msg) -> float:
+        """PARAM_VALUE's value as a number."""
+        return float(msg.param_value)
+
+    def flight_check(self, read_param) -> str:
+        """Parameters that make flying through this bridge wrong: why, or ''."""
+        return ""
+
+    def offboard_mode(self, custom_mode) -> bool:
+        """Whether the HEARTBEAT's custom mode is the one mppid's setpoints fly in."""
+        raise NotImplementedError
+
+    def before_offboard(self, engagement, wait_takeoff_s: float) -> None:
+        """What `offboard` does before it looks at mppid's stream."""
+
+    def takeoff(self, ap, engagement, altitude: float) -> None:
+        raise NotImplementedError
+
+    def offboard(self, ap) -> str:
+        """Switches into the offboard mode and waits for the HEARTBEAT to confirm; the answer's text."""
+        raise NotImplementedError
+
+    def land(self, ap) -> None:
+        raise NotImplementedError
+
+    def hold(self, ap) -> None:
+        raise NotImplementedError
+
+    def hand_back(self, ap) -> str:
+        """After mppid's stream stopped while engaged: what the bridge asks of the autopilot
+        (a mode name), or '' to leave it to the autopilot's own offboard-loss failsafe."""
+        return ""

@@ -1,0 +1,60 @@
+"""PX4: OFFBOARD mode, which needs a setpoint stream (> 2 Hz) before it is entered and ignores
+setpoints outside it, so mppid's setpoints are pre-streamed (`prestream`). Integer parameters
+arrive byte-wise in PARAM_VALUE's float. Losing the stream in OFFBOARD is PX4's own failsafe:
+after COM_OF_LOSS_T it does what COM_OBL_RC_ACT says (docs/failsafes.md)."""
+from __future__ import annotations
+
+import math
+import struct
+
+from .base import CUSTOM, AutopilotProfile, mavlink
+
+MAIN_OFFBOARD = 6
+MAIN_AUTO = 4
+SUB_LOITER = 3
+INTEGER_TYPES = (mavlink.MAV_PARAM_TYPE_INT32, mavlink.MAV_PARAM_TYPE_UINT32, mavlink.MAV_PARAM_TYPE_INT16,
+                 mavlink.MAV_PARAM_TYPE_UINT16, mavlink.MAV_PARAM_TYPE_INT8, mavlink.MAV_PARAM_TYPE_UINT8)
+
+
+def main_mode(custom_mode):
+    """PX4's main mode: bits 16..23 of the custom mode."""
+    return None if custom_mode is None else (custom_mode >> 16) & 0xFF
+
+
+class Px4(AutopilotProfile):
+    name = "px4"
+    mav_autopilot = mavlink.MAV_AUTOPILOT_PX4
+    hover_param = "MPC_THR_HOVER"
+    prestream = True
+    state_messages = (mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+                      mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
+
+    def decode_param(self, msg) -> float:
+        if msg.param_type in INTEGER_TYPES:
+            return float(struct.unpack("<i", struct.pack("<f", msg.param_value))[0])
+        return float(msg.param_value)
+
+    def offboard_mode(self, custom_mode) -> bool:
+        return main_mode(custom_mode) == MAIN_OFFBOARD
+
+    def before_offboard(self, engagement, wait_takeoff_s: float) -> None:
+        engagement.prestream("offboard requested")  # pre-stream again after a stop
+
+    def takeoff(self, ap, engagement, altitude: float) -> None:
+        # PX4 reads param7 as AMSL; NaN takes MIS_TAKEOFF_ALT (above home), set first.
+        ap.param_set("MIS_TAKEOFF_ALT", altitude)
+        ap.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, [-1.0, 0, 0, math.nan, math.nan, math.nan, math.nan], "takeoff")
+
+    def offboard(self, ap) -> str:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, MAIN_OFFBOARD, 0], "mode OFFBOARD")
+        ap.wait_mode(lambda: self.offboard_mode(ap.custom_mode), "mode OFFBOARD")
+        return "OFFBOARD"
+
+    def land(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, math.nan], "land")
+
+    def hold(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, MAIN_AUTO, SUB_LOITER], "mode HOLD")
+
+
+PROFILE = Px4()

@@ -1,0 +1,129 @@
+#!/usr/bin/env bash
+# CI's package stage (tools/test.sh, after the aarch64 stage; docs/deploy.md):
+#   1. tools/package.sh: the amd64 .deb from build/, the arm64 .deb from build-aarch64/.
+#   2. amd64: a clean Debian 12 root (mmdebstrap, Debian's packages only: the .deb's Depends
+#      and the Essential set; cached as a tarball under ~/.cache/mppid, keyed by the Depends,
+#      so a re-run needs no network), the package installed into it with dpkg, and there,
+#      from the installed files alone and in a private network namespace, the units' programs
+#      (LCM route, recorder, mppid, bridge) started from their ExecStart= lines, and the
+#      missions hover (a PX4 on UDP) and circle_3ms (an ArduPilot on UDP) flown against the
+#      stand-in autopilot (sim/mavlink_vehicle, copied in as the test's fixture), the link
+#      profile installed as the operator would: test/deploy/package_flight.py.
+#   3. arm64: the package unpacked beside the arm64 libraries of this machine (multiarch) and
+#      its programs started under qemu-user (Cortex-A76): `mppid --self-test` with the
+#      installed /etc/mppid, lcm-logger; every ELF file in it an AArch64 one; the same Depends
+#      as the amd64 package.
+#
+#   tools/package-test.sh [--no-build] [--amd64-only] [-- package_flight.py arguments]
+#
+#   --no-build     the packages in build/packages as they are
+#   --amd64-only   no arm64 part (with flight arguments: a measurement, docs/first-flight.md's
+#                  latency budget: `-- --cpu 1 --flights circle_3ms:px4 --set mppi.rollouts=1024`)
+#
+# Environment: MPPID_PACKAGE_STAGE=0 skips the stage (tools/test.sh runs it by default);
+# MPPID_DEBIAN_MIRROR (http://deb.debian.org/debian); MPPID_PACKAGE_DIR (build/packages).
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$ROOT"
+log() { printf '[package-test] %s\n' "$*"; }
+if [[ "${MPPID_PACKAGE_STAGE:-1}" == 0 ]]; then log "skipped (MPPID_PACKAGE_STAGE=0)"; exit 0; fi
+build=1 arm64=1
+flight_args=()
+while (($#)); do
+  case "$1" in
+    --no-build) build=0 ;;
+    --amd64-only) arm64=0 ;;
+    --) shift; flight_args=("$@"); break ;;
+    -h|--help) sed -n '2,25s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    *) echo "package-test.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+((EUID == 0)) || { echo "package-test.sh: needs root (a chroot, a network namespace)" >&2; exit 1; }
+OUT="${MPPID_PACKAGE_DIR:-build/packages}"
+CACHE="${XDG_CACHE_HOME:-$HOME/.cache}/mppid"
+WORK="$(mktemp -d /tmp/mppid-package-test.XXXXXX)"
+trap 'umount -R "$WORK/root/proc" "$WORK/root/dev" 2>/dev/null || true; rm -rf "$WORK"' EXIT
+t0=$(date +%s)
+
+if ((build)); then
+  if ((arm64)); then tools/package.sh amd64 arm64; else tools/package.sh amd64; fi
+fi
+deb_amd64="$(ls -t "$OUT"/mppid_*_amd64.deb | head -1)"
+deb_arm64=""
+if ((arm64)); then deb_arm64="$(ls -t "$OUT"/mppid_*_arm64.deb | head -1)"; fi
+t1=$(date +%s)
+
+# ---- amd64: a clean Debian 12 root --------------------------------------------------------
+# The Depends as package names (versions and alternatives are dpkg's to check at install),
+# and systemd, the board's own: first-flight.md's `systemctl enable` and `systemd-analyze
+# verify` run in the root (no systemd runs there; enabling is links, verifying reads files).
+depends="$(dpkg-deb -f "$deb_amd64" Depends | tr ',' '\n' | sed 's/(.*)//; s/|.*//; s/ //g' | sort -u | paste -sd, -)"
+include="$depends,systemd"
+key="$(printf '%s\n' "$include" | sha256sum | cut -c1-16)"
+tarball="$CACHE/debian12-root-$key.tar"
+if [[ ! -f "$tarball" ]]; then
+  mkdir -p "$CACHE"
+  log "mmdebstrap bookworm with $include"
+  mmdebstrap --quiet --format=tar --variant=apt --include="$include" bookworm "$tarball.part" \
+    "${MPPID_DEBIAN_MIRROR:-http://deb.debian.org/debian}"
+  mv "$tarball.part" "$tarball"
+else
+  log "Debian 12 root from $tarball"
+fi
+R="$WORK/root"
+mkdir -p "$R"
+tar -C "$R" -xf "$tarball"
+cp "$deb_amd64" "$R/tmp/"
+log "dpkg -i $(basename "$deb_amd64") in the clean root"
+chroot "$R" dpkg -i "/tmp/$(basename "$deb_amd64")"
+if chroot "$R" ldd /usr/bin/mppid | grep 'not found'; then
+  log "FAILED: mppid's libraries are not all in the package's Depends"; exit 1
+fi
+# The test's fixtures: the stand-in autopilot and the driver; nothing else of this tree.
+mkdir -p "$R/opt/standin"
+cp -r sim/mavlink_vehicle/mavlink_vehicle "$R/opt/standin/"
+cp test/deploy/package_flight.py "$R/opt/"
+t2=$(date +%s)
+log "flights from the installed files (private network namespace)"
+status=0
+unshare --net --mount --pid --fork --kill-child sh -c "
+  mount -t proc proc '$R/proc' && mount --rbind /dev '$R/dev' &&
+  exec chroot '$R' /usr/bin/python3 /opt/package_flight.py \"\$@\"" sh "${flight_args[@]}" || status=1
+cat "$R/tmp/package-flight/results.json" 2>/dev/null || true
+if ((status)); then
+  for f in "$R"/tmp/package-flight/*.log; do [[ -f "$f" ]] && { echo "--- $f"; tail -n 30 "$f"; }; done
+fi
+t3=$(date +%s)
+
+# ---- arm64: the programs under qemu-user beside this machine's arm64 libraries -------------
+if ((!arm64)); then
+  log "times: package $((t1 - t0)) s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s (no arm64)"
+  exit "$status"
+fi
+A="$WORK/arm64"
+dpkg-deb -x "$deb_arm64" "$A"
+[[ "$(dpkg-deb -f "$deb_arm64" Depends)" == "$(dpkg-deb -f "$deb_amd64" Depends)" ]] ||
+  { log "FAILED: the arm64 and amd64 packages' Depends differ"; status=1; }
+wrong=0
+while IFS= read -r -d '' f; do
+  if [[ "$(head -c4 "$f")" == $'\x7fELF' ]] && ! readelf -h "$f" | grep -q 'Machine:.*AArch64'; then
+    log "FAILED: not an AArch64 file: ${f#"$A"}"; wrong=1
+  fi
+done < <(find "$A" -type f -print0)
+((wrong)) && status=1
+qemu=(qemu-aarch64-static -cpu cortex-a76)
+log "arm64: mppid --self-test under qemu-user"
+"${qemu[@]}" "$A/usr/bin/mppid" --self-test --config "$A/etc/mppid/mppid.yaml" --vehicle "$A/etc/mppid/vehicle.yaml" ||
+  { log "FAILED: the arm64 mppid's self-test"; status=1; }
+# (--help exits 1 after its usage: the usage is the proof that it loaded and ran)
+usage="$("${qemu[@]}" "$A/usr/lib/mppid/python/bin/lcm-logger" --help 2>&1 || true)"
+[[ "$usage" == "usage: lcm-logger"* ]] || { log "FAILED: the arm64 lcm-logger does not start: $usage"; status=1; }
+t4=$(date +%s)
+
+log "packages: $(for d in "$deb_amd64" "$deb_arm64"; do printf '%s %s KiB (installed %s KiB); ' \
+  "$(basename "$d")" "$(du -k "$d" | cut -f1)" "$(dpkg-deb -f "$d" Installed-Size)"; done)"
+log "times: package $((t1 - t0)) s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s, arm64 $((t4 - t3)) s; total $((t4 - t0)) s"
+if ((status == 0)); then log "all passed"; else log "FAILED" >&2; fi
+exit "$status"

@@ -1,0 +1,181 @@
+"""A flight through a real autopilot: ArduCopter SITL, built from ArduPilot's source, in
+place of mppid-sim. In real time (ArduPilot's SITL runs on the wall clock), in the flight's
+private network namespace (sandbox.py), one process each:
+
+    arducopter (SITL)  serial 0 tcp:5760 <- mppid-mavlink-bridge (config/bridge/ardupilot_sitl.yaml)
+                       serial 1 tcp:5762 <- ap_truth.py, the referee (SIM_STATE: the simulated truth)
+    mppid (the mission's task, --realtime) <-> LCM <-> the bridge
+    mppid-mission fly <mission> --bridge <socket>: arm, the autopilot's take-off, `offboard`, the
+                       legs (references and virtual trees to mppid), land
+    lcm-logger
+
+`--controller guided` flies the same mission with ArduCopter's own GUIDED position controller
+(the mission tool on serial 0 with --guided; no mppid, no bridge): the baseline.
+
+The autopilot's parameters: ArduPilot's SITL defaults for a copter
+(<ardupilot>/Tools/autotest/default_params/copter.parm), then config/ardupilot/copter_mppid.parm
+and guided_baseline.parm (each argued there line by line). A fresh EEPROM every flight (--wipe), so flights do not inherit
+each other's learnt hover thrust.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from .. import paths
+from ..overlay import load_sets
+from ..sandbox import fifo_allowed
+from .base import SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, logger_command, mppid_binary
+
+# ArduPilot's SITL home (Canberra Model Aircraft Club, the autotest default): lat, lon, alt AMSL, heading.
+HOME = "-35.363261,149.165230,584,353"
+PARAMS = paths.ROOT / "config" / "ardupilot" / "copter_mppid.parm"
+# The GUIDED baseline's position-controller tuning (argued in the file): loaded for every flight,
+# mppid's too, so both controllers take off and are scored on the same vehicle.
+BASELINE = paths.ROOT / "config" / "ardupilot" / "guided_baseline.parm"
+BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
+IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
+# mppid's settings through ArduCopter, over the task file (argued there), then the mission's
+# own (its `mppid.set`), then --set.
+OVERLAY = paths.ROOT / "config" / "ardupilot" / "mppid_overlay.yaml"
+# The airframe both mppid and the bridge are given; `--set vehicle=FILE` (e.g. one tools/sysid
+# identified) replaces it for both.
+VEHICLE = paths.ROOT / "config" / "vehicles" / "arducopter_sitl.yaml"
+BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout (tools/ardupilot/build-sitl.sh CHECKOUT: "
+              "`./waf configure --board sitl` then `./waf copter`, as ArduPilot's documentation says), then pass "
+              "--ardupilot-bin <checkout>/build/sitl/bin/arducopter or set MPPID_ARDUPILOT_BIN")
+
+
+def ardupilot_binary(explicit: str | None = None) -> Path:
+    b = explicit or os.environ.get("MPPID_ARDUPILOT_BIN")
+    if not b:
+        raise FlightError(f"no ArduCopter SITL binary: {BUILD_HINT}")
+    p = Path(b).expanduser().resolve()
+    if not (p.is_file() and os.access(p, os.X_OK)):
+        raise FlightError(f"ArduCopter SITL binary {p} does not exist or is not executable: {BUILD_HINT}")
+    return p
+
+
+def ardupilot_defaults(binary: Path) -> Path:
+    """ArduPilot's own SITL defaults for a copter, in the checkout the binary was built in."""
+    p = binary.parents[3] / "Tools" / "autotest" / "default_params" / "copter.parm"
+    if not p.is_file():
+        raise FlightError(f"{p} not found: the binary should be <ardupilot checkout>/build/sitl/bin/arducopter")
+    return p
+
+
+def sitl_command(binary: Path, ap_dir: Path, fifo: bool) -> list[str]:
+    """The SITL in its own folder (EEPROM, dataflash logs); the world, above the controller."""
+    defaults = f"{ardupilot_defaults(binary)},{PARAMS},{BASELINE}"
+    sim = ["sh", "-c", f'cd "{ap_dir}" && exec "$0" "$@"', str(binary), "--model", "quad", "--speedup", "1",
+           "--home", HOME, "--defaults", defaults, "-I0", "--wipe"]
+    if fifo:
+        sim = ["chrt", "-f", str(SIM_FIFO_PRIORITY)] + sim
+    return sim
+
+
+def mission_command(spec: FlightSpec, mission_path: Path, out: Path) -> list[str]:
+    return [sys.executable, "-m", "mppi_mission", "fly", str(mission_path), "--seed", str(spec.seed), "--out",
+            str(out), "--lcm-url", spec.lcm_url]
+
+
+def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool) -> tuple[list, list, Path]:
+    """mppid and the bridge for the mission; the bridge's control socket."""
+    task = mission.get("task", "quadrotor_rate_track")
+    cfg = paths.TASKS / f"{task}.yaml"
+    sets = [str(kv) for kv in spec.sets if not str(kv).startswith("vehicle=")]
+    vehicles = [Path(str(kv)[len("vehicle="):]) for kv in spec.sets if str(kv).startswith("vehicle=")]
+    vehicle = (vehicles[-1].expanduser().resolve() if vehicles else VEHICLE)
+    ctrl = [str(mppid_binary()), "--config", str(cfg), "--vehicle", str(vehicle), "--lcm-url", spec.lcm_url,
+            "--backend", spec.backend, "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
+    for kv in load_sets(OVERLAY) + list((mission.get("mppid") or {}).get("set", [])) + sets:
+        ctrl += ["--set", str(kv)]
+    sock = out / "bridge.sock"
+    bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(BRIDGE_CONFIG), "--lcm-url", spec.lcm_url,
+              "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}"]
+    if fifo:
+        bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge
+    return ctrl, bridge, sock
+
+
+class ArduPilotFlight(Flight):
+    def __init__(self, spec: FlightSpec, binary: Path):
+        super().__init__(spec)
+        self.binary = binary
+
+    @classmethod
+    def create(cls, spec: FlightSpec) -> "ArduPilotFlight":
+        return cls(spec, ardupilot_binary(spec.ardupilot_bin))
+
+    def plan(self) -> Plan:
+        spec = self.spec
+        mission_path = paths.scenario_path(spec.scenario)
+        mission = yaml.safe_load(mission_path.read_text())
+        if "legs" not in mission:
+            raise FlightError(f"{mission_path} is not a mission (config/missions/*.yaml): --autopilot ardupilot "
+                              f"flies missions")
+        cmds = self._commands(mission_path, mission)
+        record = {"autopilot": "ardupilot", "ardupilot_bin": str(self.binary), "commands": cmds,
+                  "mission": str(mission_path), "spec": {"scenario": spec.scenario, "seed": spec.seed,
+                                                         "controller": spec.controller, "realtime": True,
+                                                         "lcm_url": spec.lcm_url}}
+        return Plan(commands=cmds, wall_timeout=spec.wall_timeout or float(mission.get("wall_timeout", 240.0)),
+                    record=record)
+
+    def _commands(self, mission_path: Path, mission: dict) -> dict:
+        spec = self.spec
+        fifo = fifo_allowed()
+        ap_dir = self.out / "ardupilot"
+        ap_dir.mkdir(exist_ok=True)
+        cmds = {
+            "logger": logger_command(spec, self.out),
+            "sim": sitl_command(self.binary, ap_dir, fifo),
+            "recorder": [sys.executable, "-m", "sitl_harness.ap_truth", "--url", "tcp:127.0.0.1:5762",
+                         f"--home={HOME}", "--out", str(self.out)],
+        }
+        mission_cmd = mission_command(spec, mission_path, self.out)
+        if spec.controller == "guided":
+            cmds["mission"] = mission_cmd + ["--guided", "tcp:127.0.0.1:5760"]
+            return cmds
+        ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo)
+        cmds.update(controller=ctrl, bridge=bridge, mission=mission_cmd + ["--bridge", str(sock)])
+        return cmds
+
+    def start(self, plan: Plan) -> None:
+        sb, cmds = self.sandbox, plan.commands
+        sb.spawn("logger", cmds["logger"])
+        sb.spawn("sim", cmds["sim"])
+        sb.spawn("recorder", cmds["recorder"])
+        if self.spec.controller != "guided":
+            sb.spawn("controller", cmds["controller"])
+            sb.spawn("bridge", cmds["bridge"])
+        sb.spawn("mission", cmds["mission"])
+        # The SITL boots once serial 0 (the bridge, or the mission tool's GUIDED link) connects.
+        sb.wait_ready("recorder", 60.0)
+
+    def watch(self, plan: Plan, t0: float) -> str | None:
+        """Until the mission tool exits (the flight is over: landed, or given up), or
+        something it needs dies, or the wall-clock limit."""
+        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger") if n in self.sandbox.procs]
+        while True:
+            time.sleep(0.1)
+            if self.exited("mission"):
+                return None
+            for name in watched:
+                if self.exited(name):
+                    self.events.append(f"{name} exited rc={self.returncode(name)} at {time.monotonic() - t0:.1f} s")
+                    return f"{name}_died" if name != "controller" else "controller_died"
+            if time.monotonic() - t0 > plan.wall_timeout:
+                return "wall_timeout"
+
+    def score(self, info: dict) -> dict:
+        from .. import ap_score
+        return ap_score.score_flight(self.out, self.spec, info)
+
+    def plot(self) -> list:
+        from .. import ap_plots
+        return ap_plots.plot_flight(self.out)

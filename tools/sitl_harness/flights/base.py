@@ -1,0 +1,167 @@
+"""What every flight shares, whatever its plant: the spec a flight is flown from, its
+sandbox (sandbox.py: the private network namespace, its processes, the clean-up), the
+lcm-logger recording its bus, and the course of a run (start, watch, stop, record).
+
+A plant's flight (flights/sim.py, flights/ardupilot.py) says which processes to start with
+which command lines (plan), how to start them (start) and when the flight is over (watch),
+and how its result folder is scored and plotted (score, plot)."""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import paths
+from ..sandbox import Sandbox, SandboxError
+
+LCM_URL = "udpm://239.255.76.67:7667?ttl=0"
+# A lock-step flight bursts thousands of datagrams a second; the logger must not drop any
+# while the CPU is busy (the kernel caps this at net.core.rmem_max).
+LOGGER_RECV_BUF = 4 * 1024 * 1024
+SIM_FIFO_PRIORITY = 90
+LOGGER_FIFO_PRIORITY = 79
+
+
+class FlightError(RuntimeError):
+    pass
+
+
+@dataclass
+class FlightSpec:
+    scenario: str
+    seed: int = 1
+    out: Path = Path("results/run")
+    backend: str = "cpu"
+    realtime: bool = False
+    ideal: bool = False              # lock-step without charging the controller's latency
+    latency: float | None = None     # lock-step: charge this fixed latency [s] (and tell mppid)
+    controller: str = "mppid"        # mppid | ddp (mppid --controller ddp: the MPC-DDP baseline) | standin
+    wall_timeout: float = 0.0        # 0: from the scenario's duration
+    sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
+    kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
+    lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
+    plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
+    params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
+    autopilot: str = "sim"           # the plant: a name of flights.PLANTS (sim: mppid-sim; ardupilot: ArduCopter SITL)
+    ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
+    view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
+    view_hold: float = 0.0           # ... kept serving this long after the flight [s]
+    view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]
+    view_port: int = 9090            # ... its web viewer's port; its gRPC server's is this + VIEW_GRPC_OFFSET
+    rrd: bool = False                # flight.rrd: the LCM log converted for rerun's viewer
+
+
+@dataclass
+class Plan:
+    """A flight's processes before they start: their command lines, by name, and what
+    harness.json records besides them."""
+    commands: dict[str, list[str]]
+    wall_timeout: float
+    record: dict = field(default_factory=dict)
+
+
+def lcm_url_for_port(port: int) -> str:
+    """The flight bus on another UDP port (each campaign flight gets its own)."""
+    if not 1024 <= int(port) <= 65535:
+        raise ValueError(f"LCM port {port} outside 1024-65535")
+    return f"udpm://239.255.76.67:{int(port)}?ttl=0"
+
+
+def lcm_logger() -> Path:
+    """The lcm-logger binary itself: the venv's entry point is a Python wrapper that would
+    run it as a grandchild (and leave it behind on SIGTERM)."""
+    try:
+        import lcm
+        p = Path(lcm.LCM_BIN_DIR) / "lcm-logger"
+        if p.is_file():
+            return p
+    except (ImportError, AttributeError):
+        pass
+    return paths.VENV_BIN / "lcm-logger"
+
+
+def logger_command(spec: FlightSpec, out: Path) -> list[str]:
+    """lcm-logger recording the flight's bus into OUT/flight.lcmlog."""
+    return [str(lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+            str(out / "flight.lcmlog")]
+
+
+def mppid_binary() -> Path:
+    mppid = paths.find_binary("mppid")
+    if mppid is None:
+        raise FlightError("mppid not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
+    return mppid
+
+
+class Flight:
+    """One flight: plan() its command lines, then run() flies them in a sandbox."""
+
+    def __init__(self, spec: FlightSpec):
+        self.spec = spec
+        self.out = Path(spec.out).resolve()
+        self.sandbox = Sandbox(self.out)
+        self.events: list[str] = []
+
+    @classmethod
+    def create(cls, spec: FlightSpec) -> "Flight":
+        """The flight of `spec`; raises FlightError when it cannot be flown here (a binary missing)."""
+        return cls(spec)
+
+    # ---- what a plant's flight says ------------------------------------------------------
+    def plan(self) -> Plan:
+        raise NotImplementedError
+
+    def start(self, plan: Plan) -> None:
+        raise NotImplementedError
+
+    def watch(self, plan: Plan, t0: float) -> str | None:
+        """Until the flight is over: None when it ended as it should, else why not."""
+        raise NotImplementedError
+
+    def score(self, info: dict) -> dict:
+        raise NotImplementedError
+
+    def plot(self) -> list:
+        raise NotImplementedError
+
+    # ---- the course of a run -------------------------------------------------------------
+    def run(self) -> dict:
+        self.out.mkdir(parents=True, exist_ok=True)
+        plan = self.plan()
+        t0 = time.monotonic()
+        outcome = None
+        try:
+            self.sandbox.start_namespace()
+            self.start(plan)
+            outcome = self.watch(plan, t0)
+        except SandboxError as e:
+            raise FlightError(str(e)) from None
+        except KeyboardInterrupt:
+            outcome = "interrupted"
+            self.events.append("interrupted (Ctrl-C / SIGTERM)")
+            raise
+        finally:
+            self.cleanup()
+            info = self._record(t0, outcome, plan.record)
+        return info
+
+    def cleanup(self):
+        """Stops everything, the logger last (it records the others' last messages)."""
+        self.sandbox.stop(last="logger")
+
+    def exited(self, name: str) -> bool:
+        return self.sandbox.returncode(name) is not None
+
+    def returncode(self, name: str) -> int | None:
+        return self.sandbox.returncode(name)
+
+    def _record(self, t0: float, outcome, extra: dict) -> dict:
+        """harness.json: how the flight ended, its processes' exit codes and events, and `extra`."""
+        info = {"harness_outcome": outcome, "wall_s": time.monotonic() - t0,
+                "niceness": os.getpriority(os.PRIO_PROCESS, 0),
+                "returncodes": {k: p.returncode for k, p in self.sandbox.procs.items()}, "events": self.events,
+                **extra}
+        (self.out / "harness.json").write_text(json.dumps(info, indent=2, default=str))
+        return info
