@@ -9,7 +9,7 @@ import threading
 import time
 from collections import OrderedDict
 
-from . import frames, telemetry
+from . import clock_sync, frames, telemetry
 from .autopilots.base import mavlink
 
 
@@ -60,7 +60,7 @@ class StatePublisher:
         self.source = settings["vehicle"]["state_source"]
         self.channel = settings["lcm"]["state_channel"]
         self.mppi_lcm, self.publish, self.counters = mppi_lcm, publish, counters
-        self.boot_clock = BootClock()
+        self.boot_clock = clock_sync.ClockSync()  # the autopilot's clock on ours, drift followed
         self.seq = 0
         self.times = OrderedDict()   # seq -> (monotonic us when published, MAVLink time_usec)
         self.last_odom_mono = None
@@ -127,7 +127,7 @@ class StatePublisher:
             while len(self.times) > 256:
                 self.times.popitem(last=False)
         msg.utime = now_wall
-        msg.sample_utime = self.boot_clock.to_wall_us(int(boot_us), now_wall)
+        msg.sample_utime = self.boot_clock.update(int(boot_us), now_wall)
         msg.model = self.mppi_lcm.vehicle_state_t.MODEL_QUADROTOR_RATE
         msg.vehicle_count = 1
         msg.nx = 13

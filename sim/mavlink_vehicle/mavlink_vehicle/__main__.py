@@ -38,6 +38,9 @@ def main(argv=None) -> int:
     ap.add_argument("--mass", type=float, default=1.0)
     ap.add_argument("--start", default=None, help="x,y,z ENU (default: the world's start on the ground)")
     ap.add_argument("--duration", type=float, default=0.0)
+    ap.add_argument("--clock-drift", type=float, default=0.0,
+                    help="the autopilot's clock runs 1 + this as fast as the wall clock (stamps only; -0.007: "
+                         "PX4 SIH lagging 0.7 %%); |drift| <= 0.05")
     ap.add_argument("--signing-key-file", help="MAVLink 2 signing key: 64 hex digits or 32 raw bytes")
     a = ap.parse_args(argv)
     key = None
@@ -47,6 +50,9 @@ def main(argv=None) -> int:
         if len(key) != 32:
             print("mavlink-vehicle: --signing-key-file must hold 32 bytes", file=sys.stderr)
             return 2
+    if abs(a.clock_drift) > 0.05:
+        print("mavlink-vehicle: --clock-drift must be within +-0.05", file=sys.stderr)
+        return 2
     if a.physics_hz < 500:
         print("mavlink-vehicle: --physics-hz must be >= 500", file=sys.stderr)
         return 2
@@ -71,7 +77,8 @@ def main(argv=None) -> int:
     if a.start:
         start = tuple(float(c) for c in a.start.split(","))
     v = Vehicle(a.url, autopilot=a.autopilot, params=params, world=world, mission=mission, out=out,
-                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass, signing_key=key)
+                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass, signing_key=key,
+                clock_drift=a.clock_drift)
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())

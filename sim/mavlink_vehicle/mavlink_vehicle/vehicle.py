@@ -47,7 +47,7 @@ class Vehicle:
     SETPOINT_HOLD_S = 0.1
 
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
-                 state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0, signing_key=None):
+                 state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0, signing_key=None, clock_drift=0.0):
         self.ap = autopilot
         self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
         if signing_key is not None:
@@ -80,6 +80,7 @@ class Vehicle:
         self.out = out
         self.boot = time.monotonic()
         self.t = 0.0                       # simulated time since boot, follows the wall clock
+        self.clock_rate = 1.0 + clock_drift  # the autopilot's clock (its stamps) runs this fast
         self.armed = False
         self.mode = "AUTO.LOITER" if autopilot == "px4" else "STABILIZE"
         self.setpoint = None               # (thrust 0..1, p, q, r FRD)
@@ -443,7 +444,7 @@ class Vehicle:
     def send_telemetry(self):
         x = self.plant.x
         p, v, q, vb, w = ned.state_to_ned(x)
-        tb_us = int(self.t * 1e6)
+        tb_us = int(self.t * self.clock_rate * 1e6)
         tb_ms = tb_us // 1000
         mono = time.monotonic_ns() // 1000
         cov = [math.nan] + [0.0] * 20
