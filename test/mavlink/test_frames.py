@@ -7,7 +7,7 @@ import struct
 import pytest
 
 from mppi_mavlink import frames, settings
-from mppi_mavlink.bridge import BootClock, _rotate, decode_param, mavlink
+from mppi_mavlink.bridge import _rotate, decode_param, mavlink
 from mppi_mavlink.thrust import ThrustMap
 from mavlink_vehicle import ned
 
@@ -119,14 +119,6 @@ def test_thrust_map():
     for bad in (0.0, 1.0, math.nan, -0.1):
         with pytest.raises(ValueError):
             ThrustMap(1.0, 9.81, bad)
-
-
-def test_boot_clock_takes_the_least_delayed_sample():
-    c = BootClock()
-    assert c.to_wall_us(1_000_000, 5_000_000 + 3000) == 5_003_000
-    assert c.to_wall_us(1_020_000, 5_020_000 + 500) == 5_020_500      # less delay: offset drops
-    assert c.to_wall_us(1_040_000, 5_040_000 + 9000) == 5_040_000 + 500 + 2  # a late one keeps it (+ relax)
-    assert c.to_wall_us(10_000, 6_000_000) == 6_000_000                 # reboot: start again
 
 
 def test_param_decoding():

@@ -70,7 +70,9 @@ def score_flight(out: Path, spec, info: dict) -> dict:
 def _truth_clock(truth, clock: str) -> np.ndarray:
     """The truth's times on the mission's clock: the autopilot's boot time (the GUIDED
     baseline's), or this host's wall clock as the bridge maps boot times onto it (mppid's
-    states): boot time + the smallest receipt delay, as the bridge's BootClock takes it."""
+    states): boot time + the smallest receipt delay, one offset for the flight. ArduCopter
+    SITL's clock keeps pace with this host's; an autopilot whose clock drifts (PX4 SIH) needs
+    the drift followed, as the bridge does (mppi_mavlink/clock_sync.py)."""
     boot = np.array([r["boot_us"] for r in truth], float)
     if clock == "boot":
         return boot

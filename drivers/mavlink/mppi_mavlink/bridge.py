@@ -32,13 +32,13 @@ from .forwarding import COUNTERS, Forwarder
 from .link import Link
 from .mppid_link import MppidParams
 from .notices import CRITICAL, INFO, NOTICE, WARNING, Notices
-from .state import BootClock, StatePublisher, mono_us, rotate as _rotate, wall_us  # noqa: F401  (re-exported)
+from .state import StatePublisher, mono_us, rotate as _rotate, wall_us  # noqa: F401  (re-exported)
 
 log = logging.getLogger("mppi_mavlink")
 STATE_TYPES = ("ODOMETRY", "ATTITUDE_QUATERNION", "LOCAL_POSITION_NED")
 TAKEOFF_STATES = (mavlink.MAV_LANDED_STATE_TAKEOFF, mavlink.MAV_LANDED_STATE_ON_GROUND)
 
-__all__ = ["Bridge", "CommandError", "BootClock", "decode_param", "mono_us", "wall_us"]
+__all__ = ["Bridge", "CommandError", "decode_param", "mono_us", "wall_us"]
 
 
 class Bridge:

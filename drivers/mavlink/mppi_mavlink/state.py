@@ -21,27 +21,6 @@ def wall_us() -> int:
     return time.time_ns() // 1000
 
 
-class BootClock:
-    """Autopilot boot time -> this machine's wall clock: offset = min(receive - sample),
-    the least-delayed sample, relaxed by 100 us/s so clock drift is followed; a boot time
-    jumping back more than 1 s (autopilot reboot) restarts it."""
-
-    def __init__(self):
-        self.offset = None
-        self.last_boot = None
-        self.last_wall = None
-
-    def to_wall_us(self, boot_us: int, recv_wall_us: int) -> int:
-        off = recv_wall_us - boot_us
-        if self.offset is None or boot_us < self.last_boot - 1_000_000:
-            self.offset = off
-        else:
-            relax = 1e-4 * max(0, recv_wall_us - self.last_wall)
-            self.offset = min(off, self.offset + relax)
-        self.last_boot, self.last_wall = boot_us, recv_wall_us
-        return int(boot_us + self.offset)
-
-
 def rotate(q, v):
     """v rotated by the unit quaternion q (w, x, y, z): R(q) v."""
     w, x, y, z = q

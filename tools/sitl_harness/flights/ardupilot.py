@@ -45,8 +45,8 @@ OVERLAY = paths.ROOT / "config" / "ardupilot" / "mppid_overlay.yaml"
 # The airframe both mppid and the bridge are given; `--set vehicle=FILE` (e.g. one tools/sysid
 # identified) replaces it for both.
 VEHICLE = paths.ROOT / "config" / "vehicles" / "arducopter_sitl.yaml"
-BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout (tools/ardupilot/build-sitl.sh CHECKOUT: "
-              "`./waf configure --board sitl` then `./waf copter`, as ArduPilot's documentation says), then pass "
+BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout, outside this repository, as ArduPilot's "
+              "documentation says (docs/ardupilot.md names the build flown here), then pass "
               "--ardupilot-bin <checkout>/build/sitl/bin/arducopter or set MPPID_ARDUPILOT_BIN")
 
 
