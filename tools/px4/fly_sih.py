@@ -174,7 +174,7 @@ def main(argv=None) -> int:
         env = {**os.environ, INNER: "1"}
         return subprocess.call(["unshare", "-n", "--", sys.executable, __file__] + sys.argv[1:], env=env)
     rc = fly(a)
-    from score_sih import score  # noqa: E402  (beside this file)
+    from score_sih import score  # beside this file: a script's folder is on its import path
     s = score(a.out)
     (a.out / "score.json").write_text(json.dumps(s, indent=1))
     print(json.dumps(s, indent=1))
@@ -182,5 +182,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     sys.exit(main())

@@ -17,39 +17,17 @@ bridge maps PX4's boot time onto it).
 """
 from __future__ import annotations
 
-import importlib
 import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink import clock_sync
+from sitl_harness.logs import read_jsonl
 
 ROOT = Path(__file__).resolve().parents[2]
 EARTH_R = 6_378_137.0
-
-
-def _import(name: str, where: Path):
-    """The installed package, else this checkout's copy (a venv without the packages, or
-    with another checkout's installed)."""
-    try:
-        return importlib.import_module(name)
-    except ImportError:
-        for mod in [m for m in sys.modules if m.split(".")[0] == name.split(".")[0]]:
-            del sys.modules[mod]
-        sys.path.insert(0, str(where))
-        return importlib.import_module(name)
-
-
-def _jsonl(p: Path) -> list[dict]:
-    out = []
-    if p.is_file():
-        for line in p.read_text().splitlines():
-            try:
-                out.append(json.loads(line))
-            except json.JSONDecodeError:
-                pass
-    return out
 
 
 def clock_rate(boot_us: np.ndarray, wall_us: np.ndarray) -> dict:
@@ -65,7 +43,7 @@ def clock_rate(boot_us: np.ndarray, wall_us: np.ndarray) -> dict:
 
 def truth_enu(truth: list[dict], est: list[dict]) -> tuple[np.ndarray, np.ndarray]:
     """(times on the mission's clock [us], ENU positions [m]) of the truth."""
-    sync = _import("mppi_mavlink.clock_sync", ROOT / "drivers" / "mavlink").ClockSync()
+    sync = clock_sync.ClockSync()
     t = np.array([sync.update(r["time_usec"], r["wall_us"]) for r in truth], float)
     lat = np.radians([r["lat"] * 1e-7 for r in truth])
     lon = np.radians([r["lon"] * 1e-7 for r in truth])
@@ -80,13 +58,13 @@ def truth_enu(truth: list[dict], est: list[dict]) -> tuple[np.ndarray, np.ndarra
 
 
 def estimate_enu(est: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    sync = _import("mppi_mavlink.clock_sync", ROOT / "drivers" / "mavlink").ClockSync()
+    sync = clock_sync.ClockSync()
     t = np.array([sync.update(r["time_boot_ms"] * 1000, r["wall_us"]) for r in est], float)
     return t, np.array([[r["y"], r["x"], -r["z"]] for r in est], float)
 
 
 def legs(mission: list[dict], t_truth, X, t_est, E, settle: float) -> dict:
-    reference = _import("mppi_mission.reference", ROOT / "drivers" / "mission")
+    from mppi_mission import reference
     steps = [m for m in mission if m.get("event") == "step" and m["leg"] >= 0]
     res = {}
     for i, s in enumerate(steps):
@@ -117,7 +95,7 @@ def link_record(out: Path) -> dict:
     if not log.is_file():
         return {}
     import lcm
-    mppi_lcm = _import("mppi_lcm", ROOT / "build" / "python")
+    import mppi_lcm
     command_t, vehicle_state_t = mppi_lcm.command_t, mppi_lcm.vehicle_state_t
     ages, modes, first = [], {}, {}
     ev_log = lcm.EventLog(str(log), "r")
@@ -145,9 +123,9 @@ def link_record(out: Path) -> dict:
 
 def score(out: Path) -> dict:
     out = Path(out)
-    truth = [r for r in _jsonl(out / "truth.jsonl") if r.get("mavpackettype") == "HIL_STATE_QUATERNION"]
-    est = [r for r in _jsonl(out / "estimate.jsonl") if r.get("mavpackettype") == "LOCAL_POSITION_NED"]
-    mission = _jsonl(out / "mission.jsonl")
+    truth = [r for r in read_jsonl(out / "truth.jsonl") if r.get("mavpackettype") == "HIL_STATE_QUATERNION"]
+    est = [r for r in read_jsonl(out / "estimate.jsonl") if r.get("mavpackettype") == "LOCAL_POSITION_NED"]
+    mission = read_jsonl(out / "mission.jsonl")
     summary = json.loads((out / "mission_summary.json").read_text()) if (out / "mission_summary.json").is_file() else {}
     res = {"mission_outcome": summary.get("outcome"), "truth_samples": len(truth), "estimate_samples": len(est),
            **link_record(out)}

@@ -19,28 +19,17 @@ from pathlib import Path
 import numpy as np
 
 from . import paths
+from .logs import read_jsonl
 
 CRASH_TILT_DEG = 80.0
 GROUND_Z = 0.05
 
 
-def _jsonl(p: Path) -> list[dict]:
-    if not p.is_file():
-        return []
-    out = []
-    for line in p.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            pass
-    return out
-
-
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
-    truth = [r for r in _jsonl(out / "truth.jsonl") if "x" in r]
-    events = [r for r in _jsonl(out / "truth.jsonl") if "event" in r]
-    mission = _jsonl(out / "mission.jsonl")
+    truth = [r for r in read_jsonl(out / "truth.jsonl") if "x" in r]
+    events = [r for r in read_jsonl(out / "truth.jsonl") if "event" in r]
+    mission = read_jsonl(out / "mission.jsonl")
     summary = json.loads((out / "mission_summary.json").read_text()) if (out / "mission_summary.json").is_file() else {}
     res = {"scenario": paths.scenario_label(spec.scenario), "seed": spec.seed, "autopilot": "ardupilot",
            "controller": spec.controller, "success": False, "reason": None,

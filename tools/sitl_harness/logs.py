@@ -61,3 +61,18 @@ def read_json(p: Path):
         return json.loads(Path(p).read_text())
     except (OSError, json.JSONDecodeError):
         return None
+
+
+def read_jsonl(p: Path) -> list[dict]:
+    """The records of a JSON-lines file ([] when it is missing); a line that does not parse
+    (a flight cut short mid-line) is skipped."""
+    p = Path(p)
+    if not p.is_file():
+        return []
+    out = []
+    for line in p.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except json.JSONDecodeError:
+            pass
+    return out
