@@ -43,6 +43,8 @@ PY="$ROOT/.venv/bin/python"
 "$PY" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
   --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
   --platform manylinux2014_x86_64 -d "$OUT/wheels" 'lcm>=1.5,<1.6'
+# setuptools builds the project's Python packages there (run-all.sh installs them editable).
+"$PY" -m pip download -q --no-deps --only-binary=:all: -d "$OUT/wheels" 'setuptools>=70.1'
 log "wheel: $(cd "$OUT/wheels" && ls)"
 
 # ---- Debian 12 packages, unpacked -------------------------------------------------------

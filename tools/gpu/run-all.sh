@@ -83,6 +83,21 @@ if [[ ! -e .venv/bin/python3 ]]; then
   mkdir -p .venv/bin
   for n in python python3; do printf '#!/bin/sh\nexec %s "$@"\n' "$PY" >.venv/bin/$n; chmod +x .venv/bin/$n; done
 fi
+# The project's Python packages (the LCM types, the bridge, the mission tool, the harness, the
+# simulated autopilot), editable as tools/setup.sh installs them; their console scripts
+# beside the stand-in's python, where the tools/ shims look for them.
+install_packages() {
+  local pkgs=(./lcmtypes ./drivers/mavlink ./drivers/mission ./tools/sitl_harness ./sim/mavlink_vehicle) scripts
+  "$PY" -c 'import setuptools, sys; sys.exit(tuple(map(int, setuptools.__version__.split(".")[:2])) < (70, 1))' \
+    2>/dev/null || "$PY" -m pip install -q --no-index --no-deps --disable-pip-version-check "$D"/wheels/setuptools-*.whl \
+    >>"$LOG" 2>&1 || return 1
+  "$PY" -m pip install -q --no-index --no-deps --no-build-isolation --disable-pip-version-check \
+    "${pkgs[@]/#/-e}" >>"$LOG" 2>&1 || return 1
+  scripts="$("$PY" -c 'import sysconfig; print(sysconfig.get_path("scripts"))')"
+  for s in "$scripts"/mppid-*; do ln -sf "$s" .venv/bin/; done
+}
+"$PY" -c 'import mppi_lcm, sitl_harness' 2>/dev/null && [[ -x .venv/bin/mppid-sitl ]] ||
+  install_packages || { echo "run-all.sh: installing the project's Python packages failed (see $LOG)" >&2; exit 1; }
 {
   echo "# mppid on the GPU machine ($(date -u +%FT%TZ))"
   echo
