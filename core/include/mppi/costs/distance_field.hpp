@@ -51,15 +51,6 @@ namespace mppi {
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "gather_cell_pairs reads two int16 cells as one word");
 
-// On the device the field's lookup is a call, not inlined into the rollout kernels: its
-// registers then weigh only on the cycles that read a field (inlined, the forest kernels'
-// field-less path ran 3-6 % slower on an H200). The host inlines it (the SIMD lanes want it).
-#if defined(__CUDACC__)
-#define MPPI_HD_CALL __host__ __device__ __noinline__
-#else
-#define MPPI_HD_CALL inline
-#endif
-
 // Cells cells[index + offsets[k]] and the one after it, k < n, as floats in out[2k] and
 // out[2k + 1], for each sample of the number (index: a whole number >= 0 as a float, exact
 // below 2^24). A SIMD number type overloads this (simd/lanes.hpp: one 32-bit gather per pair).
@@ -129,12 +120,6 @@ struct DistanceField {
     return select(inside, mm * 0.001f, V(max_distance));
   }
 };
-
-// f.distance(px, py, pz), as a call on the device (MPPI_HD_CALL).
-template <class V>
-MPPI_HD_CALL V field_distance(const DistanceField& f, const V& px, const V& py, const V& pz) {
-  return f.distance(px, py, pz);
-}
 
 // The cells of one map at the fixed capacity, and its geometry (as local_map_t carries them).
 // Large (2 MiB): allocate it once (std::make_unique), never on the stack.

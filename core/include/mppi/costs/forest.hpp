@@ -85,7 +85,7 @@ struct ForestCost {
   MPPI_HD static V vehicle_at_distance(const Params& p, int j, const V* x, const V& d_cylinders, mask_t<V>* crash) {
     V pos[3];
     Vehicle::position(x, pos);
-    const V d = p.field.present() ? fmin_(d_cylinders, field_distance(p.field, pos[0], pos[1], pos[2])) : d_cylinders;
+    const V d = p.field.present() ? fmin_(d_cylinders, p.field.distance(pos[0], pos[1], pos[2])) : d_cylinders;
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
     V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
