@@ -49,25 +49,30 @@
 
 namespace mppi {
 
-static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "gather_cell_pairs reads two int16 cells as one word");
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "gather_corners (SIMD) reads two int16 cells as one word");
 
-// Cells cells[index + offsets[k]] and the one after it, k < n, as floats in out[2k] and
-// out[2k + 1], for each sample of the number (index: a whole number >= 0 as a float, exact
-// below 2^24). A SIMD number type overloads this (simd/lanes.hpp: one 32-bit gather per pair).
-MPPI_HD void gather_cell_pairs(const std::int16_t* cells, float index, const int* offsets, int n, float* out) {
-  const int c = static_cast<int>(index);
-  for (int k = 0; k < n; ++k) {
-    out[2 * k] = static_cast<float>(cells[c + offsets[k]]);
-    out[2 * k + 1] = static_cast<float>(cells[c + offsets[k] + 1]);
-  }
+// The eight corners of a cell: cells[index + o] and the one after it, for o = 0, dy, dz,
+// dz + dy (the (y, z) corners 00, 10, 01, 11), as floats in out[0..7], for each sample of the
+// number (index: a whole number >= 0 as a float, exact below 2^24). Written out, no loop or
+// offset table: on the device the corners stay in registers. A SIMD number type overloads
+// this (simd/lanes.hpp: one 32-bit gather per pair).
+template <class S>
+MPPI_HD void gather_corners_scalar(const std::int16_t* cells, S index, int dy, int dz, S* out) {
+  const std::int16_t* p = cells + static_cast<int>(index);
+  out[0] = static_cast<S>(p[0]);
+  out[1] = static_cast<S>(p[1]);
+  out[2] = static_cast<S>(p[dy]);
+  out[3] = static_cast<S>(p[dy + 1]);
+  out[4] = static_cast<S>(p[dz]);
+  out[5] = static_cast<S>(p[dz + 1]);
+  out[6] = static_cast<S>(p[dz + dy]);
+  out[7] = static_cast<S>(p[dz + dy + 1]);
 }
-
-MPPI_HD void gather_cell_pairs(const std::int16_t* cells, double index, const int* offsets, int n, double* out) {
-  const int c = static_cast<int>(index);
-  for (int k = 0; k < n; ++k) {
-    out[2 * k] = static_cast<double>(cells[c + offsets[k]]);
-    out[2 * k + 1] = static_cast<double>(cells[c + offsets[k] + 1]);
-  }
+MPPI_HD void gather_corners(const std::int16_t* cells, float index, int dy, int dz, float* out) {
+  gather_corners_scalar(cells, index, dy, dz, out);
+}
+MPPI_HD void gather_corners(const std::int16_t* cells, double index, int dy, int dz, double* out) {
+  gather_corners_scalar(cells, index, dy, dz, out);
 }
 
 struct DistanceField {
@@ -106,10 +111,8 @@ struct DistanceField {
     const V iz = fmin_(ffloor(cz), V(fz - 2.0f));
     const V tx = cx - ix, ty = cy - iy, tz = cz - iz;
     const V index = ix + fx * (iy + fy * iz);  // exact: below kMaxCells
-    const int plane = nx * ny;
-    const int offsets[4] = {0, nx, plane, plane + nx};  // (y, z) corners 00, 10, 01, 11
     V c[8];
-    gather_cell_pairs(cells, index, offsets, 4, c);
+    gather_corners(cells, index, nx, nx * ny, c);
     const V c00 = c[0] + tx * (c[1] - c[0]);
     const V c10 = c[2] + tx * (c[3] - c[2]);
     const V c01 = c[4] + tx * (c[5] - c[4]);

@@ -138,14 +138,16 @@ struct LaneF {
     hn::StoreU(c, di, out);
   }
 
-  // Distance-field corners (costs/distance_field.hpp): per lane, cells[index + offsets[k]]
-  // and the cell after it as floats in out[2k], out[2k + 1]. The two cells are one 32-bit
-  // word (little-endian: the first in the low half), so a pair is one gather at a byte offset.
-  friend void gather_cell_pairs(const std::int16_t* cells, LaneF index, const int* offsets, int n, LaneF* out) {
+  // Distance-field corners (costs/distance_field.hpp gather_corners): per lane, the cells at
+  // index + o and the one after it, o = 0, dy, dz, dz + dy, as floats in out[0..7]. The two
+  // cells are one 32-bit word (little-endian: the first in the low half), so a pair is one
+  // gather at a byte offset.
+  friend void gather_corners(const std::int16_t* cells, LaneF index, int dy, int dz, LaneF* out) {
     const DI di;
     const auto bytes = hn::ShiftLeft<1>(hn::ConvertTo(di, index.v));
     const auto* words = reinterpret_cast<const std::int32_t*>(cells);  // read through the gather only
-    for (int k = 0; k < n; ++k) {
+    const int offsets[4] = {0, dy, dz, dz + dy};
+    for (int k = 0; k < 4; ++k) {
       const auto w = hn::GatherOffset(di, words, hn::Add(bytes, hn::Set(di, 2 * offsets[k])));
       out[2 * k] = LaneF(hn::ConvertTo(DF(), hn::ShiftRight<16>(hn::ShiftLeft<16>(w))));
       out[2 * k + 1] = LaneF(hn::ConvertTo(DF(), hn::ShiftRight<16>(w)));
