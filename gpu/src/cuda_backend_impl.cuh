@@ -20,7 +20,10 @@
 // Forest tasks' distance field (costs/distance_field.hpp): the cells live in a device buffer of
 // DistanceField::kMaxCells, taken from the host only when the field's cells or stamp change (a
 // new map: one copy on the update's stream ahead of the graph), and the staged parameters point
-// at it; a cycle otherwise copies only the field's ~48 bytes with the parameters.
+// at it; a cycle otherwise copies only the field's ~48 bytes with the parameters. The single
+// vehicle's chunked kernel comes in two variants, with the field's code and without (its
+// registers cost the field-less kernel ~5 % at K = 16,384); the graph holds the one the
+// parameters need and is captured again when that changes.
 #pragma once
 
 #include <cstdint>
@@ -117,6 +120,12 @@ class CudaBackend final : public RolloutBackend<T> {
     std::memcpy(h_in_.as<unsigned char>() + align16(sizeof(Input<T>)), plan, plan_floats_ * sizeof(float));
     if (plan_.device_grid) plan_obstacle_grid(x0, params, plan);
     stage_field(params, in);
+    if (plan_.chunked && !kTeam && uses_field(params) != field_kernel_) {
+      // The chunked kernel with or without the field's code: captured again when that changes
+      // (the first map; rare after).
+      field_kernel_ = !field_kernel_;
+      if (plan_.graph) capture_graph();
+    }
     // Messages are built only on failure: update() allocates nothing.
     if (plan_.graph) {
       const cudaError_t e = cudaGraphLaunch(exec_.get(), stream_.get());
@@ -141,6 +150,13 @@ class CudaBackend final : public RolloutBackend<T> {
     } else {
       (void)x0, (void)params, (void)plan;
     }
+  }
+
+  // Whether this update needs the chunked kernel that reads the distance field.
+  static bool uses_field(const Params& params) {
+    if constexpr (kForestTask<T>) return params.cost.field.present();
+    (void)params;
+    return false;
   }
 
   // The distance field's cells on the device (forest tasks): copied when the field the
@@ -293,10 +309,11 @@ class CudaBackend final : public RolloutBackend<T> {
     check(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), "cudaStreamCreateWithFlags");
     stream_.reset(stream);
     if (plan_.chunked && plan_.chunk_smem > 48 * 1024) {
-      check(cudaFuncSetAttribute(chunked_kernel(), cudaFuncAttributeMaxDynamicSharedMemorySize,
-                                 static_cast<int>(plan_.chunk_smem)),
-            "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(plan_.chunk_smem) +
-                " bytes)");
+      for (bool field : {false, true})
+        check(cudaFuncSetAttribute(chunked_kernel(field), cudaFuncAttributeMaxDynamicSharedMemorySize,
+                                   static_cast<int>(plan_.chunk_smem)),
+              "cudaFuncSetAttribute (chunked rollout, dynamic shared memory " + std::to_string(plan_.chunk_smem) +
+                  " bytes)");
     }
     if (!plan_.chunked && plan_.rollout_smem > 48 * 1024) {
       const std::string what =
@@ -312,9 +329,18 @@ class CudaBackend final : public RolloutBackend<T> {
   // The chunked rollout kernel of this task (single vehicle or team), controls kept or not.
   using ChunkedKernel = void (*)(const Input<T>*, const float*, float*, unsigned char*, float*, float*, StatsPart*,
                                  float*, int, int, int, float, int, float, int, SamplerConstants<kNu>);
-  ChunkedKernel chunked_kernel() const {
-    if constexpr (kTeam) return plan_.keep_controls ? rollout_chunked_team<T, true> : rollout_chunked_team<T, false>;
-    else return plan_.keep_controls ? rollout_chunked<T, true> : rollout_chunked<T, false>;
+  ChunkedKernel chunked_kernel() const { return chunked_kernel(field_kernel_); }
+  ChunkedKernel chunked_kernel(bool field) const {
+    if constexpr (kTeam) {
+      (void)field;
+      return plan_.keep_controls ? rollout_chunked_team<T, true> : rollout_chunked_team<T, false>;
+    } else if constexpr (kForestTask<T>) {
+      if (field) return plan_.keep_controls ? rollout_chunked<T, true, true> : rollout_chunked<T, false, true>;
+      return plan_.keep_controls ? rollout_chunked<T, true> : rollout_chunked<T, false>;
+    } else {
+      (void)field;
+      return plan_.keep_controls ? rollout_chunked<T, true> : rollout_chunked<T, false>;
+    }
   }
 
   // Calls f with the rollout kernel of this task, noise mode and lanes per rollout.
@@ -487,6 +513,7 @@ class CudaBackend final : public RolloutBackend<T> {
   DeviceBuffer d_field_;                        // the distance field's cells (forest tasks)
   const std::int16_t* field_source_ = nullptr;  // the host cells and stamp d_field_ holds
   std::uint64_t field_stamp_ = 0;
+  bool field_kernel_ = false;  // the chunked kernel in use (the graph's) reads the field
   PinnedBuffer h_in_, h_out_, h_costs_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;

@@ -333,6 +333,16 @@ TEST(CudaParity, DistanceFieldFollowsANewMap) {
   EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "refilled map";
   std::printf("[parity] distance field follows new maps: %d of %zu rollouts bit-identical on the last\n", e.identical,
               field_costs.size());
+  // The field gone again (the kernel without it), then back (with it): the CPU's costs each time.
+  sc.params.cost.obstacles = gpu_test::forest(32);
+  sc.params.cost.field = DistanceField{};
+  plan = start;
+  e = compare_one_update(sc, cpu, *gpu, 3, &plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "no map";
+  gpu_test::add_field(sc, a.get(), true, 4);
+  plan = start;
+  e = compare_one_update(sc, cpu, *gpu, 4, &plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "a map again";
 }
 
 // The launch switches of mppi.cuda: the update launched stream by stream (no graph), plain

@@ -80,17 +80,19 @@ struct ForestCost {
   // Every term of vehicle() given d_cylinders, the distance to the nearest cylinder's
   // surface: a backend may search the cylinders its own way (the CUDA one splits them over
   // lanes). The distance field, when there is one, is read here, so every backend's search
-  // feeds the one formula.
-  template <class V>
+  // feeds the one formula. kField = false compiles the field out: for a kernel a backend runs
+  // only while the parameters carry none (the CUDA chunked kernel: its field-less registers).
+  template <class V, bool kField = true>
   MPPI_HD static V vehicle_at_distance(const Params& p, int j, const V* x, const V& d_cylinders, mask_t<V>* crash) {
     V pos[3];
     Vehicle::position(x, pos);
-    const V d = p.field.present() ? fmin_(d_cylinders, p.field.distance(pos[0], pos[1], pos[2])) : d_cylinders;
+    const bool field = kField && p.field.present();
+    const V d = field ? fmin_(d_cylinders, p.field.distance(pos[0], pos[1], pos[2])) : d_cylinders;
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
     V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
           p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[Vehicle::VX]) + fsq(x[Vehicle::VY]) + fsq(x[Vehicle::VZ]));
-    if (p.obstacles.count > 0 || p.field.present()) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
+    if (p.obstacles.count > 0 || field) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     if (p.w_floor > 0.0f) {
       const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[Vehicle::VZ], V(0.0f));
       const V below = fmax_(V(p.floor_z) - z_ahead, V(0.0f));
