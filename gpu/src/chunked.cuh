@@ -138,8 +138,9 @@ struct ChunkLayout {
 };
 
 // Task::running for a single vehicle; forest tasks search the obstacles through the grid in
-// global memory (gp: the cycle's parameters on the device), exactly as ForestCost::vehicle.
-template <class T>
+// global memory (gp: the cycle's parameters on the device), exactly as ForestCost::vehicle;
+// kField false: without the distance field's code (the parameters carry none).
+template <class T, bool kField>
 __device__ __forceinline__ float running_chunked(const typename T::Params& p, const typename T::Params& gp,
                                                  const float* x, float t, std::uint32_t* crashed) {
   if constexpr (kForestTask<T>) {
@@ -148,7 +149,7 @@ __device__ __forceinline__ float running_chunked(const typename T::Params& p, co
       float pos[3];
       Vehicle::position(xj, pos);
       const float d = gp.cost.obstacle_grid.nearest_surface(gp.cost.obstacles, pos[0], pos[1], t);
-      return ForestCost<Vehicle>::vehicle_at_distance(p.cost, j, xj, d, hit);
+      return ForestCost<Vehicle>::template vehicle_at_distance<float, kField>(p.cost, j, xj, d, hit);
     });
   } else {
     (void)gp;
@@ -308,7 +309,7 @@ __device__ __forceinline__ void weigh_block(const CostTable& t, const BlockRollo
 
 // ---- rollout_chunked's block: its shared memory and its phases ------------------------------
 
-template <class T, bool kKeep>
+template <class T, bool kKeep, bool kField>
 struct ChunkedBlock {
   static constexpr int R = ChunkLayout<T>::R, QS = ChunkLayout<T>::QS, NX = T::kNx, NU = T::kNu;
   static constexpr int XS = ChunkLayout<T>::XS, US = ChunkLayout<T>::US;
@@ -380,7 +381,7 @@ struct ChunkedBlock {
   __device__ void cost(int ci, int s, int l, const float* x, std::uint32_t* bits) const {
     const int i = ci * chunk + s;
     const float t = static_cast<float>(i + 1) * dt;
-    qb[i * QS + l] = sanitize_cost(running_chunked<T>(*p, in->params, x, t, bits) + cc_at(ci, s)[l]);
+    qb[i * QS + l] = sanitize_cost(running_chunked<T, kField>(*p, in->params, x, t, bits) + cc_at(ci, s)[l]);
   }
   // The dynamics of chunk ci, lane = rollout, from the last state of chunk ci - 1.
   __device__ void produce(int ci) const {
@@ -492,15 +493,17 @@ struct ChunkedBlock {
 };
 
 // S0: S~(tau_0,k), the first row of the cost-to-go (for rollout_costs()); sums: BlockSums.
-// kKeep: the controls are kept in u_keep for the update (else drawn again there).
-template <class T, bool kKeep>
+// kKeep: the controls are kept in u_keep for the update (else drawn again there). kField: the
+// forest cost reads the distance field (the variant without runs while the parameters carry
+// none: the field's code costs the field-less kernel registers and ~5 % at K = 16,384).
+template <class T, bool kKeep, bool kField = false>
 __global__ void __launch_bounds__(kChunkMaxThreads, kChunkMinBlocks)
     rollout_chunked(const Input<T>* in, const float* plan, float* S0, unsigned char* crashed_out, float* pmin,
                     float* part, StatsPart* stats_part, float* u_keep, int K, int horizon, int chunk, float dt,
                     int substeps, float inv_lambda, int trajectory, SamplerConstants<T::kNu> c) {
   static_assert(T::kVehicles == 1, "rollout_chunked is for single vehicles");
   extern __shared__ __align__(16) unsigned char smem[];
-  const ChunkedBlock<T, kKeep> b(in, plan, u_keep, K, horizon, chunk, dt, substeps, smem);
+  const ChunkedBlock<T, kKeep, kField> b(in, plan, u_keep, K, horizon, chunk, dt, substeps, smem);
   b.prologue(c);
   griddep_wait();  // launched behind the device's obstacle grid: it is packed now
   for (int ci = 0; ci < b.nchunks; ++ci) {

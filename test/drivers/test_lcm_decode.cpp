@@ -105,6 +105,13 @@ TEST(LcmWire, CountOffsetsMatchTheGeneratedEncoders) {
   p.key = "cost.w_xy";
   const auto pb = encode(p);
   EXPECT_EQ(read_be(pb, wire::kParamKeyLength, 4), static_cast<std::int64_t>(p.key.size() + 1));
+
+  mppi_lcm::local_map_t m{};
+  m.n_cells = 6;
+  m.distance_mm.assign(6, 1);
+  const auto mb = encode(m);
+  EXPECT_EQ(read_be(mb, wire::kLocalMapCount, 4), 6);
+  EXPECT_EQ(mb.size(), wire::kLocalMapCount + 4 + 6 * sizeof(std::int16_t));
 }
 
 TEST(LcmDecode, ValidMessagesDecode) {

@@ -71,6 +71,7 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts
   e.nx = 16;
   e.model = 1;
   e.wake_on_state = trigger == daemon::Trigger::kState;
+  e.local_map = true;  // a local map every fifth cycle: the forest cost reads it in place
   transport::Inbox inbox(e);
   daemon::LoopSettings s;
   s.trigger = trigger;
@@ -98,8 +99,24 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts
   obs.count = 100;  // more than 64: the nearest-64 selection runs every cycle
   for (int i = 0; i < 100; ++i) obs.items[i] = Cylinder{4.0f + static_cast<float>(i % 10), static_cast<float>(i / 10), 0.3f, 0, 0};
   inbox.offer_obstacles();
+  std::int64_t map_seq = 0;
+  auto offer_map = [&] {
+    transport::LocalMapInput& m = *inbox.map_buffer();
+    m.seq = ++map_seq;
+    m.utime = 0;
+    m.recv_ns = clock.now_ns();
+    DistanceFieldGrid& g = m.grid;
+    g.origin[0] = -5.0f, g.origin[1] = -5.0f, g.origin[2] = 0.0f;
+    g.resolution = 0.25f;
+    g.nx = 40, g.ny = 40, g.nz = 16;
+    g.n_cells = g.nx * g.ny * g.nz;
+    g.max_distance = 5.0f;
+    for (int c = 0; c < g.n_cells; ++c) g.distance_mm[c] = static_cast<std::int16_t>(2000 + c % 1000);
+    inbox.offer_map();
+  };
   std::int64_t seq = 0;
   for (int k = 0; k < 20; ++k) {  // warm-up: thread pool, first touches
+    if (k % 5 == 0) offer_map();
     offer_state(++seq);
     ASSERT_TRUE(loop.step_realtime(stop));
   }
@@ -108,10 +125,13 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts
   for (int k = 0; k < 60; ++k) {
     offer_state(++seq);
     inbox.offer_obstacles();
+    if (k % 5 == 0) offer_map();
     loop.step_realtime(stop);
   }
   g_counting = false;
   EXPECT_EQ(g_allocs.load(), 0);
+  EXPECT_EQ(inbox.counters.maps.load(), 16);
+  EXPECT_EQ(inbox.counters.maps_rejected(), 0);
   EXPECT_EQ(tx.commands, 80);
   EXPECT_GE(tx.statuses, 5);
   EXPECT_GE(tx.plans, 5);

@@ -2,8 +2,8 @@
 // command against the log, bit for bit.
 //
 // The log (lcm-logger's, e.g. tools/sitl run's flight.lcmlog) holds what went into the
-// daemon (states, clock ticks, obstacles, references, parameter updates) and what came out
-// (commands, status, parameter answers). A lock-step cycle is a function of its inputs and
+// daemon (states, clock ticks, obstacles, local maps, references, parameter updates) and what
+// came out (commands, status, parameter answers). A lock-step cycle is a function of its inputs and
 // of the daemon's state, with two exceptions that the log also records:
 //   - the expected latency (the estimator's, from measured compute times unless pinned
 //     with daemon.latency.floor_ms = ceiling_ms): command_t.lead_us gives it back exactly
@@ -236,7 +236,9 @@ class Replay {
   bool feed(const Event& e) {
     const auto& ch = ds_.channels;
     const bool tick = e.channel == ch.clock || (inbox_.expect().tick_on_state && e.channel == ch.state);
-    if (e.channel != ch.state && e.channel != ch.reference && e.channel != ch.obstacles && !tick) return true;
+    if (e.channel != ch.state && e.channel != ch.reference && e.channel != ch.obstacles && e.channel != ch.local_map &&
+        !tick)
+      return true;
     if (!tick) {
       publish(e);
       return true;
