@@ -103,7 +103,7 @@ int main(int argc, char** argv) {
   opt.lockstep = lockstep;
   if (!prefix.empty()) {
     auto& c = opt.channels;
-    for (std::string* ch : {&c.state, &c.command, &c.obstacles, &c.reference, &c.clock}) *ch = prefix + *ch;
+    for (std::string* ch : {&c.state, &c.command, &c.obstacles, &c.reference, &c.clock, &c.depth, &c.lidar}) *ch = prefix + *ch;
   }
 
   std::signal(SIGINT, on_signal);

@@ -25,6 +25,8 @@ struct Channels {
   std::string obstacles = "MPPI_OBSTACLES";
   std::string reference = "MPPI_REFERENCE";
   std::string clock = "MPPI_SIM_CLOCK";
+  std::string depth = "MPPI_DEPTH";  // point_cloud_t: the depth camera's frames
+  std::string lidar = "MPPI_LIDAR";  // point_cloud_t: the LiDAR's revolutions
 };
 
 struct RunOptions {
