@@ -1,0 +1,240 @@
+#include "mapper/local_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+namespace mapper {
+namespace {
+
+constexpr float kFar = std::numeric_limits<float>::infinity();
+
+// One line of the squared distance transform (Felzenszwalb & Huttenlocher): d[q] =
+// min_p (q - p)^2 + f[p], over the finite f[p] only (an all-infinite line stays infinite).
+// v, z: scratch of n and n + 1.
+void edt_1d(const float* f, int n, float* d, int* v, float* z) {
+  int k = -1;
+  for (int q = 0; q < n; ++q) {
+    if (f[q] == kFar) continue;
+    const auto fq = f[q] + static_cast<float>(q) * static_cast<float>(q);
+    if (k < 0) {
+      k = 0;
+      v[0] = q;
+      z[0] = -kFar;
+      z[1] = kFar;
+      continue;
+    }
+    float s;
+    for (;;) {  // z[0] = -inf: ends at k = 0 at the latest
+      const int p = v[k];
+      s = (fq - (f[p] + static_cast<float>(p) * static_cast<float>(p))) / static_cast<float>(2 * (q - p));
+      if (s > z[k]) break;
+      --k;
+    }
+    ++k;
+    v[k] = q;
+    z[k] = s;
+    z[k + 1] = kFar;
+  }
+  if (k < 0) {
+    for (int q = 0; q < n; ++q) d[q] = kFar;
+    return;
+  }
+  int j = 0;
+  for (int q = 0; q < n; ++q) {
+    while (z[j + 1] < static_cast<float>(q)) ++j;
+    const auto dq = static_cast<float>(q - v[j]);
+    d[q] = dq * dq + f[v[j]];
+  }
+}
+
+std::int64_t floor_cell(double x, double res) { return static_cast<std::int64_t>(std::floor(x / res)); }
+
+}  // namespace
+
+LocalMap::LocalMap(const MapSettings& s) : s_(s) {
+  if (!(s.resolution > 0.0) || !(s.max_distance > 0.0) || s.max_distance > 32.0)
+    throw std::invalid_argument("map: resolution > 0, max_distance in (0, 32] m");
+  for (int i = 0; i < 3; ++i) {
+    n_[static_cast<std::size_t>(i)] = static_cast<int>(std::lround(s.size[static_cast<std::size_t>(i)] / s.resolution));
+    if (n_[static_cast<std::size_t>(i)] < 2 || n_[static_cast<std::size_t>(i)] > 4096)
+      throw std::invalid_argument("map: every side must be 2..4096 cells");
+  }
+  const auto total = static_cast<std::size_t>(n_[0]) * static_cast<std::size_t>(n_[1]) * static_cast<std::size_t>(n_[2]);
+  if (total > (1u << 24)) throw std::invalid_argument("map: at most 2^24 cells");
+  occ_.assign(total, kUnknown);
+  scratch_.assign(total, kUnknown);
+  out_.assign(total, 0.0f);
+  in_.assign(total, 0.0f);
+  const int longest = std::max({n_[0], n_[1], n_[2]});
+  line_f_.assign(static_cast<std::size_t>(longest), 0.0f);
+  line_d_.assign(static_cast<std::size_t>(longest), 0.0f);
+  line_z_.assign(static_cast<std::size_t>(longest) + 1, 0.0f);
+  line_v_.assign(static_cast<std::size_t>(longest), 0);
+  const double zero[3] = {0.0, 0.0, 0.0};
+  for (int i = 0; i < 3; ++i) corner_[static_cast<std::size_t>(i)] = -n_[static_cast<std::size_t>(i)] / 2;
+  recentre(zero);
+}
+
+std::array<double, 3> LocalMap::origin() const {
+  return {static_cast<double>(corner_[0]) * s_.resolution, static_cast<double>(corner_[1]) * s_.resolution,
+          static_cast<double>(corner_[2]) * s_.resolution};
+}
+
+int LocalMap::index_of(const double* p) const {
+  int c[3];
+  for (int i = 0; i < 3; ++i) {
+    const std::int64_t k = floor_cell(p[i], s_.resolution) - corner_[static_cast<std::size_t>(i)];
+    if (k < 0 || k >= n_[static_cast<std::size_t>(i)]) return -1;
+    c[i] = static_cast<int>(k);
+  }
+  return c[0] + n_[0] * (c[1] + n_[1] * c[2]);
+}
+
+void LocalMap::recentre(const double* centre) {
+  std::array<std::int64_t, 3> next{};
+  for (int i = 0; i < 3; ++i)
+    next[static_cast<std::size_t>(i)] = floor_cell(centre[i], s_.resolution) - n_[static_cast<std::size_t>(i)] / 2;
+  if (next == corner_) return;
+  ++stats_.shifts;
+  std::fill(scratch_.begin(), scratch_.end(), kUnknown);
+  const std::int64_t dx = next[0] - corner_[0], dy = next[1] - corner_[1], dz = next[2] - corner_[2];
+  // Rows along x: the overlap of the old and new windows, copied row by row.
+  const std::int64_t x0 = std::max<std::int64_t>(0, -dx), x1 = std::min<std::int64_t>(n_[0], n_[0] - dx);
+  if (x1 > x0) {
+    for (int k = 0; k < n_[2]; ++k) {
+      const std::int64_t ok = k + dz;
+      if (ok < 0 || ok >= n_[2]) continue;
+      for (int j = 0; j < n_[1]; ++j) {
+        const std::int64_t oj = j + dy;
+        if (oj < 0 || oj >= n_[1]) continue;
+        const std::int64_t dst = x0 + n_[0] * (j + static_cast<std::int64_t>(n_[1]) * k);
+        const std::int64_t src = x0 + dx + n_[0] * (oj + static_cast<std::int64_t>(n_[1]) * ok);
+        std::memcpy(&scratch_[static_cast<std::size_t>(dst)], &occ_[static_cast<std::size_t>(src)],
+                    static_cast<std::size_t>(x1 - x0));
+      }
+    }
+  }
+  occ_.swap(scratch_);
+  corner_ = next;
+}
+
+void LocalMap::update(std::size_t i, int delta) {
+  const int now = occ_[i] == kUnknown ? 0 : occ_[i];
+  occ_[i] = static_cast<std::int8_t>(std::clamp(now + delta, s_.min_logodds, s_.max_logodds));
+}
+
+void LocalMap::integrate_ray(const double* origin, const double* end, bool hit) {
+  ++stats_.rays;
+  // Continuous cell coordinates in the window; the segment clipped to the box (Liang-Barsky).
+  double a[3], d[3];
+  double s0 = 0.0, s1 = 1.0;
+  for (int i = 0; i < 3; ++i) {
+    const std::size_t u = static_cast<std::size_t>(i);
+    a[i] = origin[i] / s_.resolution - static_cast<double>(corner_[u]);
+    d[i] = end[i] / s_.resolution - static_cast<double>(corner_[u]) - a[i];
+    const double lo = 0.0, hi = n_[u];
+    if (std::fabs(d[i]) < 1e-12) {
+      if (a[i] < lo || a[i] >= hi) return;
+      continue;
+    }
+    double t_lo = (lo - a[i]) / d[i], t_hi = (hi - a[i]) / d[i];
+    if (t_lo > t_hi) std::swap(t_lo, t_hi);
+    s0 = std::max(s0, t_lo);
+    s1 = std::min(s1, t_hi);
+  }
+  if (s0 > s1) return;
+  const bool end_inside = s1 >= 1.0;
+  const bool mark = hit && end_inside && end[2] >= s_.floor_z;  // a surface, not the ground
+  const bool clear_end = !hit && end_inside;                    // a miss: free up to its end
+  int c[3], last[3], step[3];
+  double t_max[3], t_delta[3];
+  for (int i = 0; i < 3; ++i) {
+    const std::size_t u = static_cast<std::size_t>(i);
+    const double p0 = a[i] + s0 * d[i], p1 = a[i] + s1 * d[i];
+    c[i] = std::clamp(static_cast<int>(std::floor(p0)), 0, n_[u] - 1);
+    last[i] = std::clamp(static_cast<int>(std::floor(p1)), 0, n_[u] - 1);
+    step[i] = d[i] > 0.0 ? 1 : (d[i] < 0.0 ? -1 : 0);
+    t_delta[i] = step[i] != 0 ? 1.0 / std::fabs(d[i]) : std::numeric_limits<double>::infinity();
+    t_max[i] = step[i] > 0 ? (c[i] + 1 - a[i]) / d[i]
+               : step[i] < 0 ? (c[i] - a[i]) / d[i]
+                             : std::numeric_limits<double>::infinity();
+  }
+  const int budget = std::abs(last[0] - c[0]) + std::abs(last[1] - c[1]) + std::abs(last[2] - c[2]);
+  for (int n = 0; n <= budget; ++n) {
+    const std::size_t idx = static_cast<std::size_t>(c[0] + n_[0] * (c[1] + n_[1] * c[2]));
+    const bool at_end = c[0] == last[0] && c[1] == last[1] && c[2] == last[2];
+    if (at_end) {
+      if (mark) {
+        update(idx, s_.hit);
+        ++stats_.cells_hit;
+      } else if (clear_end || !end_inside) {
+        update(idx, s_.miss);
+        ++stats_.cells_cleared;
+      }
+      return;
+    }
+    update(idx, s_.miss);
+    ++stats_.cells_cleared;
+    const int ax = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
+    c[ax] += step[ax];
+    if (c[ax] < 0 || c[ax] >= n_[static_cast<std::size_t>(ax)]) return;
+    t_max[ax] += t_delta[ax];
+  }
+}
+
+// The squared-distance transform along one axis, in place: lines of n cells `stride` apart;
+// `count` lines `line_stride` apart, times `lines_outer` groups `outer_stride` apart.
+void LocalMap::edt_pass(float* f, int n, int stride, int count, int line_stride, int lines_outer, int outer_stride) {
+  for (int o = 0; o < lines_outer; ++o) {
+    for (int l = 0; l < count; ++l) {
+      float* base = f + static_cast<std::ptrdiff_t>(o) * outer_stride + static_cast<std::ptrdiff_t>(l) * line_stride;
+      bool any_finite = false, any_nonzero = false;
+      for (int q = 0; q < n; ++q) {
+        const float v = base[static_cast<std::ptrdiff_t>(q) * stride];
+        line_f_[static_cast<std::size_t>(q)] = v;
+        any_finite = any_finite || v != kFar;
+        any_nonzero = any_nonzero || v != 0.0f;
+      }
+      if (!any_finite || !any_nonzero) continue;  // nothing to spread, or nothing to lower
+      edt_1d(line_f_.data(), n, line_d_.data(), line_v_.data(), line_z_.data());
+      for (int q = 0; q < n; ++q) base[static_cast<std::ptrdiff_t>(q) * stride] = line_d_[static_cast<std::size_t>(q)];
+    }
+  }
+}
+
+void LocalMap::compute_distance(std::vector<std::int16_t>* out_mm) {
+  const int nx = n_[0], ny = n_[1], nz = n_[2];
+  const std::size_t total = occ_.size();
+  out_mm->resize(total);
+  bool any = false;
+  for (std::size_t i = 0; i < total; ++i) {
+    const bool occ = occ_[i] > 0;
+    any = any || occ;
+    out_[i] = occ ? 0.0f : kFar;
+    in_[i] = occ ? kFar : 0.0f;
+  }
+  const auto sat = static_cast<std::int16_t>(std::lround(1000.0 * s_.max_distance));
+  if (!any) {
+    std::fill(out_mm->begin(), out_mm->end(), sat);
+    return;
+  }
+  for (float* f : {out_.data(), in_.data()}) {
+    edt_pass(f, nx, 1, ny, nx, nz, nx * ny);        // along x: each (j, k) row
+    edt_pass(f, ny, nx, nx, 1, nz, nx * ny);        // along y: each (i, k)
+    edt_pass(f, nz, nx * ny, nx, 1, ny, nx);        // along z: each (i, j)
+  }
+  const double res = s_.resolution, maxd = s_.max_distance;
+  for (std::size_t i = 0; i < total; ++i) {
+    double m;
+    if (occ_[i] > 0)
+      m = -std::min(maxd, (std::sqrt(static_cast<double>(in_[i])) - 0.5) * res);
+    else
+      m = out_[i] == kFar ? maxd : std::min(maxd, (std::sqrt(static_cast<double>(out_[i])) - 0.5) * res);
+    (*out_mm)[i] = static_cast<std::int16_t>(std::lround(1000.0 * m));
+  }
+}
+
+}  // namespace mapper

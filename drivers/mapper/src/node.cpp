@@ -1,0 +1,252 @@
+#include "mapper/node.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <set>
+#include <stdexcept>
+
+namespace mapper {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+[[noreturn]] void fail(const std::string& where, const std::string& what) {
+  throw std::runtime_error("mapper settings: " + where + ": " + what);
+}
+
+template <class T>
+void read(const YAML::Node& n, const char* key, const std::string& where, T& out) {
+  if (!n[key]) return;
+  try {
+    out = n[key].as<T>();
+  } catch (const YAML::Exception& e) {
+    fail(where + "." + key, std::string("bad value: ") + e.what());
+  }
+}
+
+void check_keys(const YAML::Node& n, const std::string& where, const std::set<std::string>& known) {
+  if (!n) return;
+  if (!n.IsMap()) fail(where, "expected a mapping");
+  for (const auto& kv : n)
+    if (known.count(kv.first.Scalar()) == 0) fail(where + "." + kv.first.Scalar(), "unknown key");
+}
+
+// "a.b=value" into the document: the value parsed as YAML (numbers, lists, strings).
+void apply_set(YAML::Node& root, const std::string& kv) {
+  const auto eq = kv.find('=');
+  if (eq == std::string::npos || eq == 0) fail(kv, "expected key=value");
+  const std::string key = kv.substr(0, eq);
+  const auto dot = key.find('.');
+  YAML::Node value = YAML::Load(kv.substr(eq + 1));
+  if (dot == std::string::npos) {
+    root[key] = value;
+  } else {
+    YAML::Node section = root[key.substr(0, dot)];
+    section[key.substr(dot + 1)] = value;
+  }
+}
+
+void read_map(const YAML::Node& m, MapSettings& s) {
+  check_keys(m, "map",
+             {"resolution", "size", "max_distance", "floor_z", "lead", "hit", "miss", "min_logodds", "max_logodds"});
+  if (!m) return;
+  read(m, "resolution", "map", s.resolution);
+  std::vector<double> size;
+  read(m, "size", "map", size);
+  if (!size.empty()) {
+    if (size.size() != 3) fail("map.size", "expected [x, y, z] metres");
+    s.size = {size[0], size[1], size[2]};
+  }
+  read(m, "max_distance", "map", s.max_distance);
+  read(m, "floor_z", "map", s.floor_z);
+  read(m, "lead", "map", s.lead);
+  read(m, "hit", "map", s.hit);
+  read(m, "miss", "map", s.miss);
+  read(m, "min_logodds", "map", s.min_logodds);
+  read(m, "max_logodds", "map", s.max_logodds);
+  if (!(s.hit > 0 && s.miss < 0 && s.min_logodds < 0 && s.max_logodds > 0 && s.min_logodds >= -127 &&
+        s.max_logodds <= 127))
+    fail("map", "hit > 0, miss < 0, min_logodds in [-127, 0), max_logodds in (0, 127]");
+}
+
+float percentile(std::vector<float> v, double p) {
+  if (v.empty()) return 0.0f;
+  const auto k = static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size()) - 1.0,
+                                                           std::floor(p * static_cast<double>(v.size()))));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+std::string timing_json(const std::vector<float>& v) {
+  char buf[160];
+  const float mx = v.empty() ? 0.0f : *std::max_element(v.begin(), v.end());
+  std::snprintf(buf, sizeof buf, "{\"n\":%zu,\"p50\":%.3f,\"p99\":%.3f,\"max\":%.3f}", v.size(),
+                static_cast<double>(percentile(v, 0.5)), static_cast<double>(percentile(v, 0.99)),
+                static_cast<double>(mx));
+  return buf;
+}
+
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+constexpr std::size_t kCloudCountOffset = 8 + 8 + 8 + 1 + 3 * 4 + 4 * 4 + 4 + 4;  // fingerprint included
+constexpr std::size_t kCloudBytesPerPoint = 3 * 4 + 1;
+constexpr std::size_t kTimingSamples = 1 << 18;
+
+}  // namespace
+
+NodeSettings load_settings(const std::string& path, const std::vector<std::string>& sets) {
+  YAML::Node root;
+  try {
+    root = path.empty() ? YAML::Node(YAML::NodeType::Map) : YAML::LoadFile(path);
+    for (const auto& kv : sets) apply_set(root, kv);
+  } catch (const YAML::Exception& e) {
+    fail(path.empty() ? "--set" : path, e.what());
+  }
+  check_keys(root, "mapper", {"map", "rate_hz", "inputs", "output", "max_ray"});
+  NodeSettings s;
+  read_map(root["map"], s.map);
+  read(root, "rate_hz", "mapper", s.rate_hz);
+  read(root, "inputs", "mapper", s.inputs);
+  read(root, "output", "mapper", s.output);
+  read(root, "max_ray", "mapper", s.max_ray);
+  if (!(s.rate_hz > 0.0 && s.rate_hz <= 100.0)) fail("rate_hz", "must be in (0, 100]");
+  if (s.inputs.empty()) fail("inputs", "at least one point_cloud_t channel");
+  if (!(s.max_ray >= 0.0)) fail("max_ray", "must be >= 0");
+  return s;
+}
+
+bool decode_cloud(const void* data, std::size_t size, mppi_lcm::point_cloud_t* m) {
+  if (size < kCloudCountOffset + 4) return false;
+  const auto* b = static_cast<const unsigned char*>(data) + kCloudCountOffset;
+  const std::int32_t n = static_cast<std::int32_t>((std::uint32_t{b[0]} << 24) | (std::uint32_t{b[1]} << 16) |
+                                                   (std::uint32_t{b[2]} << 8) | std::uint32_t{b[3]});
+  if (n < 0 || size != kCloudCountOffset + 4 + kCloudBytesPerPoint * static_cast<std::size_t>(n)) return false;
+  return m->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
+}
+
+MapperNode::MapperNode(const NodeSettings& s, lcm::LCM* lcm) : s_(s), lcm_(lcm), map_(s.map) {
+  for (const auto& ch : s_.inputs) lcm_->subscribe(ch, &MapperNode::on_cloud, this);
+  out_.n_cells = map_.cells();
+  out_.distance_mm.reserve(static_cast<std::size_t>(map_.cells()));
+  integrate_ms_.reserve(kTimingSamples);
+  publish_ms_.reserve(kTimingSamples);
+}
+
+void MapperNode::on_cloud(const lcm::ReceiveBuffer* rb, const std::string&) {
+  if (!decode_cloud(rb->data, rb->data_size, &in_)) {
+    ++undecodable_;
+    return;
+  }
+  integrate(in_);
+}
+
+// The window follows the sensor, `lead` metres ahead along its horizontal motion.
+void MapperNode::centre_on(const float* position) {
+  const double p[3] = {position[0], position[1], position[2]};
+  if (have_pos_) {
+    const double dx = p[0] - last_pos_[0], dy = p[1] - last_pos_[1], d = std::hypot(dx, dy);
+    if (d > 0.05) {
+      heading_[0] = dx / d;
+      heading_[1] = dy / d;
+      std::copy(p, p + 3, last_pos_);
+    }
+  } else {
+    std::copy(p, p + 3, last_pos_);
+    have_pos_ = true;
+  }
+  const double c[3] = {p[0] + s_.map.lead * heading_[0], p[1] + s_.map.lead * heading_[1], p[2]};
+  map_.recentre(c);
+}
+
+void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
+  const auto t0 = Clock::now();
+  for (float v : m.position)
+    if (!std::isfinite(v)) return;
+  centre_on(m.position);
+  const double w = m.orientation[0], x = m.orientation[1], y = m.orientation[2], z = m.orientation[3];
+  // Sensor -> world rotation matrix of the (normalised) quaternion.
+  const double qn = std::sqrt(w * w + x * x + y * y + z * z);
+  if (!(qn > 0.5 && qn < 2.0)) return;
+  const double a = w / qn, b = x / qn, c = y / qn, d = z / qn;
+  const double r[9] = {1 - 2 * (c * c + d * d), 2 * (b * c - a * d),     2 * (b * d + a * c),
+                       2 * (b * c + a * d),     1 - 2 * (b * b + d * d), 2 * (c * d - a * b),
+                       2 * (b * d - a * c),     2 * (c * d + a * b),     1 - 2 * (b * b + c * c)};
+  const double o[3] = {m.position[0], m.position[1], m.position[2]};
+  const double cut = s_.max_ray > 0.0 ? s_.max_ray : std::numeric_limits<double>::infinity();
+  for (std::int32_t i = 0; i < m.n; ++i) {
+    const std::size_t k = static_cast<std::size_t>(i);
+    double p[3] = {m.x[k], m.y[k], m.z[k]};
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) continue;
+    bool hit = m.hit[k] != 0;
+    const double range = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    if (range > cut) {  // cut to a miss at max_ray
+      for (double& v : p) v *= cut / range;
+      hit = false;
+    }
+    const double e[3] = {o[0] + r[0] * p[0] + r[1] * p[1] + r[2] * p[2], o[1] + r[3] * p[0] + r[4] * p[1] + r[5] * p[2],
+                         o[2] + r[6] * p[0] + r[7] * p[1] + r[8] * p[2]};
+    map_.integrate_ray(o, e, hit);
+  }
+  newest_utime_ = std::max(newest_utime_, m.utime);
+  dirty_ = true;
+  ++frames_;
+  if (integrate_ms_.size() < integrate_ms_.capacity()) integrate_ms_.push_back(static_cast<float>(ms_since(t0)));
+}
+
+bool MapperNode::publish() {
+  if (!dirty_) return false;
+  const auto t0 = Clock::now();
+  map_.compute_distance(&out_.distance_mm);
+  out_.utime = newest_utime_;
+  out_.seq = maps_++;
+  const auto org = map_.origin();
+  for (int i = 0; i < 3; ++i) out_.origin[i] = static_cast<float>(org[static_cast<std::size_t>(i)]);
+  out_.resolution = static_cast<float>(map_.resolution());
+  out_.nx = map_.nx();
+  out_.ny = map_.ny();
+  out_.nz = map_.nz();
+  out_.max_distance = static_cast<float>(s_.map.max_distance);
+  out_.n_cells = map_.cells();
+  lcm_->publish(s_.output, &out_);
+  dirty_ = false;
+  if (publish_ms_.size() < publish_ms_.capacity()) publish_ms_.push_back(static_cast<float>(ms_since(t0)));
+  return true;
+}
+
+void MapperNode::run(const volatile std::sig_atomic_t* stop) {
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / s_.rate_hz));
+  auto next = Clock::now() + period;
+  while (!*stop) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(next - Clock::now()).count();
+    if (left > 0) lcm_->handleTimeout(static_cast<int>(std::min<std::int64_t>(left, 100)));
+    const auto now = Clock::now();
+    if (now >= next) {
+      publish();
+      next += period;
+      if (next < now) next = now + period;  // fell behind: no burst of maps to catch up
+    }
+  }
+}
+
+std::string MapperNode::stats_json() const {
+  const Stats& st = map_.stats();
+  char head[512];
+  std::snprintf(head, sizeof head,
+                "{\"frames\":%lld,\"undecodable\":%lld,\"maps\":%lld,\"rays\":%lld,\"cells_cleared\":%lld,"
+                "\"cells_hit\":%lld,\"shifts\":%lld,\"cells\":%d,\"resolution\":%g,",
+                static_cast<long long>(frames_), static_cast<long long>(undecodable_), static_cast<long long>(maps_),
+                static_cast<long long>(st.rays), static_cast<long long>(st.cells_cleared),
+                static_cast<long long>(st.cells_hit), static_cast<long long>(st.shifts), map_.cells(),
+                map_.resolution());
+  return std::string(head) + "\"integrate_ms\":" + timing_json(integrate_ms_) +
+         ",\"publish_ms\":" + timing_json(publish_ms_) + "}";
+}
+
+}  // namespace mapper
