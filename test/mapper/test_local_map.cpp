@@ -127,10 +127,12 @@ TEST(LocalMap, ATreeTheCameraSawReadsItsTrueDistanceWithinAboutACell) {
   m.recentre(pose.p.data());
   for (int k = 0; k < 5; ++k) {
     cam.capture(world, pose, rng, &f);
+    m.begin_frame(pose.p.data());
     for (std::size_t i = 0; i < f.x.size(); ++i) {
       const double e[3] = {pose.p[0] + f.x[i], pose.p[1] + f.y[i], pose.p[2] + f.z[i]};
-      m.integrate_ray(pose.p.data(), e, f.hit[i] != 0);
+      m.add_point(e, f.hit[i] != 0);
     }
+    m.end_frame();
   }
   std::vector<std::int16_t> mm;
   m.compute_distance(&mm);

@@ -66,6 +66,13 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
   if (total > (1u << 24)) throw std::invalid_argument("map: at most 2^24 cells");
   occ_.assign(total, kUnknown);
   scratch_.assign(total, kUnknown);
+  touched_.assign(total, 0);
+  ends_seen_.assign(total, 0);
+  hits_.assign(total, 0);
+  passes_.assign(total, 0);
+  weight_.assign(total, 0);
+  ends_.reserve(total);
+  frame_cells_.reserve(total);
   out_.assign(total, 0.0f);
   in_.assign(total, 0.0f);
   const int longest = std::max({n_[0], n_[1], n_[2]});
@@ -127,57 +134,125 @@ void LocalMap::update(std::size_t i, int delta) {
 }
 
 void LocalMap::integrate_ray(const double* origin, const double* end, bool hit) {
-  ++stats_.rays;
-  // Continuous cell coordinates in the window; the segment clipped to the box (Liang-Barsky).
-  double a[3], d[3];
-  double s0 = 0.0, s1 = 1.0;
+  begin_frame(origin);
+  add_point(end, hit);
+  end_frame();
+}
+
+void LocalMap::begin_frame(const double* origin) {
+  ++frame_;
+  ends_.clear();
+  for (int i = 0; i < 3; ++i)
+    origin_[i] = origin[i] / s_.resolution - static_cast<double>(corner_[static_cast<std::size_t>(i)]);
+}
+
+// The part of the segment a + s d, s in [0, 1], inside the window's box [0, n): false if none.
+bool LocalMap::clip(const double* a, const double* d, double* s0, double* s1) const {
+  *s0 = 0.0;
+  *s1 = 1.0;
   for (int i = 0; i < 3; ++i) {
-    const std::size_t u = static_cast<std::size_t>(i);
-    a[i] = origin[i] / s_.resolution - static_cast<double>(corner_[u]);
-    d[i] = end[i] / s_.resolution - static_cast<double>(corner_[u]) - a[i];
-    const double lo = 0.0, hi = n_[u];
+    const double hi = n_[static_cast<std::size_t>(i)];
     if (std::fabs(d[i]) < 1e-12) {
-      if (a[i] < lo || a[i] >= hi) return;
+      if (a[i] < 0.0 || a[i] >= hi) return false;
       continue;
     }
-    double t_lo = (lo - a[i]) / d[i], t_hi = (hi - a[i]) / d[i];
+    double t_lo = -a[i] / d[i], t_hi = (hi - a[i]) / d[i];
     if (t_lo > t_hi) std::swap(t_lo, t_hi);
-    s0 = std::max(s0, t_lo);
-    s1 = std::min(s1, t_hi);
+    *s0 = std::max(*s0, t_lo);
+    *s1 = std::min(*s1, t_hi);
   }
-  if (s0 > s1) return;
-  const bool end_inside = s1 >= 1.0;
-  const bool mark = hit && end_inside && end[2] >= s_.floor_z;  // a surface, not the ground
-  const bool clear_end = !hit && end_inside;                    // a miss: free up to its end
-  int c[3], last[3], step[3];
+  return *s0 <= *s1;
+}
+
+int LocalMap::cell_at(const double* p) const {
+  int c[3];
+  for (int i = 0; i < 3; ++i) c[i] = std::clamp(static_cast<int>(std::floor(p[i])), 0, n_[static_cast<std::size_t>(i)] - 1);
+  return c[0] + n_[0] * (c[1] + n_[1] * c[2]);
+}
+
+// This frame's tallies for cell u, started at its first touch.
+void LocalMap::touch(std::size_t u) {
+  if (touched_[u] == frame_) return;
+  touched_[u] = frame_;
+  hits_[u] = 0;
+  passes_[u] = 0;
+  frame_cells_.push_back(static_cast<int>(u));
+}
+
+void LocalMap::add_point(const double* end, bool hit) {
+  ++stats_.rays;
+  double d[3], s0, s1;
+  for (int i = 0; i < 3; ++i)
+    d[i] = end[i] / s_.resolution - static_cast<double>(corner_[static_cast<std::size_t>(i)]) - origin_[i];
+  if (!clip(origin_, d, &s0, &s1)) return;
+  const bool inside = s1 >= 1.0;
+  double e[3];
+  for (int i = 0; i < 3; ++i) e[i] = origin_[i] + s1 * d[i];
+  const int cell = cell_at(e);
+  const auto u = static_cast<std::size_t>(cell);
+  if (hit && inside && end[2] >= s_.floor_z) {  // a surface, not the ground
+    touch(u);
+    if (hits_[u] < 0xFFFF) ++hits_[u];
+  }
+  if (ends_seen_[u] != frame_) {  // the first ray to this cell: one trace for all of them
+    ends_seen_[u] = frame_;
+    weight_[u] = 0;
+    // A miss, or a ray leaving the window: free up to and with its last cell; a return: up to it.
+    ends_.push_back(hit && inside ? -1 - cell : cell);
+  }
+  if (weight_[u] < 0xFFFF) ++weight_[u];
+}
+
+void LocalMap::end_frame() {
+  for (const int entry : ends_) {
+    const bool clear_end = entry >= 0;
+    const int cell = clear_end ? entry : -1 - entry;
+    const int last[3] = {cell % n_[0], (cell / n_[0]) % n_[1], cell / (n_[0] * n_[1])};
+    double d[3];
+    for (int i = 0; i < 3; ++i) d[i] = last[i] + 0.5 - origin_[i];  // to the end cell's centre
+    walk(d, last, clear_end, weight_[static_cast<std::size_t>(cell)]);
+  }
+  // One update per cell and frame: a return if more rays ended in it than went through it
+  // (range noise puts a few returns a cell short of the surface; the rays to the surface
+  // outvote them), else a miss.
+  for (const int c : frame_cells_) {
+    const auto u = static_cast<std::size_t>(c);
+    if (hits_[u] > passes_[u]) {
+      update(u, s_.hit);
+      ++stats_.cells_hit;
+    } else {
+      update(u, s_.miss);
+      ++stats_.cells_cleared;
+    }
+  }
+  frame_cells_.clear();
+}
+
+// Counts `weight` rays through every cell from the origin along d up to `last` (with it if
+// clear_end) (Amanatides & Woo).
+void LocalMap::walk(const double* d, const int* last, bool clear_end, std::uint16_t weight) {
+  double s0, s1;
+  if (!clip(origin_, d, &s0, &s1)) return;
+  int c[3], step[3];
   double t_max[3], t_delta[3];
   for (int i = 0; i < 3; ++i) {
-    const std::size_t u = static_cast<std::size_t>(i);
-    const double p0 = a[i] + s0 * d[i], p1 = a[i] + s1 * d[i];
-    c[i] = std::clamp(static_cast<int>(std::floor(p0)), 0, n_[u] - 1);
-    last[i] = std::clamp(static_cast<int>(std::floor(p1)), 0, n_[u] - 1);
+    const double p0 = origin_[i] + s0 * d[i];
+    c[i] = std::clamp(static_cast<int>(std::floor(p0)), 0, n_[static_cast<std::size_t>(i)] - 1);
     step[i] = d[i] > 0.0 ? 1 : (d[i] < 0.0 ? -1 : 0);
     t_delta[i] = step[i] != 0 ? 1.0 / std::fabs(d[i]) : std::numeric_limits<double>::infinity();
-    t_max[i] = step[i] > 0 ? (c[i] + 1 - a[i]) / d[i]
-               : step[i] < 0 ? (c[i] - a[i]) / d[i]
+    t_max[i] = step[i] > 0   ? (c[i] + 1 - origin_[i]) / d[i]
+               : step[i] < 0 ? (c[i] - origin_[i]) / d[i]
                              : std::numeric_limits<double>::infinity();
   }
   const int budget = std::abs(last[0] - c[0]) + std::abs(last[1] - c[1]) + std::abs(last[2] - c[2]);
   for (int n = 0; n <= budget; ++n) {
-    const std::size_t idx = static_cast<std::size_t>(c[0] + n_[0] * (c[1] + n_[1] * c[2]));
     const bool at_end = c[0] == last[0] && c[1] == last[1] && c[2] == last[2];
-    if (at_end) {
-      if (mark) {
-        update(idx, s_.hit);
-        ++stats_.cells_hit;
-      } else if (clear_end || !end_inside) {
-        update(idx, s_.miss);
-        ++stats_.cells_cleared;
-      }
-      return;
+    if (!at_end || clear_end) {
+      const auto idx = static_cast<std::size_t>(c[0] + n_[0] * (c[1] + n_[1] * c[2]));
+      touch(idx);
+      passes_[idx] = static_cast<std::uint16_t>(std::min(0xFFFF, passes_[idx] + weight));
     }
-    update(idx, s_.miss);
-    ++stats_.cells_cleared;
+    if (at_end) return;
     const int ax = t_max[0] < t_max[1] ? (t_max[0] < t_max[2] ? 0 : 2) : (t_max[1] < t_max[2] ? 1 : 2);
     c[ax] += step[ax];
     if (c[ax] < 0 || c[ax] >= n_[static_cast<std::size_t>(ax)]) return;

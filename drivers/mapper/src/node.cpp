@@ -180,6 +180,7 @@ void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
                        2 * (b * d - a * c),     2 * (c * d + a * b),     1 - 2 * (b * b + c * c)};
   const double o[3] = {m.position[0], m.position[1], m.position[2]};
   const double cut = s_.max_ray > 0.0 ? s_.max_ray : std::numeric_limits<double>::infinity();
+  map_.begin_frame(o);
   for (std::int32_t i = 0; i < m.n; ++i) {
     const std::size_t k = static_cast<std::size_t>(i);
     double p[3] = {m.x[k], m.y[k], m.z[k]};
@@ -192,8 +193,9 @@ void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
     }
     const double e[3] = {o[0] + r[0] * p[0] + r[1] * p[1] + r[2] * p[2], o[1] + r[3] * p[0] + r[4] * p[1] + r[5] * p[2],
                          o[2] + r[6] * p[0] + r[7] * p[1] + r[8] * p[2]};
-    map_.integrate_ray(o, e, hit);
+    map_.add_point(e, hit);
   }
+  map_.end_frame();
   newest_utime_ = std::max(newest_utime_, m.utime);
   dirty_ = true;
   ++frames_;

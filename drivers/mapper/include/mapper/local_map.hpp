@@ -50,7 +50,16 @@ class LocalMap {
   // Moves the window so that it is centred on `centre` (whole cells; cells leaving it are
   // forgotten, cells entering it are unknown).
   void recentre(const double* centre);
-  // One ray from `origin` to `end` (world frame); `hit`: the end is a surface.
+  // A frame: begin_frame(sensor origin), add_point(end, hit) for each of its rays (world
+  // frame; `hit`: the end is a surface), end_frame(). Within a frame a cell is updated once:
+  // a return if more of the frame's rays ended in it than went through it, else a miss; one
+  // ray is traced per distinct end cell, counting for all the rays that end there (OctoMap's
+  // insertPointCloud with discretize, in effect): near the sensor hundreds of rays cross the
+  // same cells.
+  void begin_frame(const double* origin);
+  void add_point(const double* end, bool hit);
+  void end_frame();
+  // A frame of one ray.
   void integrate_ray(const double* origin, const double* end, bool hit);
   // The signed distance field of the current occupancy, in mm, saturated (x fastest).
   void compute_distance(std::vector<std::int16_t>* out_mm);
@@ -71,12 +80,23 @@ class LocalMap {
 
  private:
   void update(std::size_t i, int delta);
+  bool clip(const double* a, const double* d, double* s0, double* s1) const;
+  int cell_at(const double* p) const;
+  void walk(const double* d, const int* last, bool clear_end, std::uint16_t weight);
+  void touch(std::size_t u);
   void edt_pass(float* f, int n, int stride, int count, int line_stride, int lines_outer, int outer_stride);
 
   MapSettings s_;
   std::array<int, 3> n_{};
   std::array<std::int64_t, 3> corner_{};  // the window's first cell, in world cells
   std::vector<std::int8_t> occ_, scratch_;
+  std::vector<std::uint32_t> touched_, ends_seen_;  // the frame that last tallied / queued a cell
+  std::vector<std::uint16_t> hits_, passes_;        // this frame's returns in / rays through a cell
+  std::vector<std::uint16_t> weight_;               // this frame's rays ending in a cell
+  std::vector<int> ends_;                           // this frame's end cells (-1 - cell: keep it)
+  std::vector<int> frame_cells_;                    // the cells tallied this frame
+  std::uint32_t frame_ = 0;
+  double origin_[3] = {0, 0, 0};                    // this frame's sensor, in window cells
   std::vector<float> out_, in_;           // squared distances, cells^2
   std::vector<float> line_f_, line_z_, line_d_;
   std::vector<int> line_v_;
