@@ -88,7 +88,10 @@ class Simulation {
  public:
   Simulation(const Scenario& s, const RunOptions& o)
       : s_(s), o_(o), plant_(make_plant(s)), lcm_(o.lcm_url), wind_rng_(s.seed, 3), noise_rng_(s.seed, 4),
-        sensors_(s, &lcm_, o.channels.depth, o.channels.lidar) {
+        sensor_lcm_(o.sensor_lcm_url.empty() ? nullptr : std::make_unique<lcm::LCM>(o.sensor_lcm_url)),
+        sensors_(s, sensor_lcm_ ? sensor_lcm_.get() : &lcm_, o.channels.depth, o.channels.lidar) {
+    if (sensor_lcm_ && !sensor_lcm_->good())
+      throw std::runtime_error("LCM init failed for the sensor url '" + o.sensor_lcm_url + "'");
     if (!lcm_.good()) throw std::runtime_error("LCM init failed for url '" + o.lcm_url + "'");
     lcm_.subscribe(o.channels.command, &Simulation::on_command, this);
     nu_total_ = plant_->nu() * plant_->vehicles();
@@ -124,6 +127,7 @@ class Simulation {
   std::unique_ptr<Plant> plant_;
   lcm::LCM lcm_;
   Rng wind_rng_, noise_rng_;
+  std::unique_ptr<lcm::LCM> sensor_lcm_;  // the sensors' own bus (RunOptions::sensor_lcm_url)
   SensorRig sensors_;
   int nu_total_ = 0;
   std::vector<float> u_applied_;

@@ -4,7 +4,10 @@
 #include <lcm/lcm-cpp.hpp>
 #include <mppi_lcm/local_map_t.hpp>
 #include <mppi_lcm/point_cloud_t.hpp>
+#include <cmath>
+#include <cstdio>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "mapper/node.hpp"
@@ -44,6 +47,9 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   lcm::LCM lc("memq://");
   ASSERT_TRUE(lc.good());
   mapper::MapperNode node(mapper::load_settings("", {}), &lc);
+  std::FILE* sensed = std::tmpfile();
+  ASSERT_NE(sensed, nullptr);
+  node.record_sensed(sensed);
   MapSink sink;
   lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
   EXPECT_FALSE(node.publish());  // nothing seen yet: nothing to say
@@ -85,6 +91,24 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   EXPECT_LT(cell(6.0, -1.0, 2.0), 0.0);  // inside the trunk
   EXPECT_NEAR(cell(20.0, 10.0, 2.0), 5.0, 1e-3);  // behind the camera: unknown, free, saturated
   EXPECT_FALSE(node.publish());  // no new frame since
+
+  // What was sensed: the tree's columns, the first time they were occupied, nothing else.
+  std::rewind(sensed);
+  char line[65536];
+  ASSERT_NE(std::fgets(line, sizeof line, sensed), nullptr);
+  const std::string rec = line;
+  EXPECT_NE(rec.find("\"t\":0.000"), std::string::npos) << rec;
+  EXPECT_NE(rec.find("\"sensor\":[10.000,-1.000,2.000]"), std::string::npos) << rec;
+  int columns = 0;
+  for (std::size_t at = rec.find("[", rec.find("columns")) + 1; (at = rec.find('[', at)) != std::string::npos; ++at) {
+    double x = 0, y = 0;
+    ASSERT_EQ(std::sscanf(rec.c_str() + at, "[%lf,%lf]", &x, &y), 2);
+    EXPECT_LT(std::hypot(x - 6.0, y + 1.0), 0.3 + 0.4) << x << " " << y;
+    ++columns;
+  }
+  EXPECT_GE(columns, 2);
+  EXPECT_EQ(std::fgets(line, sizeof line, sensed), nullptr);  // one map, one line
+  std::fclose(sensed);
 }
 
 TEST(MapperNode, CountsAndIgnoresUndecodableFrames) {

@@ -1,9 +1,11 @@
 // mppid-mapper: sensor frames (point_cloud_t) in, the local distance field (local_map_t) out.
-//   mppid-mapper [--config FILE] [--set key=value ...] [--lcm-url URL] [--channel-prefix P]
-//                [--stats FILE]
+//   mppid-mapper [--config FILE] [--set key=value ...] [--lcm-url URL] [--sensor-lcm-url URL]
+//                [--channel-prefix P]
+//                [--stats FILE] [--sensed FILE]
 #include <csignal>
 #include <cstdio>
 #include <exception>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -18,16 +20,18 @@ void on_signal(int) { g_stop = 1; }
 int usage(const char* why) {
   if (why != nullptr) std::fprintf(stderr, "mppid-mapper: %s\n", why);
   std::fprintf(stderr,
-               "usage: mppid-mapper [--config FILE] [--set key=value ...] [--lcm-url URL]\n"
-               "                    [--channel-prefix P] [--stats FILE]\n"
+               "usage: mppid-mapper [--config FILE] [--set key=value ...] [--lcm-url URL] [--sensor-lcm-url URL]\n"
+               "                    [--channel-prefix P] [--stats FILE] [--sensed FILE]\n"
                "  --config   settings (config/mapper/mapper.yaml: map.resolution, map.size, rate_hz, ...)\n"
+               "  --sensor-lcm-url  the sensors' frames on this bus (default: --lcm-url's, where the maps go)\n"
                "  --set      one setting, e.g. map.resolution=0.2, rate_hz=20, inputs=[MPPI_DEPTH]\n"
-               "  --stats    on exit, write frames, maps and update timings (JSON) there\n");
+               "  --stats    on exit, write frames, maps and update timings (JSON) there\n"
+               "  --sensed   append each map's newly occupied (x, y) columns there (JSON lines)\n");
   return 2;
 }
 
 struct Args {
-  std::string config, url, prefix, stats;
+  std::string config, url, sensor_url, prefix, stats, sensed;
   std::vector<std::string> sets;
 };
 
@@ -44,10 +48,14 @@ int parse(int argc, char** argv, Args* a) {
       a->sets.push_back(v);
     else if (k == "--lcm-url")
       a->url = v;
+    else if (k == "--sensor-lcm-url")
+      a->sensor_url = v;
     else if (k == "--channel-prefix")
       a->prefix = v;
     else if (k == "--stats")
       a->stats = v;
+    else if (k == "--sensed")
+      a->sensed = v;
     else
       return usage(("unknown argument " + k).c_str());
   }
@@ -65,12 +73,24 @@ int main(int argc, char** argv) {
     s.output = args.prefix + s.output;
     lcm::LCM lcm(args.url);
     if (!lcm.good()) throw std::runtime_error("LCM init failed for url '" + args.url + "'");
-    mapper::MapperNode node(s, &lcm);
+    std::unique_ptr<lcm::LCM> sensor_bus;
+    if (!args.sensor_url.empty()) {
+      sensor_bus = std::make_unique<lcm::LCM>(args.sensor_url);
+      if (!sensor_bus->good()) throw std::runtime_error("LCM init failed for url '" + args.sensor_url + "'");
+    }
+    mapper::MapperNode node(s, &lcm, sensor_bus ? sensor_bus.get() : &lcm);
+    std::FILE* sensed = nullptr;
+    if (!args.sensed.empty()) {
+      sensed = std::fopen(args.sensed.c_str(), "w");
+      if (sensed == nullptr) throw std::runtime_error("cannot write " + args.sensed);
+      node.record_sensed(sensed);
+    }
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
     std::fprintf(stderr, "mppid-mapper: %d x %d x %d cells of %g m -> %s at %g Hz\n", node.map().nx(), node.map().ny(),
                  node.map().nz(), node.map().resolution(), s.output.c_str(), s.rate_hz);
     node.run(&g_stop);
+    if (sensed != nullptr) std::fclose(sensed);
     const std::string stats = node.stats_json();
     std::fprintf(stderr, "mppid-mapper: %s\n", stats.c_str());
     if (!args.stats.empty()) {

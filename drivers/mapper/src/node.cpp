@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <set>
+#include <sys/select.h>
 #include <stdexcept>
 
 namespace mapper {
@@ -131,12 +132,15 @@ bool decode_cloud(const void* data, std::size_t size, mppi_lcm::point_cloud_t* m
   return m->decode(data, 0, static_cast<int>(size)) == static_cast<int>(size);
 }
 
-MapperNode::MapperNode(const NodeSettings& s, lcm::LCM* lcm) : s_(s), lcm_(lcm), map_(s.map) {
-  for (const auto& ch : s_.inputs) lcm_->subscribe(ch, &MapperNode::on_cloud, this);
+MapperNode::MapperNode(const NodeSettings& s, lcm::LCM* maps, lcm::LCM* sensors)
+    : s_(s), lcm_(maps), sensors_(sensors), map_(s.map) {
+  for (const auto& ch : s_.inputs) sensors_->subscribe(ch, &MapperNode::on_cloud, this);
   out_.n_cells = map_.cells();
   out_.distance_mm.reserve(static_cast<std::size_t>(map_.cells()));
   integrate_ms_.reserve(kTimingSamples);
   publish_ms_.reserve(kTimingSamples);
+  columns_seen_.reserve(1 << 16);
+  new_columns_.reserve(static_cast<std::size_t>(map_.nx()) * static_cast<std::size_t>(map_.ny()));
 }
 
 void MapperNode::on_cloud(const lcm::ReceiveBuffer* rb, const std::string&) {
@@ -197,6 +201,8 @@ void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
   }
   map_.end_frame();
   newest_utime_ = std::max(newest_utime_, m.utime);
+  if (first_utime_ < 0) first_utime_ = m.utime;
+  std::copy(m.position, m.position + 3, sensor_pos_);
   dirty_ = true;
   ++frames_;
   if (integrate_ms_.size() < integrate_ms_.capacity()) integrate_ms_.push_back(static_cast<float>(ms_since(t0)));
@@ -218,8 +224,39 @@ bool MapperNode::publish() {
   out_.n_cells = map_.cells();
   lcm_->publish(s_.output, &out_);
   dirty_ = false;
+  if (sensed_ != nullptr) write_new_columns();
   if (publish_ms_.size() < publish_ms_.capacity()) publish_ms_.push_back(static_cast<float>(ms_since(t0)));
   return true;
+}
+
+void MapperNode::write_new_columns() {
+  new_columns_.clear();
+  const int nx = map_.nx(), ny = map_.ny(), nz = map_.nz();
+  const auto& c = map_.corner();
+  for (int j = 0; j < ny; ++j) {
+    for (int i = 0; i < nx; ++i) {
+      bool occ = false;
+      for (int k = 0; k < nz && !occ; ++k) occ = map_.occupied(i + nx * (j + ny * k));
+      if (!occ) continue;
+      const auto key = static_cast<std::int64_t>((static_cast<std::uint64_t>(c[0] + i) << 32) |
+                                                 static_cast<std::uint32_t>(c[1] + j));
+      if (columns_seen_.insert(key).second) new_columns_.push_back(key);  // a new column: rare
+    }
+  }
+  if (new_columns_.empty()) return;
+  std::fprintf(sensed_, "{\"t\":%.3f,\"utime\":%lld,\"sensor\":[%.3f,%.3f,%.3f],\"columns\":[",
+               1e-6 * static_cast<double>(newest_utime_ - first_utime_), static_cast<long long>(newest_utime_),
+               static_cast<double>(sensor_pos_[0]), static_cast<double>(sensor_pos_[1]), static_cast<double>(sensor_pos_[2]));
+  const double r = map_.resolution();
+  for (std::size_t n = 0; n < new_columns_.size(); ++n) {
+    const std::int64_t key = new_columns_[n];
+    const auto u = static_cast<std::uint64_t>(key);
+    const auto x = static_cast<double>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u >> 32)));
+    const auto y = static_cast<double>(static_cast<std::int32_t>(static_cast<std::uint32_t>(u & 0xFFFFFFFFu)));
+    std::fprintf(sensed_, "%s[%.3f,%.3f]", n == 0 ? "" : ",", (x + 0.5) * r, (y + 0.5) * r);
+  }
+  std::fputs("]}\n", sensed_);
+  std::fflush(sensed_);
 }
 
 void MapperNode::run(const volatile std::sig_atomic_t* stop) {
@@ -227,7 +264,7 @@ void MapperNode::run(const volatile std::sig_atomic_t* stop) {
   auto next = Clock::now() + period;
   while (!*stop) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(next - Clock::now()).count();
-    if (left > 0) lcm_->handleTimeout(static_cast<int>(std::min<std::int64_t>(left, 100)));
+    if (left > 0) wait_and_handle(static_cast<int>(std::min<std::int64_t>(left, 100)));
     const auto now = Clock::now();
     if (now >= next) {
       publish();
@@ -235,6 +272,23 @@ void MapperNode::run(const volatile std::sig_atomic_t* stop) {
       if (next < now) next = now + period;  // fell behind: no burst of maps to catch up
     }
   }
+}
+
+// Waits up to timeout_ms for traffic on the sensor bus (and the map bus: drained, so its
+// socket buffer never fills with what others publish there); handles what came.
+int MapperNode::wait_and_handle(int timeout_ms) {
+  if (sensors_ == lcm_) return sensors_->handleTimeout(timeout_ms);
+  const int a = sensors_->getFileno(), b = lcm_->getFileno();
+  fd_set fds;
+  FD_ZERO(&fds);
+  FD_SET(a, &fds);
+  FD_SET(b, &fds);
+  timeval tv{timeout_ms / 1000, static_cast<suseconds_t>((timeout_ms % 1000) * 1000)};
+  const int r = select(std::max(a, b) + 1, &fds, nullptr, nullptr, &tv);
+  if (r <= 0) return r;
+  if (FD_ISSET(a, &fds)) sensors_->handle();
+  if (FD_ISSET(b, &fds)) lcm_->handle();
+  return r;
 }
 
 std::string MapperNode::stats_json() const {

@@ -32,6 +32,9 @@ struct Channels {
 struct RunOptions {
   bool lockstep = false;
   std::string lcm_url;  // empty: LCM's default
+  // The sensors' frames (point_cloud_t, up to megabytes a second) on a bus of their own, as a
+  // camera's driver would be: the controller's bus then carries none. Empty: lcm_url's.
+  std::string sensor_lcm_url;
   std::string out_dir = ".";
   Channels channels;
   bool quiet = false;

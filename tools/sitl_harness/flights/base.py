@@ -82,10 +82,13 @@ def lcm_logger() -> Path:
     return paths.VENV_BIN / "lcm-logger"
 
 
-def logger_command(spec: FlightSpec, out: Path) -> list[str]:
-    """lcm-logger recording the flight's bus into OUT/flight.lcmlog."""
-    return [str(lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
-            str(out / "flight.lcmlog")]
+def logger_command(spec: FlightSpec, out: Path, exclude: tuple[str, ...] = ()) -> list[str]:
+    """lcm-logger recording the flight's bus into OUT/flight.lcmlog, but the channels named in
+    `exclude` (LCM's channel patterns are PCRE: a negative look-ahead leaves them out)."""
+    cmd = [str(lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}"]
+    if exclude:
+        cmd.append("--channel=^(?!(" + "|".join(exclude) + ")$).*")
+    return cmd + [str(out / "flight.lcmlog")]
 
 
 def mppid_binary() -> Path:

@@ -5,6 +5,7 @@ the simulator's truth (score.py) and plotted (plots.py)."""
 from __future__ import annotations
 
 import json
+import re
 import sys
 import time
 from pathlib import Path
@@ -13,11 +14,60 @@ import yaml
 
 from .. import paths
 from ..sandbox import fifo_allowed
-from .base import (LOGGER_FIFO_PRIORITY, SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, logger_command,
-                   mppid_binary)
+from .base import (LOGGER_FIFO_PRIORITY, LOGGER_RECV_BUF, SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan,
+                   logger_command, mppid_binary)
 from .view import FlightView, view_sets
 
 INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (seconds under load)
+# What a sensed flight's log leaves out by default: the raw frames (a depth camera's are ~0.3 MB
+# at 30 Hz) and the maps (1 MB at 10 Hz: 300 MB a 30-s flight). mapper.log_maps: true keeps the
+# maps (tools/replay needs them); sensed.jsonl and mapper_stats.json say what was sensed.
+SENSOR_CHANNELS = ("MPPI_DEPTH", "MPPI_LIDAR")
+MAP_CHANNEL = "MPPI_LOCAL_MAP"
+
+
+def sensed(scen: dict) -> bool:
+    """The scenario has a sensor on (sensing.depth_camera or sensing.lidar, not enabled: false)."""
+    sensing = scen.get("sensing") or {}
+    return any(isinstance(sensing.get(k), dict) and sensing[k].get("enabled", True) for k in ("depth_camera", "lidar"))
+
+
+def sensor_bus(lcm_url: str) -> str:
+    """The sensors' own bus: the flight's URL on the next UDP port (each flight has its own
+    network namespace), so the controller's socket never receives the frames; a receive buffer
+    that holds a few of them (the kernel caps it at net.core.rmem_max)."""
+    m = re.match(r"^(udpm://[^:]+):(\d+)(\?.*)?$", lcm_url)
+    if m is None:
+        raise FlightError(f"cannot derive the sensor bus from the LCM URL {lcm_url}")
+    port = int(m.group(2))
+    port = port + 1 if port < 65535 else port - 1
+    query = (m.group(3) or "?ttl=0") + f"&recv_buf_size={LOGGER_RECV_BUF}"
+    return f"{m.group(1)}:{port}{query}"
+
+
+def mapper_command(spec: FlightSpec, scen: dict, out: Path) -> list[str]:
+    """mppid-mapper for a sensed flight: the scenario's mapper.config (default
+    config/mapper/mapper.yaml) and mapper.set overrides; its timings and what it sensed into OUT."""
+    exe = paths.find_binary("mppid-mapper")
+    if exe is None:
+        raise FlightError("mppid-mapper not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
+    mp = scen.get("mapper") or {}
+    cfg = paths.ROOT / mp.get("config", "config/mapper/mapper.yaml")
+    if not cfg.is_file():
+        raise FlightError(f"scenario {spec.scenario} names mapper config {cfg}, which does not exist")
+    cmd = [str(exe), "--config", str(cfg), "--lcm-url", f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+           "--sensor-lcm-url", sensor_bus(spec.lcm_url), "--stats", str(out / "mapper_stats.json"),
+           "--sensed", str(out / "sensed.jsonl")]
+    for kv in mp.get("set", []):
+        cmd += ["--set", str(kv)]
+    return cmd
+
+
+def log_exclusions(scen: dict) -> tuple[str, ...]:
+    if not sensed(scen):
+        return ()
+    keep_maps = bool((scen.get("mapper") or {}).get("log_maps", False))
+    return SENSOR_CHANNELS + (() if keep_maps else (MAP_CHANNEL,))
 
 
 def controller_config(spec: FlightSpec, scen: dict) -> Path:
@@ -56,10 +106,12 @@ def mppid_command(spec: FlightSpec, scen: dict, cfg: Path, fifo: bool) -> list[s
     return cmd
 
 
-def sim_command(spec: FlightSpec, scen_path: Path, out: Path, sim_bin: Path) -> list[str]:
+def sim_command(spec: FlightSpec, scen_path: Path, out: Path, sim_bin: Path, scen: dict | None = None) -> list[str]:
     lockstep = not spec.realtime
     cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", spec.lcm_url,
            "--out", str(out), "--lockstep" if lockstep else "--realtime"]
+    if scen is not None and sensed(scen):
+        cmd += ["--sensor-lcm-url", sensor_bus(spec.lcm_url)]
     if lockstep and spec.ideal:
         cmd.append("--ideal")
     elif lockstep and spec.latency is not None:
@@ -113,8 +165,13 @@ class SimFlight(Flight):
         else:
             ctrl = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url",
                     spec.lcm_url]
-        cmds = {"sim": sim_command(spec, scen_path, self.out, sim_bin), "controller": ctrl,
-                "logger": logger_command(spec, self.out)}
+        cmds = {"sim": sim_command(spec, scen_path, self.out, sim_bin, scen), "controller": ctrl,
+                "logger": logger_command(spec, self.out, log_exclusions(scen))}
+        if sensed(scen):
+            # The trees exist only in the simulator's world: mppid knows what the mapper makes
+            # of the sensors (docs/sensing.md). Normal policy: below the FIFO daemon, as a
+            # companion computer's perception would run.
+            cmds["mapper"] = mapper_command(spec, scen, self.out)
         if spec.params:
             cmds["inject"] = inject_command(spec)
         if fifo:
@@ -135,8 +192,12 @@ class SimFlight(Flight):
             self.view.start()
         sb.spawn("logger", cmds["logger"])
         sb.spawn("controller", cmds["controller"])
-        time.sleep(0.5)  # let both subscribe before the first state
-        for name in ("logger", "controller"):
+        if "mapper" in cmds:
+            sb.spawn("mapper", cmds["mapper"])
+        time.sleep(0.5)  # let them subscribe before the first state
+        for name in ("logger", "controller", "mapper"):
+            if name not in cmds:
+                continue
             if self.exited(name):
                 raise FlightError(f"{name} exited at start (rc={self.returncode(name)}); see {name}.log")
         if "inject" in cmds:
@@ -166,6 +227,9 @@ class SimFlight(Flight):
                 return "controller_died"
             if self.exited("logger"):
                 return "logger_died"
+            if "mapper" in plan.commands and self.exited("mapper"):
+                self.events.append(f"mapper exited rc={self.returncode('mapper')} at {now:.2f} s")
+                return "mapper_died"
             if now > plan.wall_timeout:
                 return "wall_timeout"
 

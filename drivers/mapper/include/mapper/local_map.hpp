@@ -72,6 +72,8 @@ class LocalMap {
   const MapSettings& settings() const { return s_; }
   // World position of cell (0, 0, 0)'s corner.
   std::array<double, 3> origin() const;
+  // The window's first cell in world cells (origin() / resolution).
+  const std::array<std::int64_t, 3>& corner() const { return corner_; }
   // Cell index of a world point, -1 outside.
   int index_of(const double* p) const;
   bool occupied(int index) const { return occ_[static_cast<std::size_t>(index)] > 0; }

@@ -9,7 +9,9 @@
 #include <lcm/lcm-cpp.hpp>
 #include <mppi_lcm/local_map_t.hpp>
 #include <mppi_lcm/point_cloud_t.hpp>
+#include <cstdio>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "mapper/local_map.hpp"
@@ -34,7 +36,9 @@ bool decode_cloud(const void* data, std::size_t size, mppi_lcm::point_cloud_t* m
 
 class MapperNode {
  public:
-  MapperNode(const NodeSettings& s, lcm::LCM* lcm);
+  // Frames from `sensors`, maps to `maps` (the same bus, or the sensors on one of their own).
+  MapperNode(const NodeSettings& s, lcm::LCM* maps, lcm::LCM* sensors);
+  MapperNode(const NodeSettings& s, lcm::LCM* lcm) : MapperNode(s, lcm, lcm) {}
   // Integrates one frame into the map (what the subscription calls).
   void integrate(const mppi_lcm::point_cloud_t& cloud);
   // Computes and publishes the map if a frame came since the last one; true if published.
@@ -44,13 +48,22 @@ class MapperNode {
   // {"frames":..., "maps":..., "integrate_ms":{p50,p99,max}, "publish_ms":{...}, ...}
   std::string stats_json() const;
   const LocalMap& map() const { return map_; }
+  // From now on, each map that holds occupied columns (x, y cells) never occupied before
+  // appends a JSON line to `f`: {"t" (s since the first frame), "utime", "sensor" (its
+  // position), "columns": [[x, y] world centres]}: what was sensed and when (the harness's
+  // score names each tree's first sighting from it).
+  void record_sensed(std::FILE* f) { sensed_ = f; }
 
  private:
   void on_cloud(const lcm::ReceiveBuffer* rb, const std::string& channel);
   void centre_on(const float* position);
+  void write_new_columns();
+
+  int wait_and_handle(int timeout_ms);
 
   NodeSettings s_;
   lcm::LCM* lcm_;
+  lcm::LCM* sensors_;
   LocalMap map_;
   mppi_lcm::point_cloud_t in_;
   mppi_lcm::local_map_t out_;
@@ -61,6 +74,11 @@ class MapperNode {
   double heading_[2] = {0, 0};  // unit horizontal direction of motion (lead)
   bool have_pos_ = false;
   std::vector<float> integrate_ms_, publish_ms_;  // reserved at start: no allocation per frame
+  std::FILE* sensed_ = nullptr;
+  std::unordered_set<std::int64_t> columns_seen_;  // world (x, y) cells ever occupied
+  std::vector<std::int64_t> new_columns_;
+  std::int64_t first_utime_ = -1;
+  float sensor_pos_[3] = {0, 0, 0};
 };
 
 }  // namespace mapper
