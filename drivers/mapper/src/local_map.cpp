@@ -76,7 +76,7 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
   out_.assign(total, 0.0f);
   in_.assign(total, 0.0f);
   const int longest = std::max({n_[0], n_[1], n_[2]});
-  line_f_.assign(static_cast<std::size_t>(longest), 0.0f);
+  block_.assign(static_cast<std::size_t>(n_[0]) * static_cast<std::size_t>(std::max(n_[1], n_[2])), 0.0f);
   line_d_.assign(static_cast<std::size_t>(longest), 0.0f);
   line_z_.assign(static_cast<std::size_t>(longest) + 1, 0.0f);
   line_v_.assign(static_cast<std::size_t>(longest), 0);
@@ -260,22 +260,39 @@ void LocalMap::walk(const double* d, const int* last, bool clear_end, std::uint1
   }
 }
 
-// The squared-distance transform along one axis, in place: lines of n cells `stride` apart;
-// `count` lines `line_stride` apart, times `lines_outer` groups `outer_stride` apart.
-void LocalMap::edt_pass(float* f, int n, int stride, int count, int line_stride, int lines_outer, int outer_stride) {
-  for (int o = 0; o < lines_outer; ++o) {
-    for (int l = 0; l < count; ++l) {
-      float* base = f + static_cast<std::ptrdiff_t>(o) * outer_stride + static_cast<std::ptrdiff_t>(l) * line_stride;
-      bool any_finite = false, any_nonzero = false;
-      for (int q = 0; q < n; ++q) {
-        const float v = base[static_cast<std::ptrdiff_t>(q) * stride];
-        line_f_[static_cast<std::size_t>(q)] = v;
-        any_finite = any_finite || v != kFar;
-        any_nonzero = any_nonzero || v != 0.0f;
-      }
-      if (!any_finite || !any_nonzero) continue;  // nothing to spread, or nothing to lower
-      edt_1d(line_f_.data(), n, line_d_.data(), line_v_.data(), line_z_.data());
-      for (int q = 0; q < n; ++q) base[static_cast<std::ptrdiff_t>(q) * stride] = line_d_[static_cast<std::size_t>(q)];
+// One line of the transform in place (n cells), unless it has nothing to spread (no finite
+// cell) or nothing to lower (all zero).
+void LocalMap::edt_line(float* line, int n) {
+  bool any_finite = false, any_nonzero = false;
+  for (int q = 0; q < n; ++q) {
+    any_finite = any_finite || line[q] != kFar;
+    any_nonzero = any_nonzero || line[q] != 0.0f;
+  }
+  if (!any_finite || !any_nonzero) return;
+  edt_1d(line, n, line_d_.data(), line_v_.data(), line_z_.data());
+  std::copy(line_d_.begin(), line_d_.begin() + n, line);
+}
+
+// The transform along y (axis 1) or z (axis 2), in place. For each plane across the axis the
+// nx lines are transposed into a block (rows read whole, x fastest: cache-friendly where a
+// line walked cell by cell would touch a cache line per cell), transformed, and written back.
+void LocalMap::edt_axis(float* f, int axis) {
+  const int nx = n_[0], ny = n_[1], nz = n_[2];
+  const int n = axis == 1 ? ny : nz;                          // cells per line
+  const std::ptrdiff_t step = axis == 1 ? nx : static_cast<std::ptrdiff_t>(nx) * ny;  // between them
+  const int planes = axis == 1 ? nz : ny;
+  const std::ptrdiff_t plane_step = axis == 1 ? static_cast<std::ptrdiff_t>(nx) * ny : nx;
+  float* block = block_.data();
+  for (int o = 0; o < planes; ++o) {
+    float* base = f + o * plane_step;
+    for (int q = 0; q < n; ++q) {
+      const float* row = base + q * step;
+      for (int i = 0; i < nx; ++i) block[static_cast<std::ptrdiff_t>(i) * n + q] = row[i];
+    }
+    for (int i = 0; i < nx; ++i) edt_line(block + static_cast<std::ptrdiff_t>(i) * n, n);
+    for (int q = 0; q < n; ++q) {
+      float* row = base + q * step;
+      for (int i = 0; i < nx; ++i) row[i] = block[static_cast<std::ptrdiff_t>(i) * n + q];
     }
   }
 }
@@ -297,9 +314,9 @@ void LocalMap::compute_distance(std::vector<std::int16_t>* out_mm) {
     return;
   }
   for (float* f : {out_.data(), in_.data()}) {
-    edt_pass(f, nx, 1, ny, nx, nz, nx * ny);        // along x: each (j, k) row
-    edt_pass(f, ny, nx, nx, 1, nz, nx * ny);        // along y: each (i, k)
-    edt_pass(f, nz, nx * ny, nx, 1, ny, nx);        // along z: each (i, j)
+    for (int r = 0; r < ny * nz; ++r) edt_line(f + static_cast<std::ptrdiff_t>(r) * nx, nx);  // along x
+    edt_axis(f, 1);
+    edt_axis(f, 2);
   }
   const double res = s_.resolution, maxd = s_.max_distance;
   for (std::size_t i = 0; i < total; ++i) {

@@ -86,7 +86,8 @@ class LocalMap {
   int cell_at(const double* p) const;
   void walk(const double* d, const int* last, bool clear_end, std::uint16_t weight);
   void touch(std::size_t u);
-  void edt_pass(float* f, int n, int stride, int count, int line_stride, int lines_outer, int outer_stride);
+  void edt_line(float* line, int n);
+  void edt_axis(float* f, int axis);
 
   MapSettings s_;
   std::array<int, 3> n_{};
@@ -100,7 +101,7 @@ class LocalMap {
   std::uint32_t frame_ = 0;
   double origin_[3] = {0, 0, 0};                    // this frame's sensor, in window cells
   std::vector<float> out_, in_;           // squared distances, cells^2
-  std::vector<float> line_f_, line_z_, line_d_;
+  std::vector<float> block_, line_z_, line_d_;
   std::vector<int> line_v_;
   Stats stats_;
 };
