@@ -98,3 +98,47 @@ def test_sensed_standin_flight_maps_the_forest_ahead(sim_binary, tmp_path):
         if f is not None:
             assert tree[0] > 0 and np.hypot(tree[0], tree[1]) - tree[2] < 10.5
             assert abs(np.degrees(np.arctan2(tree[1], tree[0]))) < 43.5 + 10
+
+
+class _Rec:
+    """What Scene logs, by entity (a stand-in for rerun's RecordingStream)."""
+
+    def __init__(self):
+        self.logged = {}
+
+    def set_time(self, *_a, **_k):
+        pass
+
+    def log(self, path, obj):
+        self.logged[path] = obj
+
+
+def test_view_draws_the_occupied_cells_near_the_vehicle_and_the_sensor_frames():
+    from mppi_lcm import local_map_t, point_cloud_t, vehicle_state_t
+    from mppid_view.scene import Scene, cloud_world, occupied_cells
+    m = local_map_t()
+    m.nx, m.ny, m.nz, m.resolution, m.origin = 4, 4, 8, 0.5, [10.0, 0.0, 0.0]
+    d = np.full((8, 4, 4), 1000, np.int16)
+    d[4, 1, 2] = -100     # z 2.25, x 11.25, y 0.75: near the vehicle's altitude
+    d[0, 0, 0] = 0        # z 0.25: far below it
+    m.n_cells = d.size
+    m.distance_mm = d.ravel().tolist()
+    assert np.allclose(occupied_cells(m, 2.0), [[11.25, 0.75, 2.25]])
+    assert len(occupied_cells(m, None)) == 2
+
+    c = point_cloud_t()
+    c.position, c.orientation = [1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0]  # yawed 180 deg
+    c.n, c.x, c.y, c.z, c.hit = 2, [4.0, 10.0], [1.0, 0.0], [0.0, 0.0], [1, 0]
+    o, p, hit = cloud_world(c)
+    assert np.allclose(o, [1, 2, 3]) and np.allclose(p, [[-3.0, 1.0, 3.0], [-9.0, 2.0, 3.0]]) and list(hit) == [1, 0]
+
+    rec = _Rec()
+    scene = Scene(rec)
+    s = vehicle_state_t()
+    s.model, s.vehicle_count, s.nx, s.n, s.sample_utime = 1, 1, 16, 16, 1
+    s.x = [0.0, 0.0, 2.0] + [0.0] * 13
+    scene.log("MPPI_STATE", s)
+    assert scene.log("MPPI_LOCAL_MAP", m) and scene.log("MPPI_DEPTH", c)
+    assert len(rec.logged["world/map/occupied"].centers) == 1
+    assert len(rec.logged["world/sensors/depth/points"].positions) == 1
+    assert len(rec.logged["world/sensors/depth/rays"].strips) == 2

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,6 +68,19 @@ def lcm_url_for_port(port: int) -> str:
     if not 1024 <= int(port) <= 65535:
         raise ValueError(f"LCM port {port} outside 1024-65535")
     return f"udpm://239.255.76.67:{int(port)}?ttl=0"
+
+
+def sensor_bus(lcm_url: str) -> str:
+    """The sensors' own bus: the flight's URL on the next UDP port (each flight has its own
+    network namespace), so the controller's socket never receives the frames; a receive buffer
+    that holds a few of them (the kernel caps it at net.core.rmem_max)."""
+    m = re.match(r"^(udpm://[^:]+):(\d+)(\?.*)?$", lcm_url)
+    if m is None:
+        raise ValueError(f"cannot derive the sensor bus from the LCM URL {lcm_url}")
+    port = int(m.group(2))
+    port = port + 1 if port < 65535 else port - 1
+    query = (m.group(3) or "?ttl=0") + f"&recv_buf_size={LOGGER_RECV_BUF}"
+    return f"{m.group(1)}:{port}{query}"
 
 
 def lcm_logger() -> Path:

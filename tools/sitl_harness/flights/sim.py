@@ -5,7 +5,6 @@ the simulator's truth (score.py) and plotted (plots.py)."""
 from __future__ import annotations
 
 import json
-import re
 import sys
 import time
 from pathlib import Path
@@ -15,7 +14,7 @@ import yaml
 from .. import paths
 from ..sandbox import fifo_allowed
 from .base import (LOGGER_FIFO_PRIORITY, LOGGER_RECV_BUF, SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan,
-                   logger_command, mppid_binary)
+                   logger_command, mppid_binary, sensor_bus)
 from .view import FlightView, view_sets
 
 INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (seconds under load)
@@ -30,19 +29,6 @@ def sensed(scen: dict) -> bool:
     """The scenario has a sensor on (sensing.depth_camera or sensing.lidar, not enabled: false)."""
     sensing = scen.get("sensing") or {}
     return any(isinstance(sensing.get(k), dict) and sensing[k].get("enabled", True) for k in ("depth_camera", "lidar"))
-
-
-def sensor_bus(lcm_url: str) -> str:
-    """The sensors' own bus: the flight's URL on the next UDP port (each flight has its own
-    network namespace), so the controller's socket never receives the frames; a receive buffer
-    that holds a few of them (the kernel caps it at net.core.rmem_max)."""
-    m = re.match(r"^(udpm://[^:]+):(\d+)(\?.*)?$", lcm_url)
-    if m is None:
-        raise FlightError(f"cannot derive the sensor bus from the LCM URL {lcm_url}")
-    port = int(m.group(2))
-    port = port + 1 if port < 65535 else port - 1
-    query = (m.group(3) or "?ttl=0") + f"&recv_buf_size={LOGGER_RECV_BUF}"
-    return f"{m.group(1)}:{port}{query}"
 
 
 def mapper_command(spec: FlightSpec, scen: dict, out: Path) -> list[str]:
