@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "mppi/app/config.hpp"
+#include "mppi/costs/field_of_cylinders.hpp"
 #include "mppi/cpu_backend.hpp"
 #include "mppi/offline/offline.hpp"
 #include "mppi/params.hpp"
@@ -83,6 +84,35 @@ void BM_ForestCost(benchmark::State& st) {
   benchmark::DoNotOptimize(crashed);
 }
 BENCHMARK(BM_ForestCost)->Arg(0)->Arg(16)->Arg(32)->Arg(64);
+
+// The same vehicle with the local map (costs/distance_field.hpp): the trees of BM_ForestCost/32
+// as the default map (0.2 m cells, 160 x 160 x 32 around the vehicle, 1.6 MB), alone (arg 0:
+// a sensed forest) or beside the 32 cylinders (arg 32). Positions walk through the map so the
+// corners come from memory, not from one cache line.
+void BM_ForestCostField(benchmark::State& st) {
+  ForestCost<Quadrotor>::Params p{};
+  ObstacleSet trees;
+  trees.count = 32;
+  for (int i = 0; i < trees.count; ++i)
+    trees.items[i] = Cylinder{4.0f + static_cast<float>(i), static_cast<float>(i % 5) - 2.0f, 0.4f, 0.0f, 0.0f};
+  if (st.range(0) > 0) p.obstacles = trees;
+  auto grid = std::make_unique<DistanceFieldGrid>();
+  const float origin[3] = {-16.0f, -16.0f, 0.0f};
+  fill_from_cylinders(trees, 8.0f, origin, 0.2f, 160, 160, 32, 6.0f, grid.get());
+  p.field = grid->view(1);
+  auto x = state_near_hover<Quadrotor>();
+  std::uint32_t crashed = 0, i = 0;
+  for (auto _ : st) {
+    x[Quadrotor::PX] = -15.0f + 0.37f * static_cast<float>(i % 80);
+    x[Quadrotor::PY] = -10.0f + 0.53f * static_cast<float>((i / 80) % 40);
+    ++i;
+    bool hit = false;
+    benchmark::DoNotOptimize(ForestCost<Quadrotor>::vehicle(p, 0, x.data(), 0.5f, &hit));
+    crashed |= hit;
+  }
+  benchmark::DoNotOptimize(crashed);
+}
+BENCHMARK(BM_ForestCostField)->Arg(0)->Arg(32);
 
 void BM_TrackingCost(benchmark::State& st) {
   TrackingCost<QuadrotorRate>::Params p{};
@@ -174,8 +204,13 @@ BENCHMARK(BM_ObstacleGridBuild)->Arg(48)->Arg(64)->Arg(200)->Arg(256)->Unit(benc
 
 // ---- The CPU backend's rollouts, per task and SIMD target ---------------------------------
 
+// What the forest cost knows in BM_Rollouts: the cylinders (as flown today), the same trees
+// only as the default local map (a sensed forest), or both.
+enum class Known { kCylinders, kField, kBoth };
+
 // K rollouts of T steps of a task from its settings file and offline scenario (forest tasks:
-// the 48 obstacles nearest the start, culled from the plan's path as the optimizer does).
+// the 48 obstacles nearest the start, culled from the plan's path as the optimizer does; with
+// a field, those trees, 8 m tall, as the default map: 0.2 m cells, 160 x 160 x 32 around the start).
 template <class T>
 struct RolloutBench {
   static constexpr int K = 256, kHorizon = 100;
@@ -185,8 +220,9 @@ struct RolloutBench {
   std::vector<float> x0, plan, cost, du, weights, path;
   std::vector<unsigned char> crashed;
   cpu::Batch<T> batch;
+  std::unique_ptr<DistanceFieldGrid> field;
 
-  explicit RolloutBench(const std::string& task) {
+  explicit RolloutBench(const std::string& task, Known known = Known::kCylinders) {
     auto cfg = app::load_config(app::default_config_path(task),
                                 {"mppi.rollouts=" + std::to_string(K), "mppi.horizon=" + std::to_string(kHorizon),
                                  "mppi.simd=off", "backend=cpu"});
@@ -204,6 +240,13 @@ struct RolloutBench {
       for (int j = 0; j < T::kVehicles; ++j)
         for (int d = 0; d < 3; ++d) params.cost.goal[j][d] = sc.inputs.goals[j][d];
       params.cost.obstacles = sc.inputs.obstacles;
+      if (known != Known::kCylinders) {
+        field = std::make_unique<DistanceFieldGrid>();
+        const float origin[3] = {sc.x0[0] - 16.0f, sc.x0[1] - 16.0f, 0.0f};
+        fill_from_cylinders(sc.inputs.obstacles, 8.0f, origin, 0.2f, 160, 160, 32, 6.0f, field.get());
+        params.cost.field = field->view(1);
+        if (known == Known::kField) params.cost.obstacles.count = 0;
+      }
     } else if constexpr (std::is_same_v<typename T::Cost, TrackingCost<typename T::Vehicle>>) {
       params.cost.reference = sc.inputs.reference;
     }
@@ -236,8 +279,8 @@ struct RolloutBench {
 };
 
 template <class T>
-void BM_Rollouts(benchmark::State& st, const std::string& task, simd::Target target) {
-  RolloutBench<T> b(task);
+void BM_Rollouts(benchmark::State& st, const std::string& task, simd::Target target, Known known) {
+  RolloutBench<T> b(task, known);
   const cpu::KernelOps<T> ops =
       target == simd::Target::kScalar ? cpu::kernel_ops<T, cpu::ScalarLanes>() : *cpu::kernels_for<T>(target);
   std::uint32_t cycle = 0;
@@ -261,9 +304,18 @@ void register_rollouts() {
     visit_task(name, [&](auto tag) {
       using T = typename decltype(tag)::type;
       for (simd::Target t : targets)
-        benchmark::RegisterBenchmark(("BM_Rollouts/" + name + "/" + simd::name(t)).c_str(), BM_Rollouts<T>, name, t)
+        benchmark::RegisterBenchmark(("BM_Rollouts/" + name + "/" + simd::name(t)).c_str(), BM_Rollouts<T>, name, t,
+                                     Known::kCylinders)
             ->Unit(benchmark::kMillisecond);
     });
+  }
+  // The forest with the local map: the sensed forest (the field alone) and both.
+  for (simd::Target t : targets) {
+    for (Known k : {Known::kField, Known::kBoth})
+      benchmark::RegisterBenchmark(("BM_Rollouts/quadrotor_forest+" + std::string(k == Known::kField ? "field" : "field+cylinders") +
+                                    "/" + simd::name(t)).c_str(),
+                                   BM_Rollouts<QuadrotorForest>, "quadrotor_forest", t, k)
+          ->Unit(benchmark::kMillisecond);
   }
 }
 

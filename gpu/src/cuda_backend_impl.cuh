@@ -17,6 +17,10 @@
 // path, which update() computes on the host with the layout (prepares_params(): the optimizer
 // skips its host build); mppi.cuda.grid: host searches the grid of the parameters given instead.
 // Every `mppi.cuda` setting leaves the plan the same (rollout costs bit for bit).
+// Forest tasks' distance field (costs/distance_field.hpp): the cells live in a device buffer of
+// DistanceField::kMaxCells, taken from the host only when the field's cells or stamp change (a
+// new map: one copy on the update's stream ahead of the graph), and the staged parameters point
+// at it; a cycle otherwise copies only the field's ~48 bytes with the parameters.
 #pragma once
 
 #include <cstdint>
@@ -112,6 +116,7 @@ class CudaBackend final : public RolloutBackend<T> {
     std::memcpy(static_cast<void*>(&in->params), &params, plan_.device_grid ? staged_param_bytes<T>() : sizeof(Params));
     std::memcpy(h_in_.as<unsigned char>() + align16(sizeof(Input<T>)), plan, plan_floats_ * sizeof(float));
     if (plan_.device_grid) plan_obstacle_grid(x0, params, plan);
+    stage_field(params, in);
     // Messages are built only on failure: update() allocates nothing.
     if (plan_.graph) {
       const cudaError_t e = cudaGraphLaunch(exec_.get(), stream_.get());
@@ -138,6 +143,29 @@ class CudaBackend final : public RolloutBackend<T> {
     }
   }
 
+  // The distance field's cells on the device (forest tasks): copied when the field the
+  // parameters point at is another, or stamped anew, before the update's graph on its stream;
+  // the staged parameters then point at the device's copy.
+  void stage_field(const Params& params, Input<T>* in) {
+    if constexpr (kForestTask<T>) {
+      const DistanceField& f = params.cost.field;
+      if (!f.present()) return;
+      if (f.cells != field_source_ || f.stamp != field_stamp_) {
+        const std::size_t cells = static_cast<std::size_t>(f.nx) * static_cast<std::size_t>(f.ny) * static_cast<std::size_t>(f.nz);
+        if (cells > static_cast<std::size_t>(DistanceField::kMaxCells))
+          throw std::runtime_error("cuda backend: a distance field of more than DistanceField::kMaxCells cells");
+        const cudaError_t e = cudaMemcpyAsync(d_field_.as<void>(), f.cells, cells * sizeof(std::int16_t),
+                                              cudaMemcpyHostToDevice, stream_.get());
+        if (e != cudaSuccess) fail(e, what("cudaMemcpyAsync of the distance field"));
+        field_source_ = f.cells;
+        field_stamp_ = f.stamp;
+      }
+      in->params.cost.field.cells = d_field_.as<const std::int16_t>();
+    } else {
+      (void)params, (void)in;
+    }
+  }
+
   std::vector<float> rollout_costs() const override {
     std::vector<float> out(static_cast<std::size_t>(k_));
     check(cudaMemcpy(out.data(), d_cost_.as<float>(), out.size() * sizeof(float), cudaMemcpyDeviceToHost),
@@ -158,7 +186,8 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t host_bytes() const override { return h_in_.bytes() + h_out_.bytes() + h_costs_.bytes(); }
   std::size_t device_bytes() const override {
     return d_cost_.bytes() + d_crashed_.bytes() + d_u_.bytes() + d_cc_.bytes() + d_pmin_.bytes() + d_part_.bytes() +
-           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes() + d_grid_lists_.bytes() + d_grid_counts_.bytes();
+           d_stats_part_.bytes() + d_in_.bytes() + d_out_.bytes() + d_grid_lists_.bytes() + d_grid_counts_.bytes() +
+           d_field_.bytes();
   }
 
  private:
@@ -246,6 +275,9 @@ class CudaBackend final : public RolloutBackend<T> {
       d_grid_lists_ = DeviceBuffer(kGridListBytes, "the obstacle grid's lists (every cell of every cell side tried)");
       d_grid_counts_ = DeviceBuffer(kGridCountBytes, "the obstacle grid's list lengths");
     }
+    if constexpr (kForestTask<T>)
+      d_field_ = DeviceBuffer(static_cast<std::size_t>(DistanceField::kMaxCells) * sizeof(std::int16_t),
+                              "the distance field's cells (DistanceField::kMaxCells int16)");
     out_bytes_ = align16(plan_floats_ * sizeof(float)) + sizeof(DeviceStats);
     d_in_ = DeviceBuffer(in_bytes_, "the per-cycle input");
     d_out_ = DeviceBuffer(out_bytes_, "the per-cycle output");
@@ -452,6 +484,9 @@ class CudaBackend final : public RolloutBackend<T> {
   std::size_t layout_offset_ = 0;  // of the grid's layout in the per-cycle input
   std::vector<float> path_;        // the plan's path, xy per step and vehicle
   DeviceBuffer d_grid_lists_, d_grid_counts_;
+  DeviceBuffer d_field_;                        // the distance field's cells (forest tasks)
+  const std::int16_t* field_source_ = nullptr;  // the host cells and stamp d_field_ holds
+  std::uint64_t field_stamp_ = 0;
   PinnedBuffer h_in_, h_out_, h_costs_;
   std::unique_ptr<CUstream_st, StreamDeleter> stream_;
   std::unique_ptr<CUgraph_st, GraphDeleter> graph_;

@@ -23,6 +23,7 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/controller.hpp"
+#include "mppi/costs/field_of_cylinders.hpp"
 #include "mppi/cpu_backend.hpp"
 #include "simd_probe.hpp"
 #include "task_cases.hpp"
@@ -231,6 +232,20 @@ void check_step(const char* name, simd::Target target, const testing::SimdProbe<
   EXPECT_GT(crash_lanes, 0) << name << ": no lane crashed: the crash terms went untested";
 }
 
+// The exact field of the scenario's trees (2.5 m tall) over their bounding box and the start,
+// 2 m around, from the ground up, in 0.25 m cells.
+void field_around(const TaskSetup& s, DistanceFieldGrid* grid) {
+  const ObstacleSet& obs = s.scenario.inputs.obstacles;
+  float lo[2] = {s.scenario.x0[0], s.scenario.x0[1]}, hi[2] = {lo[0], lo[1]};
+  for (int i = 0; i < obs.count; ++i) {
+    lo[0] = std::min(lo[0], obs.items[i].x), hi[0] = std::max(hi[0], obs.items[i].x);
+    lo[1] = std::min(lo[1], obs.items[i].y), hi[1] = std::max(hi[1], obs.items[i].y);
+  }
+  const float res = 0.25f, origin[3] = {lo[0] - 2.0f, lo[1] - 2.0f, 0.0f};
+  const int nx = static_cast<int>((hi[0] - lo[0] + 4.0f) / res) + 1, ny = static_cast<int>((hi[1] - lo[1] + 4.0f) / res) + 1;
+  ASSERT_TRUE(fill_from_cylinders(obs, 2.5f, origin, res, nx, ny, 16, 6.0f, grid)) << nx << " x " << ny;
+}
+
 TEST(SimdStep, EveryModelAndCostBitIdenticalWithLibmAndCloseWithHighway) {
   int checked = 0;
   for_each_task([&](auto named) {
@@ -263,8 +278,15 @@ TEST(SimdStep, EveryModelAndCostBitIdenticalWithLibmAndCloseWithHighway) {
       auto culled = p;
       culled.cost.obstacle_grid.build(culled.cost.obstacles, path.data(), 21, 1.0f, 4.0f, 1.0f);
       ASSERT_GT(culled.cost.obstacle_grid.nx, 0);
+      // And with a distance field (the same trees, 2.5 m tall, at 0.25 m) beside the
+      // cylinders: the lanes read it through their gathers, the scalar code cell by cell.
+      auto field = std::make_unique<DistanceFieldGrid>();
+      field_around(s, field.get());
+      auto sensed = culled;
+      sensed.cost.field = field->view(1);
       for_each_simd_target([&](auto target) {
         check_step<T>(named.name, target.value, *testing::simd_probe<T, target.value>(), s, culled);
+        check_step<T>(named.name, target.value, *testing::simd_probe<T, target.value>(), s, sensed);
         ++checked;
       });
     } else {

@@ -1,7 +1,7 @@
 // mppid-gpu-timing: time one full CUDA update (state and plan up, sample, roll out, weigh,
 // update, plan down) with steady_clock around RolloutBackend::update(), and print JSON.
 //   mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench]
-//                    [--set mppi.cuda.FIELD=VALUE]... CASE...
+//                    [--field none|both|only] [--map-every N] [--set mppi.cuda.FIELD=VALUE]... CASE...
 //   CASE = task:K[:T]
 // --set mppi.cuda.FIELD=VALUE: the backend's launch settings (mppi/gpu/cuda_settings.hpp, as a
 // task file's `mppi.cuda` section: kernel, chunk_steps, warps, noise, controls, lanes, grid,
@@ -10,6 +10,10 @@
 // GPU and this thread idle in between, instead of back to back: the tail an idle GPU adds.
 // --scene test (default): the parity tests' scenario (test/gpu/scenarios.hpp: 32 obstacles, the
 // obstacle grid built from the plan); --no-grid: every search scans all 32 cylinders.
+// --field both: the test scene's trees also as a distance field (scenarios.hpp add_field: 0.2 m
+// cells, 180 x 120 x 24, 1.0 MB) beside the cylinders; only: the field without the cylinders
+// (a sensed forest); --map-every N: a new map (a new stamp: the cells copied to the device
+// again) every N updates, as a 10 Hz mapper gives a 50 Hz loop at N = 5 (default 0: one map).
 // --scene bench: mppid-bench's (the task file's settings, the offline forest with the 32
 // obstacles nearest the start, the plan after 20 cycles of the controller): the update alone
 // where mppid-bench times the whole Controller::iterate, so the two can be compared.
@@ -23,6 +27,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <exception>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -49,8 +54,8 @@ struct Result {
 // Updates of `backend` from x0 with params, the plan starting from plan0 (and put back every 50
 // updates: the problem stays stationary).
 template <class T>
-Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, const typename T::Params& params,
-                    const std::vector<float>& plan0, int iters, int warmup, int period_us) {
+Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, typename T::Params params,
+                    const std::vector<float>& plan0, int iters, int warmup, int period_us, int map_every = 0) {
   std::vector<float> plan = plan0;
   mppi::UpdateStats stats;
   std::vector<double> us;
@@ -58,6 +63,9 @@ Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, const typ
   auto release = std::chrono::steady_clock::now();
   for (int n = 0; n < warmup + iters; ++n) {
     if (n % 50 == 0) plan = plan0;
+    if constexpr (T::kUsesPath) {
+      if (map_every > 0 && n % map_every == 0) ++params.cost.field.stamp;
+    }
     if (period_us > 0) {
       release += std::chrono::microseconds(period_us);
       std::this_thread::sleep_until(release);
@@ -84,15 +92,18 @@ Result time_updates(mppi::RolloutBackend<T>& backend, const float* x0, const typ
 
 // The parity tests' scenario.
 template <class T>
-Result time_test_scene(int k, int t, const mppi::CudaSettings& cuda, int iters, int warmup, bool grid, int period_us) {
+Result time_test_scene(int k, int t, const mppi::CudaSettings& cuda, int iters, int warmup, bool grid, int period_us,
+                       const std::string& field, int map_every) {
   auto sc = mppi::gpu_test::make_scenario<T>(k, t);
   auto backend = mppi::make_cuda_backend<T>(sc.settings, cuda);
   const auto plan = mppi::gpu_test::initial_plan(sc.settings);
+  auto cells = std::make_unique<mppi::DistanceFieldGrid>();
   if constexpr (T::kUsesPath) {
+    if (field != "none") mppi::gpu_test::add_field(sc, cells.get(), field == "both");
     if (grid) mppi::gpu_test::prepare(sc, plan);  // the host's obstacle grid (unless built on the device)
     else sc.params.cost.obstacle_reach = 0.0f;    // no grid on either side: every search scans the set
   }
-  return time_updates<T>(*backend, sc.x0.data(), sc.params, plan, iters, warmup, period_us);
+  return time_updates<T>(*backend, sc.x0.data(), sc.params, plan, iters, warmup, period_us, map_every);
 }
 
 // mppid-bench's scene, through the controller mppid-bench times.
@@ -122,8 +133,9 @@ Result time_bench_scene(const std::string& task, int k, int t, const std::vector
 namespace {
 
 struct Options {
-  int iters = 1000, warmup = 50, period_us = 0;
+  int iters = 1000, warmup = 50, period_us = 0, map_every = 0;
   bool grid = true;
+  std::string field = "none";
   std::string scene = "test";
   std::vector<std::string> sets;  // "mppi.cuda.FIELD=VALUE"
   YAML::Node cuda{YAML::NodeType::Map};  // the same as the mppi.cuda section
@@ -139,10 +151,12 @@ int parse(int argc, char** argv, Options* o) {
     else if (arg == "--no-grid") o->grid = false;
     else if (arg == "--period-us" && a + 1 < argc) o->period_us = std::atoi(argv[++a]);
     else if (arg == "--scene" && a + 1 < argc) o->scene = argv[++a];
+    else if (arg == "--field" && a + 1 < argc) o->field = argv[++a];
+    else if (arg == "--map-every" && a + 1 < argc) o->map_every = std::atoi(argv[++a]);
     else if (arg == "--set" && a + 1 < argc) o->sets.push_back(argv[++a]);
     else if (arg == "--help" || arg == "-h") {
       std::printf("usage: mppid-gpu-timing [--iters N] [--warmup N] [--no-grid] [--period-us P] [--scene test|bench] "
-                  "[--set mppi.cuda.FIELD=VALUE]... task:K[:T]...\n");
+                  "[--field none|both|only] [--map-every N] [--set mppi.cuda.FIELD=VALUE]... task:K[:T]...\n");
       return -1;
     } else o->cases.push_back(arg);
   }
@@ -150,6 +164,10 @@ int parse(int argc, char** argv, Options* o) {
   if (o->iters < 1) o->iters = 1;
   if (o->scene != "test" && o->scene != "bench") {
     std::fprintf(stderr, "mppid-gpu-timing: --scene: test or bench, got %s\n", o->scene.c_str());
+    return 2;
+  }
+  if (o->field != "none" && o->field != "both" && o->field != "only") {
+    std::fprintf(stderr, "mppid-gpu-timing: --field: none, both or only, got %s\n", o->field.c_str());
     return 2;
   }
   const std::string prefix = "mppi.cuda.";
@@ -186,9 +204,9 @@ int main(int argc, char** argv) {
   const std::time_t now = std::time(nullptr);
   std::strftime(date, sizeof date, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&now));
   std::printf("{\n  \"device\": \"%s\",\n  \"date\": \"%s\",\n  \"cuda_graph\": %s,\n  \"iterations\": %d,\n"
-              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"scene\": \"%s\",\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"cuda\": \"%s\",\n  \"results\": [",
+              "  \"warmup\": %d,\n  \"period_us\": %d,\n  \"scene\": \"%s\",\n  \"obstacles\": 32,\n  \"obstacle_grid\": %s,\n  \"field\": \"%s\",\n  \"map_every\": %d,\n  \"cuda\": \"%s\",\n  \"results\": [",
               mppi::cuda_device_name().c_str(), date, asked.graph ? "true" : "false", o.iters, o.warmup, o.period_us,
-              o.scene.c_str(), o.grid ? "true" : "false", mppi::describe(asked).c_str());
+              o.scene.c_str(), o.grid ? "true" : "false", o.field.c_str(), o.map_every, mppi::describe(asked).c_str());
   bool first = true;
   int status = 0;
   for (const auto& c : o.cases) {
@@ -204,7 +222,7 @@ int main(int argc, char** argv) {
         r = o.scene == "bench"
                 ? time_bench_scene<T>(name, k, t, o.sets, o.iters, o.warmup, o.period_us)
                 : time_test_scene<T>(k, t, mppi::app::read_cuda_settings(o.cuda, name), o.iters, o.warmup, o.grid,
-                                     o.period_us);
+                                     o.period_us, o.field, o.map_every);
         r.task = name;
         r.k = k;
         r.t = t;

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mppi/costs/field_of_cylinders.hpp"
 #include "mppi/gpu/cuda_settings.hpp"
 #include "mppi/settings.hpp"
 #include "mppi/tasks.hpp"
@@ -229,6 +230,19 @@ void prepare(Scenario<T>& sc, const std::vector<float>& plan) {
   std::vector<float> path(static_cast<std::size_t>(sc.settings.horizon + 1) * T::kVehicles * 2);
   T::prepare(sc.params, sc.x0.data(), plan.data(), sc.settings.horizon, sc.settings.dt, sc.settings.substeps,
              path.data());
+}
+
+// A sensed forest: the scenario's trees as a distance field (3 m tall, so rollouts that climb
+// past 3 m fly over them; 0.2 m cells over x [-4, 32] m, |y| <= 12 m, z [0, 4.8] m: 180 x 120 x
+// 24 cells, 1.0 MB), in *grid (which must outlive the scenario's use), stamped `stamp`. With
+// cylinders_too the cylinders stay beside it (each is then both known and sensed); without,
+// the cost knows only the field.
+template <class T>
+void add_field(Scenario<T>& sc, DistanceFieldGrid* grid, bool cylinders_too, std::uint64_t stamp = 1) {
+  const float origin[3] = {-4.0f, -12.0f, 0.0f};
+  fill_from_cylinders(sc.params.cost.obstacles, 3.0f, origin, 0.2f, 180, 120, 24, 6.0f, grid);
+  sc.params.cost.field = grid->view(stamp);
+  if (!cylinders_too) sc.params.cost.obstacles.count = 0;
 }
 
 }  // namespace mppi::gpu_test

@@ -262,6 +262,79 @@ TEST(CudaParity, ObstacleGridEveryKernel) {
   for (int lanes : {1, 2}) check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, lane kernel", lanes_of(lanes));
 }
 
+// The distance field (a sensed map, costs/distance_field.hpp) on every kernel: alone (the
+// cost knows only the field) and beside the cylinders with the obstacle grid; the lane kernel
+// at one and four lanes a rollout, the teams' kernels, the host's grid and no graph.
+template <class T>
+void check_parity_with_field(const char* name, bool cylinders_too, const CudaSettings& cuda = {}) {
+  auto grid = std::make_unique<DistanceFieldGrid>();
+  check_parity<T>(name, Weighting::kCostToGo, [&grid, cylinders_too, cuda](gpu_test::Scenario<T>& sc) {
+    sc.cuda = cuda;
+    gpu_test::add_field(sc, grid.get(), cylinders_too);
+    if (cylinders_too) gpu_test::prepare(sc, gpu_test::initial_plan(sc.settings));
+  });
+}
+
+TEST(CudaParity, DistanceFieldEveryKernel) {
+  SKIP_WITHOUT_CUDA();
+  check_parity_with_field<QuadrotorForest>("quadrotor_forest+field", false);
+  check_parity_with_field<QuadrotorForest>("quadrotor_forest+field+cylinders", true);
+  check_parity_with_field<RateQuadrotorForest>("quadrotor_rate_forest+field", false);
+  check_parity_with_field<Team3Forest>("team3_forest+field+cylinders", true);
+  check_parity_with_field<Team9Forest>("team9_forest+field", false);
+  for (int lanes : {1, 4})
+    check_parity_with_field<QuadrotorForest>("quadrotor_forest+field+cylinders, lane kernel", true, lanes_of(lanes));
+  CudaSettings host;
+  host.grid = CudaSettings::Grid::kHost;
+  host.graph = false;
+  check_parity_with_field<QuadrotorForest>("quadrotor_forest+field+cylinders, host grid, no graph", true, host);
+}
+
+// The device's copy of the cells follows the field: a new map (other cells, a new stamp)
+// between two updates of one backend is what the next update costs, and the field's costs
+// are not the cylinders' (the test would pass on a backend that ignored the field otherwise).
+TEST(CudaParity, DistanceFieldFollowsANewMap) {
+  SKIP_WITHOUT_CUDA();
+  auto sc = gpu_test::make_scenario<QuadrotorForest>(4096, 100);
+  sc.settings.seed = 42;
+  MppiSettings scalar = sc.settings;
+  scalar.simd = "off";
+  CpuBackend<QuadrotorForest> cpu(scalar);
+  auto gpu = make_cuda_backend<QuadrotorForest>(sc.settings, sc.cuda);
+  auto plan = gpu_test::initial_plan(sc.settings);
+  const std::vector<float> start = plan;
+  std::vector<float> cylinder_costs;
+  {
+    std::vector<float> p = start;
+    UpdateStats st;
+    cpu.update(sc.x0.data(), sc.params, 0, p.data(), &st);
+    cylinder_costs = cpu.rollout_costs();
+  }
+  auto a = std::make_unique<DistanceFieldGrid>();
+  gpu_test::add_field(sc, a.get(), false, 1);
+  Errors e = compare_one_update(sc, cpu, *gpu, 0, &plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "first map";
+  int differ = 0;
+  const auto field_costs = cpu.rollout_costs();
+  for (std::size_t k = 0; k < field_costs.size(); ++k) differ += field_costs[k] != cylinder_costs[k];
+  EXPECT_GT(differ, static_cast<int>(field_costs.size()) / 2) << "the field should change the costs";
+  // Another forest, into another grid: the backend must take the new cells.
+  auto b = std::make_unique<DistanceFieldGrid>();
+  sc.params.cost.obstacles = gpu_test::forest(32, 99u);
+  gpu_test::add_field(sc, b.get(), false, 2);
+  plan = start;
+  e = compare_one_update(sc, cpu, *gpu, 1, &plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "second map";
+  // The same grid refilled in place with the first forest under a new stamp.
+  sc.params.cost.obstacles = gpu_test::forest(32);
+  gpu_test::add_field(sc, b.get(), false, 3);
+  plan = start;
+  e = compare_one_update(sc, cpu, *gpu, 2, &plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * sc.settings.rollouts) << "refilled map";
+  std::printf("[parity] distance field follows new maps: %d of %zu rollouts bit-identical on the last\n", e.identical,
+              field_costs.size());
+}
+
 // The launch switches of mppi.cuda: the update launched stream by stream (no graph), plain
 // launches (no PDL), the host's obstacle grid: the same costs and plan.
 TEST(CudaParity, LaunchSwitches) {

@@ -29,6 +29,7 @@ struct TaskInputs {
   Reference reference;
   float reference_time = 0.0f;  // reference time at the state's sample time, s
   ObstacleSet obstacles;
+  DistanceField field;  // the local map (a view; none by default): the forest costs' field
 };
 
 class Controller {
@@ -158,6 +159,7 @@ void apply_task_inputs(typename T::Params& params, const TaskInputs& in) {
     for (int j = 0; j < T::kVehicles; ++j)
       for (int d = 0; d < 3; ++d) params.cost.goal[j][d] = in.goals[j][d];
     params.cost.obstacles = in.obstacles;
+    params.cost.field = in.field;
   } else if constexpr (std::is_same_v<Cost, TrackingCost<typename T::Vehicle>>) {
     params.cost.reference = in.reference;
     params.cost.time0 = in.reference_time;

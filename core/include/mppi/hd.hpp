@@ -6,7 +6,7 @@
 // SIMD batch of samples on the CPU (mppi/simd/lanes.hpp: the same operations, lane-wise).
 // Code written for V uses only what both provide:
 //   arithmetic + - * / (a float operand converts to V), comparisons giving a mask_t<V>,
-//   fsin fcos fsincos fexp flog fsqrt fatan fatan2 ftan fabs_ fmin_ fmax_ fclamp fsq,
+//   fsin fcos fsincos fexp flog fsqrt fatan fatan2 ftan fabs_ fmin_ fmax_ fclamp fsq ffloor,
 //   select(mask, a, b), mask_and/mask_or/mask_not, any_of/all_of.
 // A branch on a per-sample value becomes a select of both results (`q = select(hit, q + w, q)`
 // is `if (hit) q += w;` exactly); a branch on a parameter stays a branch. For float, a mask
@@ -42,6 +42,7 @@ MPPI_HD float fmin_(float a, float b) { return a < b ? a : b; }
 MPPI_HD float fmax_(float a, float b) { return a > b ? a : b; }
 MPPI_HD float fclamp(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 MPPI_HD float fsq(float a) { return a * a; }
+MPPI_HD float ffloor(float a) { return ::floorf(a); }
 MPPI_HD bool ffinite(float a) { return a == a && a - a == 0.0f; }
 // Sine and cosine of one argument. On the device one range reduction serves both (CUDA's
 // sincosf gives exactly sinf's and cosf's results); on the host the two C library calls.
@@ -69,6 +70,7 @@ MPPI_HD double fmin_(double a, double b) { return a < b ? a : b; }
 MPPI_HD double fmax_(double a, double b) { return a > b ? a : b; }
 MPPI_HD double fclamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 MPPI_HD double fsq(double a) { return a * a; }
+MPPI_HD double ffloor(double a) { return ::floor(a); }
 MPPI_HD bool ffinite(double a) { return a == a && a - a == 0.0; }
 MPPI_HD double select(bool m, double a, double b) { return m ? a : b; }
 MPPI_HD void fsincos(double a, double* s, double* c) {

@@ -324,7 +324,9 @@ void ControlLoop::apply_between_cycles() {
   const bool new_state = in_->state.update();
   const bool new_ref = in_->reference.update();
   const bool new_obs = in_->obstacles.update();
-  if (new_state || new_ref || new_obs) update_inputs(in_->state.front(), new_ref, new_obs);
+  const bool new_map = in_->map != nullptr && in_->map->update();
+  if (new_state || new_ref || new_obs || new_map) update_inputs(in_->state.front(), new_ref, new_obs, new_map);
+  note_map_age();
 }
 
 }  // namespace mppi::daemon

@@ -135,6 +135,13 @@ void parse_channels(const YAML::Node& c, transport::LcmChannels* ch) {
   ch->param_result = text(c, "param_result", ch->param_result, p);
   ch->clock = text(c, "clock", ch->clock, p);
   ch->rollouts = text(c, "rollouts", ch->rollouts, p);
+  ch->local_map = text(c, "local_map", ch->local_map, p);
+}
+
+// The local map (local_map_t): taken or not, and when the one in use is stale.
+void parse_map(const YAML::Node& m, DaemonSettings* d) {
+  d->local_map = flag(m, "enabled", d->local_map, "map.");
+  d->loop.map_timeout_ns = std::llround(number(m, "timeout_ms", 500.0, 1.0, 60000.0, "map.") * 1e6);
 }
 
 // The rollout fan on the wire (RolloutPublisher): off unless hz > 0.
@@ -231,6 +238,8 @@ transport::Inbox::Expect inbox_expects(const DaemonSettings& ds, const Controlle
   e.restart_after_ns = ds.loop.state_timeout_ns;
   e.tick_on_state = ds.loop.lockstep && ds.lockstep_trigger == "state";
   e.wake_on_state = !ds.loop.lockstep && ds.loop.trigger == Trigger::kState;
+  e.local_map = ds.local_map;
+  e.map_timeout_ns = ds.loop.map_timeout_ns;
   return e;
 }
 
@@ -254,6 +263,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.loop.deadline_guard = true;
   d.loop.anytime_margin_ns = 3 * rt::kNsPerMs;
   d.expect_model = state_model_for(task);
+  d.local_map = task.find("forest") != std::string::npos;
   if (!section || section.IsNull()) return d;
   if (!section.IsMap()) throw ConfigError("daemon: expected a map");
   check_known(section, "",
@@ -261,7 +271,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
                "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts",
-               "spin", "identification"});
+               "spin", "identification", "map"});
   parse_timing(section, &d.loop);
   parse_triggers(section, &d);
   d.spin = flag(section, "spin", d.spin);
@@ -270,7 +280,8 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.warmup_iterations = static_cast<int>(number(section, "warmup_iterations", d.warmup_iterations, 0, 1000));
   if (const YAML::Node f = section["failsafe_u"]) parse_failsafe_u(f, nu, &d.loop.failsafe_u);
   if (const YAML::Node c = subsection(section, "channels", {"state", "command", "status", "plan", "reference",
-                                                            "obstacles", "params", "param_result", "clock", "rollouts"}))
+                                                            "obstacles", "params", "param_result", "clock", "rollouts",
+                                                            "local_map"}))
     parse_channels(c, &d.channels);
   // The default ceiling of the expected latency is one period: a cycle that needs longer
   // misses its deadline anyway (and the deadline guard covers it).
@@ -291,6 +302,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
     parse_rollouts(n, d.loop.rate_hz, &d.loop.rollouts);
   if (const YAML::Node r = subsection(section, "realtime", {"priority", "cpu", "lock_memory"}))
     parse_realtime(r, &d.realtime);
+  if (const YAML::Node m = subsection(section, "map", {"enabled", "timeout_ms"})) parse_map(m, &d);
   return d;
 }
 

@@ -61,6 +61,11 @@ void ControlLoop::maybe_status(bool force) {
   status_.rejected_undecodable = ld(ic.rejected_undecodable) + ld(ic.rejected_shape) + ld(ic.rejected_inputs);
   status_.rejected_params = ld(counters_.params_rejected) + ld(ic.params_dropped);
   status_.rejected_future = ld(counters_.future_states);
+  status_.maps_accepted = ld(ic.maps);
+  status_.maps_rejected = ic.maps_rejected();
+  const std::int64_t map_age_us = ld(counters_.map_age_us);
+  status_.map_age_ms = map_age_us < 0 ? -1.0f : static_cast<float>(static_cast<double>(map_age_us) * 1e-3);
+  status_.map_stale_cycles = ld(counters_.map_stale_cycles);
   status_.partial_updates = ld(counters_.partial_updates);
   status_.anytime_holds = ld(counters_.anytime_holds);
   status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);

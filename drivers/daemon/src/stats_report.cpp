@@ -56,6 +56,12 @@ std::string text_stats(const RunFacts& f, const ControlLoop& loop, const transpo
       " (ticks rejected={})\n",
       v(in.states), v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
       v(in.rejected_time), v(in.rejected_undecodable), v(in.rejected_inputs), v(in.ticks_rejected));
+  if (v(in.maps) + in.maps_rejected() > 0)
+    out += fmt::format("  maps accepted={} rejected: invalid={} out_of_order={} stale={} time={} undecodable={};"
+                       " cycles with a stale map={}\n",
+                       v(in.maps), v(in.maps_rejected_invalid), v(in.maps_rejected_out_of_order),
+                       v(in.maps_rejected_stale), v(in.maps_rejected_time), v(in.maps_undecodable),
+                       v(c.map_stale_cycles));
   out += fmt::format("  params applied={} rejected={} dropped={}  status={} plans={}\n", v(c.params_applied),
                      v(c.params_rejected), v(in.params_dropped), v(c.status_published), v(c.plans_published));
   out += fmt::format("  rss start={} kB end={} kB\n", f.rss_start_kb, f.rss_end_kb);
@@ -87,13 +93,14 @@ std::string json_stats(const RunFacts& f, const ControlLoop& loop, const transpo
       "\"states\":{},\"rejected_nan\":{},\"rejected_duplicate\":{},\"rejected_out_of_order\":{},"
       "\"rejected_shape\":{},\"rejected_time\":{},\"rejected_undecodable\":{},\"params_applied\":{},"
       "\"params_rejected\":{},\"held_without_goal\":{},\"trigger\":\"{}\",\"state_triggered\":{},\"clock_triggered\":{},"
-      "\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
+      "\"maps\":{},\"maps_rejected\":{},\"map_stale_cycles\":{},\"rss_start_kb\":{},\"rss_end_kb\":{}}}\n",
       v(c.commands_normal), v(c.commands_hold), v(c.commands_failsafe), v(c.commands_blocked),
       v(c.optimizer_nonfinite), v(c.optimizer_errors), v(c.late_holds), v(c.stale_cycles),
       v(c.guard_takeovers), v(c.guard_commands), v(c.partial_updates), v(c.anytime_holds), v(in.states),
       v(in.rejected_nan), v(in.rejected_duplicate), v(in.rejected_out_of_order), v(in.rejected_shape),
       v(in.rejected_time), v(in.rejected_undecodable), v(c.params_applied), v(c.params_rejected),
-      v(c.holds_without_goal), loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), f.rss_start_kb, f.rss_end_kb);
+      v(c.holds_without_goal), loop.settings().trigger == Trigger::kState ? "state" : "clock", v(c.state_triggered), v(c.clock_triggered), v(in.maps), in.maps_rejected(), v(c.map_stale_cycles),
+      f.rss_start_kb, f.rss_end_kb);
   return out;
 }
 }  // namespace

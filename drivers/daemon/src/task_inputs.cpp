@@ -1,5 +1,5 @@
 // ControlLoop: the task's inputs from what arrived between cycles: the reference and the
-// goals, the hold in place before any, and the obstacles nearest the vehicles.
+// goals, the hold in place before any, the obstacles nearest the vehicles and the local map.
 #include <algorithm>
 #include <cmath>
 
@@ -7,7 +7,8 @@
 
 namespace mppi::daemon {
 
-void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed) {
+void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed,
+                                bool map_changed) {
   if (reference_changed) {
     const transport::ReferenceInput& r = in_->reference.front();
     Reference& ref = inputs_.reference;
@@ -38,11 +39,28 @@ void ControlLoop::update_inputs(const transport::StateSample& x, bool reference_
     std::copy_n(o.items, o.count, obstacles_all_.items);
     have_obstacles_ = true;
   }
+  if (map_changed) {
+    // The cost reads the inbox's front map in place: it stays put until the next update()
+    // of the slot, here, between cycles (no copy of its cells; a new stamp for the GPU's).
+    const transport::LocalMapInput& m = in_->map->front();
+    inputs_.field = m.grid.view(++map_stamp_);
+    map_utime_ = m.utime;
+    have_map_ = true;
+  }
   if (!have_reference_ && !holding_ && in_->state.writes() > 0) hold_where_the_state_is(x);
   if (have_obstacles_) select_obstacles(x);
   if (have_reference_ && in_->state.writes() > 0)
     inputs_.reference_time = static_cast<float>(static_cast<double>(x.sample_utime - reference_t0_utime_) * 1e-6);
-  if (have_reference_ || have_obstacles_ || holding_) c_->set_inputs(inputs_);
+  if (have_reference_ || have_obstacles_ || holding_ || have_map_) c_->set_inputs(inputs_);
+}
+
+// The age of the map in use against the newest state's sample time; past map_timeout_ns the
+// cost keeps the map and the cycle counts as flown with a stale one.
+void ControlLoop::note_map_age() {
+  if (!have_map_ || in_->state.writes() == 0) return;
+  const std::int64_t age_us = in_->state.front().sample_utime - map_utime_;
+  counters_.map_age_us.store(age_us, std::memory_order_relaxed);
+  if (age_us * 1000 > s_.map_timeout_ns) counters_.map_stale_cycles.fetch_add(1, std::memory_order_relaxed);
 }
 
 // Before the first goal or reference: every vehicle's goal (and a tracking task's held

@@ -1,5 +1,6 @@
 #include "mppi/transport/inbox.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 
@@ -45,6 +46,7 @@ Reject Inbox::offer_state() {
       return reject(counters.rejected_out_of_order, Reject::kOutOfOrder);
   }
   have_last_ = true;
+  last_sample_utime_ = std::max(last_sample_utime_, s.sample_utime);
   last_seq_ = s.seq;
   last_recv_ns_ = s.recv_ns;
   state.publish();
@@ -83,6 +85,35 @@ void Inbox::offer_obstacles() {
   }
   if (!ok) return count_bad_input();
   obstacles.publish();
+}
+
+// A map replaces the last whole: its grid must be one the cost can read, its seq and utime
+// after the last map's (a seq that steps back is a publisher restart after a quiet
+// restart_after_ns, as for states), and it must not be older than map_timeout_ns behind the
+// newest state. A rejected map leaves the last good one in place.
+Reject Inbox::offer_map() {
+  if (!map) return Reject::kShape;
+  const LocalMapInput& m = map->back();
+  auto reject = [](std::atomic<std::int64_t>& c, Reject r) {
+    c.fetch_add(1, std::memory_order_relaxed);
+    return r;
+  };
+  if (m.grid.invalid() != nullptr) return reject(counters.maps_rejected_invalid, Reject::kShape);
+  if (m.utime < 0 || m.utime > kMaxUtime) return reject(counters.maps_rejected_time, Reject::kTime);
+  if (have_map_) {
+    const bool restart = m.recv_ns - last_map_recv_ns_ >= expect_.restart_after_ns;
+    if (!restart && (m.seq <= last_map_seq_ || m.utime < last_map_utime_))
+      return reject(counters.maps_rejected_out_of_order, Reject::kOutOfOrder);
+  }
+  if (last_sample_utime_ >= 0 && (last_sample_utime_ - m.utime) * 1000 > expect_.map_timeout_ns)
+    return reject(counters.maps_rejected_stale, Reject::kTime);
+  have_map_ = true;
+  last_map_seq_ = m.seq;
+  last_map_utime_ = m.utime;
+  last_map_recv_ns_ = m.recv_ns;
+  map->publish();
+  counters.maps.fetch_add(1, std::memory_order_relaxed);
+  return Reject::kNone;
 }
 
 void Inbox::offer_param(const ParamUpdate& p) {

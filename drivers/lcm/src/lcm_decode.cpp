@@ -79,6 +79,12 @@ bool decode_message(const void* data, std::size_t size, mppi_lcm::param_update_t
 
 bool decode_message(const void* data, std::size_t size, mppi_lcm::sim_clock_t* m) { return run(m, data, size); }
 
+bool decode_message(const void* data, std::size_t size, mppi_lcm::local_map_t* m) {
+  std::int64_t n = 0;
+  return read_be(data, size, wire::kLocalMapCount, 4, &n) && n <= DistanceField::kMaxCells &&
+         backed(n, sizeof(std::int16_t), wire::kLocalMapCount + 4, size) && run(m, data, size);
+}
+
 }  // namespace mppi::transport
 
 namespace mppi::transport {
@@ -86,6 +92,7 @@ namespace mppi::transport {
 LcmDecoder::LcmDecoder(rt::Clock* recv_clock) : recv_clock_(recv_clock) {
   state_in_.x.reserve(kMaxStates);
   obstacles_in_.cylinders.reserve(kMaxObstaclesIn);
+  map_in_.distance_mm.reserve(DistanceField::kMaxCells);  // virtual until a map arrives
   reference_in_.goals.reserve(kMaxVehicles);
 }
 
@@ -142,6 +149,32 @@ void LcmDecoder::obstacles(const void* data, std::size_t size, Inbox* inbox) {
     o.items[i] = Cylinder{c.x, c.y, c.radius, c.vx, c.vy};
   }
   inbox->offer_obstacles();
+}
+
+void LcmDecoder::local_map(const void* data, std::size_t size, Inbox* inbox) {
+  LocalMapInput* out = inbox->map_buffer();
+  if (out == nullptr) return;
+  const std::int64_t now = recv_clock_->now_ns();
+  if (!decode_message(data, size, &map_in_)) {
+    // A map too large to take is a valid message the daemon refuses, not garbage.
+    std::int64_t n = 0;
+    if (read_be(data, size, wire::kLocalMapCount, 4, &n) && n > DistanceField::kMaxCells) return inbox->count_invalid_map();
+    return inbox->count_undecodable_map();
+  }
+  const auto& m = map_in_;
+  out->utime = m.utime;
+  out->seq = m.seq;
+  out->recv_ns = now;
+  DistanceFieldGrid& g = out->grid;
+  std::copy_n(m.origin, 3, g.origin);
+  g.resolution = m.resolution;
+  g.nx = m.nx;
+  g.ny = m.ny;
+  g.nz = m.nz;
+  g.max_distance = m.max_distance;
+  g.n_cells = m.n_cells;
+  std::copy(m.distance_mm.begin(), m.distance_mm.end(), g.distance_mm);  // n_cells <= kMaxCells (decode)
+  inbox->offer_map();
 }
 
 void LcmDecoder::param(const void* data, std::size_t size, Inbox* inbox) {

@@ -64,6 +64,7 @@ void LcmTransport::start(Inbox* inbox) {
   lcm_.subscribe(ch_.obstacles, &LcmTransport::on_obstacles, this);
   lcm_.subscribe(ch_.params, &LcmTransport::on_param, this);
   lcm_.subscribe(ch_.clock, &LcmTransport::on_clock, this);
+  if (inbox->map) lcm_.subscribe(ch_.local_map, &LcmTransport::on_local_map, this);
   running_ = true;
   thread_ = std::thread([this] {
     if (receive_fifo_ > 0) {
@@ -89,6 +90,10 @@ void LcmTransport::on_state(const lcm::ReceiveBuffer* rb, const std::string&) {
 void LcmTransport::on_reference(const lcm::ReceiveBuffer* rb, const std::string&) {
   decoder_.reference(rb->data, rb->data_size, inbox_);
 }
+void LcmTransport::on_local_map(const lcm::ReceiveBuffer* rb, const std::string&) {
+  decoder_.local_map(rb->data, rb->data_size, inbox_);
+}
+
 void LcmTransport::on_obstacles(const lcm::ReceiveBuffer* rb, const std::string&) {
   decoder_.obstacles(rb->data, rb->data_size, inbox_);
 }
@@ -163,6 +168,10 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.rejected_undecodable = s.rejected_undecodable;
   m.rejected_params = s.rejected_params;
   m.rejected_future = s.rejected_future;
+  m.maps_accepted = s.maps_accepted;
+  m.maps_rejected = s.maps_rejected;
+  m.map_age_ms = s.map_age_ms;
+  m.map_stale_cycles = s.map_stale_cycles;
   m.healthy = s.healthy ? 1 : 0;
   return send(ch_.status, m);
 }

@@ -20,8 +20,15 @@
 // is then bounded (2 w_xy r per metre), so w_xy can be large enough to hold each vehicle of a
 // team on its own goal near the end without flinging it off the start line 40 m away at
 // top speed. The terminal term uses the same shape.
+//
+// The sensed obstacles (issue 30): with a distance field (costs/distance_field.hpp: a mapper's
+// local map) in `field`, d is the nearer of the cylinders' surface and the field's
+// interpolated distance at the vehicle's position (3-D: the field knows the trees' height),
+// and the obstacle and crash terms read that d. Without a field (field.cells null) nothing
+// changes: the known-cylinder cost, bit for bit.
 #pragma once
 
+#include "mppi/costs/distance_field.hpp"
 #include "mppi/costs/obstacles.hpp"
 #include "mppi/hd.hpp"
 
@@ -56,6 +63,9 @@ struct ForestCost {
     // a rollout leaving the grid searches every obstacle. obstacle_reach 0: no grid.
     float obstacle_reach = 8.0f;    // m
     float obstacle_cell = 1.0f;     // m
+    // The local distance field (a view: the cells live with whoever set it, e.g. the
+    // daemon's inbox); none by default. Before the obstacles: the kernels stage it.
+    DistanceField field;
     ObstacleSet obstacles;
     ObstacleGrid obstacle_grid;     // rebuilt each cycle by prepare()
   };
@@ -67,17 +77,20 @@ struct ForestCost {
     return vehicle_at_distance(p, j, x, p.obstacle_grid.nearest_surface(p.obstacles, pos[0], pos[1], t), crash);
   }
 
-  // Every term of vehicle() given d, the distance to the nearest obstacle surface: a
-  // backend may search the obstacles its own way (the CUDA one splits them over lanes).
+  // Every term of vehicle() given d_cylinders, the distance to the nearest cylinder's
+  // surface: a backend may search the cylinders its own way (the CUDA one splits them over
+  // lanes). The distance field, when there is one, is read here, so every backend's search
+  // feeds the one formula.
   template <class V>
-  MPPI_HD static V vehicle_at_distance(const Params& p, int j, const V* x, const V& d, mask_t<V>* crash) {
+  MPPI_HD static V vehicle_at_distance(const Params& p, int j, const V* x, const V& d_cylinders, mask_t<V>* crash) {
     V pos[3];
     Vehicle::position(x, pos);
+    const V d = p.field.present() ? fmin_(d_cylinders, p.field.distance(pos[0], pos[1], pos[2])) : d_cylinders;
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
     V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
           p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[Vehicle::VX]) + fsq(x[Vehicle::VY]) + fsq(x[Vehicle::VZ]));
-    if (p.obstacles.count > 0) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
+    if (p.obstacles.count > 0 || p.field.present()) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     if (p.w_floor > 0.0f) {
       const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[Vehicle::VZ], V(0.0f));
       const V below = fmax_(V(p.floor_z) - z_ahead, V(0.0f));

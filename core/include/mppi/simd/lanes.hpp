@@ -122,6 +122,7 @@ struct LaneF {
   friend LaneF fsq(LaneF a) { return a * a; }
   friend LaneF fabs_(LaneF a) { return LaneF(hn::Abs(a.v)); }
   friend LaneF fsqrt(LaneF a) { return LaneF(hn::Sqrt(a.v)); }
+  friend LaneF ffloor(LaneF a) { return LaneF(hn::Floor(a.v)); }
   friend LaneF fsin(LaneF a) { return LaneF(Math::sin(a.v)); }
   friend LaneF fcos(LaneF a) { return LaneF(Math::cos(a.v)); }
   friend LaneF fexp(LaneF a) { return LaneF(Math::exp(a.v)); }
@@ -135,6 +136,20 @@ struct LaneF {
     const DI di;
     const auto c = hn::Add(hn::ConvertTo(di, fx.v), hn::Mul(hn::Set(di, nx), hn::ConvertTo(di, fy.v)));
     hn::StoreU(c, di, out);
+  }
+
+  // Distance-field corners (costs/distance_field.hpp): per lane, cells[index + offsets[k]]
+  // and the cell after it as floats in out[2k], out[2k + 1]. The two cells are one 32-bit
+  // word (little-endian: the first in the low half), so a pair is one gather at a byte offset.
+  friend void gather_cell_pairs(const std::int16_t* cells, LaneF index, const int* offsets, int n, LaneF* out) {
+    const DI di;
+    const auto bytes = hn::ShiftLeft<1>(hn::ConvertTo(di, index.v));
+    const auto* words = reinterpret_cast<const std::int32_t*>(cells);  // read through the gather only
+    for (int k = 0; k < n; ++k) {
+      const auto w = hn::GatherOffset(di, words, hn::Add(bytes, hn::Set(di, 2 * offsets[k])));
+      out[2 * k] = LaneF(hn::ConvertTo(DF(), hn::ShiftRight<16>(hn::ShiftLeft<16>(w))));
+      out[2 * k + 1] = LaneF(hn::ConvertTo(DF(), hn::ShiftRight<16>(w)));
+    }
   }
 };
 

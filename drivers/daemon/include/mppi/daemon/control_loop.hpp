@@ -98,6 +98,11 @@ struct LoopSettings {
   std::int64_t anytime_margin_ns = 0;
   // A display sample of the rollouts on their own channel (tools/view); off by default.
   FanSettings rollouts;
+  // The local map (local_map_t, forest tasks; the inbox takes it): a map older than this behind
+  // the newest state is stale. Arriving, it is refused; in use (no newer one came), the cost
+  // keeps it and its cycles are counted (map_stale_cycles): the trees it holds are still
+  // there, while a map dropped would leave the cost blind to them (docs/sensing-cost.md).
+  std::int64_t map_timeout_ns = 500 * rt::kNsPerMs;
 };
 
 class ControlLoop {
@@ -226,7 +231,8 @@ class ControlLoop {
   void restart_estimates();  // daemon.restart_estimates
 
   // The task inputs (task_inputs.cpp): reference, goals and the nearest obstacles.
-  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed);
+  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed, bool map_changed);
+  void note_map_age();
   void hold_where_the_state_is(const transport::StateSample& x);
   void select_obstacles(const transport::StateSample& x);
 
@@ -280,6 +286,9 @@ class ControlLoop {
   bool have_reference_ = false;
   bool holding_ = false;  // goals set from the first state (no goal or reference yet)
   bool have_obstacles_ = false;
+  bool have_map_ = false;           // inputs_.field points at the inbox's front map
+  std::uint64_t map_stamp_ = 0;     // +1 per map taken (the CUDA backend's copy follows it)
+  std::int64_t map_utime_ = 0;      // the map in use
 
   PlanTimeline plan_;           // the held plan, the warm start and when their step 0 acts
   std::vector<float> u_;        // this cycle's command

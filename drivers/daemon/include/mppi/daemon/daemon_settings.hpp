@@ -26,6 +26,9 @@ struct DaemonSettings {
   int warmup_iterations = 3;
   std::int8_t expect_model = 0;  // vehicle_state_t::MODEL_*, from the task
   LiveSettings live;             // live optimizer updates (mppi.* at run time)
+  // daemon.map.enabled: the inbox takes local_map_t on channels.local_map (default: forest
+  // tasks); the timeout is loop.map_timeout_ns (daemon.map.timeout_ms).
+  bool local_map = false;
 };
 
 // Reads `section` (may be null: all defaults) for a controller with nu controls of task

@@ -36,6 +36,8 @@ struct LoopCounters {
   std::atomic<std::int64_t> clock_triggered{0};   // trigger state: cycles started without one (grace ran out)
   std::atomic<std::int64_t> holds_without_goal{0};  // no goal or reference yet: held where the first state was
   std::atomic<std::int64_t> actuation_delay_ns{0};  // the actuation delay flown with (estimated, when on)
+  std::atomic<std::int64_t> map_stale_cycles{0};    // cycles flown with a map older than map_timeout_ns
+  std::atomic<std::int64_t> map_age_us{-1};         // the age of the map flown at the last cycle (-1: none)
 };
 
 }  // namespace mppi::daemon

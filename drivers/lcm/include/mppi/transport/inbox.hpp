@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 
 #include "mppi/rt/latest_value.hpp"
 #include "mppi/rt/spsc_ring.hpp"
@@ -35,6 +36,18 @@ struct InboxCounters {
   std::atomic<std::int64_t> ticks{0};
   std::atomic<std::int64_t> ticks_dropped{0};   // queue full
   std::atomic<std::int64_t> ticks_rejected{0};  // sim time outside [0, kMaxUtime]
+  // Local maps (local_map_t): taken, and rejected by reason.
+  std::atomic<std::int64_t> maps{0};
+  std::atomic<std::int64_t> maps_rejected_invalid{0};       // shape, non-finite, capacity (DistanceFieldGrid::invalid)
+  std::atomic<std::int64_t> maps_rejected_out_of_order{0};  // seq or utime not after the last map's
+  std::atomic<std::int64_t> maps_rejected_stale{0};         // older than map_timeout_ns behind the newest state
+  std::atomic<std::int64_t> maps_rejected_time{0};          // utime outside [0, kMaxUtime]
+  std::atomic<std::int64_t> maps_undecodable{0};            // garbage bytes, a count the bytes do not back
+  std::int64_t maps_rejected() const {
+    return maps_rejected_invalid.load(std::memory_order_relaxed) + maps_rejected_out_of_order.load(std::memory_order_relaxed) +
+           maps_rejected_stale.load(std::memory_order_relaxed) + maps_rejected_time.load(std::memory_order_relaxed) +
+           maps_undecodable.load(std::memory_order_relaxed);
+  }
 };
 
 class Inbox {
@@ -48,9 +61,15 @@ class Inbox {
     std::int64_t restart_after_ns = 100'000'000;
     bool tick_on_state = false;  // lock-step: each accepted state is also a tick
     bool wake_on_state = false;  // real time, state-triggered: post state_wake per accepted state
+    // Local maps (local_map_t) are taken (the slot, three maps of 2 MiB, allocated here).
+    // One whose utime is more than map_timeout_ns behind the newest state's sample time on
+    // arrival is refused as stale.
+    bool local_map = false;
+    std::int64_t map_timeout_ns = 500'000'000;
   };
 
-  explicit Inbox(const Expect& e) : expect_(e) {}
+  explicit Inbox(const Expect& e)
+      : map(e.local_map ? std::make_unique<rt::LatestValue<LocalMapInput>>() : nullptr), expect_(e) {}
 
   // ---- receive-thread side --------------------------------------------------------
   // Fill state_buffer(), then offer_state() validates it and hands it to the loop.
@@ -60,6 +79,11 @@ class Inbox {
   void offer_reference();
   ObstacleInput& obstacles_buffer() { return obstacles.back(); }
   void offer_obstacles();
+  // Null when no map is expected. Fill it, then offer_map() validates it and hands it over.
+  LocalMapInput* map_buffer() { return map ? &map->back() : nullptr; }
+  Reject offer_map();
+  void count_undecodable_map() { counters.maps_undecodable.fetch_add(1, std::memory_order_relaxed); }
+  void count_invalid_map() { counters.maps_rejected_invalid.fetch_add(1, std::memory_order_relaxed); }
   void offer_param(const ParamUpdate& p);
   void offer_tick(const ClockTick& t);
   void count_undecodable() { counters.rejected_undecodable.fetch_add(1, std::memory_order_relaxed); }
@@ -69,6 +93,9 @@ class Inbox {
   rt::LatestValue<StateSample> state;
   rt::LatestValue<ReferenceInput> reference;
   rt::LatestValue<ObstacleInput> obstacles;
+  // The newest valid map (null unless Expect::local_map). The loop's front() stays put until
+  // its next update(), so the cost may point at its cells for a whole cycle.
+  std::unique_ptr<rt::LatestValue<LocalMapInput>> map;
   rt::SpscRing<ParamUpdate, 64> params;
   rt::SpscRing<ClockTick, 256> ticks;
   rt::Wakeup wake;        // posted once per tick (lock-step)
@@ -85,6 +112,9 @@ class Inbox {
   std::int64_t last_seq_ = -1;  // receive thread only
   std::int64_t last_recv_ns_ = 0;
   bool have_last_ = false;
+  std::int64_t last_sample_utime_ = -1;  // the newest accepted state's (receive thread)
+  std::int64_t last_map_seq_ = -1, last_map_utime_ = -1, last_map_recv_ns_ = 0;  // receive thread
+  bool have_map_ = false;
   std::atomic<std::int64_t> last_state_recv_ns_{INT64_MIN};
 };
 

@@ -20,6 +20,7 @@
 #include "mppi/rt/clock.hpp"
 #include "mppi/transport/inbox.hpp"
 #include "mppi_lcm/command_t.hpp"
+#include "mppi_lcm/local_map_t.hpp"
 #include "mppi_lcm/obstacles_t.hpp"
 #include "mppi_lcm/param_update_t.hpp"
 #include "mppi_lcm/reference_t.hpp"
@@ -34,6 +35,9 @@ bool decode_message(const void* data, std::size_t size, mppi_lcm::obstacles_t* m
 bool decode_message(const void* data, std::size_t size, mppi_lcm::param_update_t* m);
 bool decode_message(const void* data, std::size_t size, mppi_lcm::sim_clock_t* m);
 bool decode_message(const void* data, std::size_t size, mppi_lcm::command_t* m);
+// local_map_t: also false when n_cells exceeds DistanceField::kMaxCells (the decoder's
+// scratch is reserved for that many; a larger map is never decoded).
+bool decode_message(const void* data, std::size_t size, mppi_lcm::local_map_t* m);
 
 // Where each message's count sits in its encoding (8-byte fingerprint included) and how
 // many bytes one counted element takes; test_lcm_decode.cpp checks them against the
@@ -46,6 +50,7 @@ constexpr std::size_t kCylinderBytes = 5 * 4;
 constexpr std::size_t kReferenceCount = 8 + 8 + 8 + 1 + 12 + 4 + 4 + 4 + 8;  // int16, then 3 floats each
 constexpr std::size_t kReferenceTail = 3 * 4;  // after the goals: ramp_s, phase, end_s
 constexpr std::size_t kParamKeyLength = 8 + 8 + 8;  // int32 length including the NUL, then bytes
+constexpr std::size_t kLocalMapCount = 8 + 8 + 8 + 12 + 4 + 4 + 4 + 4 + 4;  // int32 n_cells, then n_cells int16
 }  // namespace wire
 
 // One channel's bytes -> the inbox, which validates them (Inbox::offer_*). Undecodable
@@ -59,6 +64,8 @@ class LcmDecoder {
   void obstacles(const void* data, std::size_t size, Inbox* inbox);
   void param(const void* data, std::size_t size, Inbox* inbox);
   void clock(const void* data, std::size_t size, Inbox* inbox);
+  // Into inbox->map_buffer() (nothing when the inbox takes no maps).
+  void local_map(const void* data, std::size_t size, Inbox* inbox);
 
  private:
   rt::Clock* recv_clock_;
@@ -67,6 +74,7 @@ class LcmDecoder {
   mppi_lcm::obstacles_t obstacles_in_;
   mppi_lcm::param_update_t param_in_;
   mppi_lcm::sim_clock_t clock_in_;
+  mppi_lcm::local_map_t map_in_;
 };
 
 }  // namespace mppi::transport

@@ -38,6 +38,7 @@ struct LcmChannels {
   std::string param_result = "MPPI_PARAM_RESULT";
   std::string clock = "MPPI_SIM_CLOCK";
   std::string rollouts = "MPPI_ROLLOUTS";
+  std::string local_map = "MPPI_LOCAL_MAP";  // local_map_t in (forest tasks)
 };
 
 class LcmTransport final : public Transport {
@@ -76,6 +77,7 @@ class LcmTransport final : public Transport {
   void on_obstacles(const lcm::ReceiveBuffer* rb, const std::string& channel);
   void on_param(const lcm::ReceiveBuffer* rb, const std::string& channel);
   void on_clock(const lcm::ReceiveBuffer* rb, const std::string& channel);
+  void on_local_map(const lcm::ReceiveBuffer* rb, const std::string& channel);
   template <class Msg>
   bool send(const std::string& channel, const Msg& msg);
 

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <string>
 
+#include "mppi/costs/distance_field.hpp"
 #include "mppi/costs/obstacles.hpp"
 
 namespace mppi::transport {
@@ -64,6 +65,15 @@ struct ObstacleInput {
   std::int64_t utime = 0;
   std::int32_t count = 0;
   Cylinder items[kMaxObstaclesIn];
+};
+
+// A local map (local_map_t): the distance field's cells at their fixed capacity (2 MiB:
+// allocate once, never on the stack; the inbox holds three, Inbox::Expect::local_map).
+struct LocalMapInput {
+  std::int64_t utime = 0;  // newest sensor data in it [us, the states' clock]
+  std::int64_t seq = -1;
+  std::int64_t recv_ns = 0;  // our CLOCK_MONOTONIC at receipt
+  DistanceFieldGrid grid;
 };
 
 struct ParamUpdate {
@@ -124,6 +134,10 @@ struct StatusReport {
   float ess = 0, min_cost = 0;
   std::int64_t rejected_nan = 0, rejected_stale = 0, rejected_out_of_order = 0, rejected_undecodable = 0,
                rejected_params = 0, rejected_future = 0;
+  // The local map (controller_status_t): taken, rejected (any reason), the age of the one
+  // flown [ms] (-1: none), cycles flown with one older than daemon.map.timeout_ms.
+  std::int64_t maps_accepted = 0, maps_rejected = 0, map_stale_cycles = 0;
+  float map_age_ms = -1.0f;
   bool healthy = false;
 };
 
