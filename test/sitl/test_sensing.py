@@ -31,6 +31,10 @@ def test_sensed_flight_starts_the_mapper_and_logs_no_frames(tmp_path):
     assert mapper[mapper.index("--sensed") + 1] == str(tmp_path / "sensed.jsonl")
     sim = cmds["sim"]
     assert sim[sim.index("--sensor-lcm-url") + 1] == bus
+    flown = SimFlight(FlightSpec(scenario="forest_4m_sensed", out=tmp_path, realtime=True)).plan().commands
+    if paths.find_binary("mppid") is not None:  # the controller takes the 1 MB maps: a buffer for them
+        ctrl = flown["controller"]
+        assert ctrl[ctrl.index("--lcm-url") + 1] == spec.lcm_url + "&recv_buf_size=4194304"
     logger = cmds["logger"]
     assert "--channel=^(?!(MPPI_DEPTH|MPPI_LIDAR|MPPI_LOCAL_MAP)$).*" in logger
     # The known-map forest: no mapper, no sensor bus, everything logged.

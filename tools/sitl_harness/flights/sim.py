@@ -69,7 +69,9 @@ def controller_config(spec: FlightSpec, scen: dict) -> Path:
 def mppid_command(spec: FlightSpec, scen: dict, cfg: Path, fifo: bool) -> list[str]:
     """mppid (or its DDP baseline) for a flight of the scenario `scen`."""
     lockstep = not spec.realtime
-    cmd = [str(mppid_binary()), "--config", str(cfg), "--lcm-url", spec.lcm_url]
+    # A sensed flight's maps are 1 MB (local_map_t): a socket buffer that holds a few of them.
+    url = f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}" if sensed(scen) else spec.lcm_url
+    cmd = [str(mppid_binary()), "--config", str(cfg), "--lcm-url", url]
     # As the systemd unit runs it (SCHED_FIFO, locked memory; it runs on with a
     # warning where the OS refuses), in lock-step too: there its measured latency is
     # what the simulator charges, and it must be the service's, not a busy machine's.
