@@ -74,12 +74,25 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
   ends_.reserve(total);
   frame_cells_.reserve(total);
   out_.assign(total, 0.0f);
-  in_.assign(total, 0.0f);
   const int longest = std::max({n_[0], n_[1], n_[2]});
   block_.assign(static_cast<std::size_t>(n_[0]) * static_cast<std::size_t>(std::max(n_[1], n_[2])), 0.0f);
   line_d_.assign(static_cast<std::size_t>(longest), 0.0f);
   line_z_.assign(static_cast<std::size_t>(longest) + 1, 0.0f);
   line_v_.assign(static_cast<std::size_t>(longest), 0);
+  // mm of a squared distance of d2 cells^2 between centres (less half a cell), to saturation.
+  const double res = s.resolution, maxd = s.max_distance;
+  for (int d2 = 0;; ++d2) {
+    const double m = std::min(maxd, std::max(0.0, (std::sqrt(static_cast<double>(d2)) - 0.5) * res));
+    mm_of_d2_.push_back(static_cast<std::int16_t>(std::lround(1000.0 * m)));
+    if (m >= maxd && d2 >= kInsideRadius * kInsideRadius) break;
+  }
+  for (int z = -kInsideRadius; z <= kInsideRadius; ++z)
+    for (int y = -kInsideRadius; y <= kInsideRadius; ++y)
+      for (int x = -kInsideRadius; x <= kInsideRadius; ++x)
+        if (x * x + y * y + z * z <= kInsideRadius * kInsideRadius && (x | y | z) != 0)
+          inside_offsets_.push_back({x, y, z, x * x + y * y + z * z});
+  std::stable_sort(inside_offsets_.begin(), inside_offsets_.end(),
+                   [](const auto& a, const auto& b) { return a[3] < b[3]; });
   const double zero[3] = {0.0, 0.0, 0.0};
   for (int i = 0; i < 3; ++i) corner_[static_cast<std::size_t>(i)] = -n_[static_cast<std::size_t>(i)] / 2;
   recentre(zero);
@@ -297,6 +310,18 @@ void LocalMap::edt_axis(float* f, int axis) {
   }
 }
 
+// Inside an obstacle: the distance to the nearest free cell, searched over the offsets within
+// kInsideRadius cells nearest first (trunks are a few cells across: most occupied cells have a
+// free neighbour at the first offset tried); deeper cells read the radius.
+int LocalMap::inside_d2(int x, int y, int z) const {
+  for (const auto& o : inside_offsets_) {
+    const int a = x + o[0], b = y + o[1], c = z + o[2];
+    if (a < 0 || b < 0 || c < 0 || a >= n_[0] || b >= n_[1] || c >= n_[2]) continue;
+    if (occ_[static_cast<std::size_t>(a + n_[0] * (b + n_[1] * c))] <= 0) return o[3];
+  }
+  return kInsideRadius * kInsideRadius;
+}
+
 void LocalMap::compute_distance(std::vector<std::int16_t>* out_mm) {
   const int nx = n_[0], ny = n_[1], nz = n_[2];
   const std::size_t total = occ_.size();
@@ -306,27 +331,28 @@ void LocalMap::compute_distance(std::vector<std::int16_t>* out_mm) {
     const bool occ = occ_[i] > 0;
     any = any || occ;
     out_[i] = occ ? 0.0f : kFar;
-    in_[i] = occ ? kFar : 0.0f;
   }
-  const auto sat = static_cast<std::int16_t>(std::lround(1000.0 * s_.max_distance));
+  const std::int16_t sat = mm_of_d2_.back();
   if (!any) {
     std::fill(out_mm->begin(), out_mm->end(), sat);
     return;
   }
-  for (float* f : {out_.data(), in_.data()}) {
-    for (int r = 0; r < ny * nz; ++r) edt_line(f + static_cast<std::ptrdiff_t>(r) * nx, nx);  // along x
-    edt_axis(f, 1);
-    edt_axis(f, 2);
-  }
-  const double res = s_.resolution, maxd = s_.max_distance;
+  for (int r = 0; r < ny * nz; ++r) edt_line(out_.data() + static_cast<std::ptrdiff_t>(r) * nx, nx);  // along x
+  edt_axis(out_.data(), 1);
+  edt_axis(out_.data(), 2);
+  // Squared distances are whole cells^2: a table gives the millimetres (saturated past its end).
+  const auto last = static_cast<float>(mm_of_d2_.size() - 1);
   for (std::size_t i = 0; i < total; ++i) {
-    double m;
-    if (occ_[i] > 0)
-      m = -std::min(maxd, (std::sqrt(static_cast<double>(in_[i])) - 0.5) * res);
-    else
-      m = out_[i] == kFar ? maxd : std::min(maxd, (std::sqrt(static_cast<double>(out_[i])) - 0.5) * res);
-    (*out_mm)[i] = static_cast<std::int16_t>(std::lround(1000.0 * m));
+    if (occ_[i] > 0) continue;
+    const float d2 = out_[i];
+    (*out_mm)[i] = d2 >= last ? sat : mm_of_d2_[static_cast<std::size_t>(d2 + 0.5f)];
   }
+  for (int z = 0; z < nz; ++z)
+    for (int y = 0; y < ny; ++y)
+      for (int x = 0; x < nx; ++x) {
+        const auto i = static_cast<std::size_t>(x + nx * (y + ny * z));
+        if (occ_[i] > 0) (*out_mm)[i] = static_cast<std::int16_t>(-mm_of_d2_[static_cast<std::size_t>(inside_d2(x, y, z))]);
+      }
 }
 
 }  // namespace mapper

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <set>
 #include <sys/select.h>
 #include <stdexcept>
@@ -96,6 +97,18 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+// This thread's CPU time [ms] (the work's own cost; wall time adds what preempted it).
+double cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+std::int64_t wall_us() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
 constexpr std::size_t kCloudCountOffset = 8 + 8 + 8 + 1 + 3 * 4 + 4 * 4 + 4 + 4;  // fingerprint included
 constexpr std::size_t kCloudBytesPerPoint = 3 * 4 + 1;
 constexpr std::size_t kTimingSamples = 1 << 18;
@@ -137,8 +150,7 @@ MapperNode::MapperNode(const NodeSettings& s, lcm::LCM* maps, lcm::LCM* sensors)
   for (const auto& ch : s_.inputs) sensors_->subscribe(ch, &MapperNode::on_cloud, this);
   out_.n_cells = map_.cells();
   out_.distance_mm.reserve(static_cast<std::size_t>(map_.cells()));
-  integrate_ms_.reserve(kTimingSamples);
-  publish_ms_.reserve(kTimingSamples);
+  for (auto* v : {&integrate_ms_, &integrate_cpu_ms_, &publish_ms_, &publish_cpu_ms_, &age_ms_}) v->reserve(kTimingSamples);
   columns_seen_.reserve(1 << 16);
   new_columns_.reserve(static_cast<std::size_t>(map_.nx()) * static_cast<std::size_t>(map_.ny()));
 }
@@ -171,6 +183,7 @@ void MapperNode::centre_on(const float* position) {
 
 void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
   const auto t0 = Clock::now();
+  const double c0 = cpu_ms();
   for (float v : m.position)
     if (!std::isfinite(v)) return;
   centre_on(m.position);
@@ -205,12 +218,16 @@ void MapperNode::integrate(const mppi_lcm::point_cloud_t& m) {
   std::copy(m.position, m.position + 3, sensor_pos_);
   dirty_ = true;
   ++frames_;
-  if (integrate_ms_.size() < integrate_ms_.capacity()) integrate_ms_.push_back(static_cast<float>(ms_since(t0)));
+  if (integrate_ms_.size() < integrate_ms_.capacity()) {
+    integrate_ms_.push_back(static_cast<float>(ms_since(t0)));
+    integrate_cpu_ms_.push_back(static_cast<float>(cpu_ms() - c0));
+  }
 }
 
 bool MapperNode::publish() {
   if (!dirty_) return false;
   const auto t0 = Clock::now();
+  const double c0 = cpu_ms();
   map_.compute_distance(&out_.distance_mm);
   out_.utime = newest_utime_;
   out_.seq = maps_++;
@@ -225,7 +242,14 @@ bool MapperNode::publish() {
   lcm_->publish(s_.output, &out_);
   dirty_ = false;
   if (sensed_ != nullptr) write_new_columns();
-  if (publish_ms_.size() < publish_ms_.capacity()) publish_ms_.push_back(static_cast<float>(ms_since(t0)));
+  if (publish_ms_.size() < publish_ms_.capacity()) {
+    publish_ms_.push_back(static_cast<float>(ms_since(t0)));
+    publish_cpu_ms_.push_back(static_cast<float>(cpu_ms() - c0));
+  }
+  // How old the map is as it leaves: its newest frame's capture to now, on the frames' clock
+  // (the wall clock in real time).
+  if (age_ms_.size() < age_ms_.capacity())
+    age_ms_.push_back(static_cast<float>(1e-3 * static_cast<double>(wall_us() - newest_utime_)));
   return true;
 }
 
@@ -259,18 +283,18 @@ void MapperNode::write_new_columns() {
   std::fflush(sensed_);
 }
 
+// A map goes out as soon as a frame has come in and a period has passed since the last map:
+// right after that frame's integration, so its age is the sensor's latency and the mapper's
+// own time, not a wait for a timer.
 void MapperNode::run(const volatile std::sig_atomic_t* stop) {
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / s_.rate_hz));
-  auto next = Clock::now() + period;
+  auto last = Clock::now() - period;
   while (!*stop) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(next - Clock::now()).count();
-    if (left > 0) wait_and_handle(static_cast<int>(std::min<std::int64_t>(left, 100)));
+    const auto due = last + period;
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(due - Clock::now()).count();
+    wait_and_handle(dirty_ ? static_cast<int>(std::clamp<std::int64_t>(left, 0, 100)) : 100);
     const auto now = Clock::now();
-    if (now >= next) {
-      publish();
-      next += period;
-      if (next < now) next = now + period;  // fell behind: no burst of maps to catch up
-    }
+    if (dirty_ && now >= due && publish()) last = now;
   }
 }
 
@@ -302,7 +326,8 @@ std::string MapperNode::stats_json() const {
                 static_cast<long long>(st.cells_hit), static_cast<long long>(st.shifts), map_.cells(),
                 map_.resolution());
   return std::string(head) + "\"integrate_ms\":" + timing_json(integrate_ms_) +
-         ",\"publish_ms\":" + timing_json(publish_ms_) + "}";
+         ",\"integrate_cpu_ms\":" + timing_json(integrate_cpu_ms_) + ",\"publish_ms\":" + timing_json(publish_ms_) +
+         ",\"publish_cpu_ms\":" + timing_json(publish_cpu_ms_) + ",\"map_age_ms\":" + timing_json(age_ms_) + "}";
 }
 
 }  // namespace mapper

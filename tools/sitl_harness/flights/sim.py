@@ -23,6 +23,7 @@ INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (second
 # maps (tools/replay needs them); sensed.jsonl and mapper_stats.json say what was sensed.
 SENSOR_CHANNELS = ("MPPI_DEPTH", "MPPI_LIDAR")
 MAP_CHANNEL = "MPPI_LOCAL_MAP"
+MAPPER_FIFO_PRIORITY = 70  # below the daemon (80) and the logger (79)
 
 
 def sensed(scen: dict) -> bool:
@@ -126,8 +127,12 @@ def realtime_priorities(cmds: dict) -> dict:
     runs SCHED_FIFO 80, the simulator above). The logger just below the daemon: a lock-step
     flight runs many times faster than real time and a logger starved meanwhile loses
     datagrams. The parameter injector as the logger: at the normal policy a lock-step flight
-    (SCHED_FIFO, both cores) would starve it of every state until the flight ends."""
-    prio = {"sim": SIM_FIFO_PRIORITY, "logger": LOGGER_FIFO_PRIORITY, "inject": LOGGER_FIFO_PRIORITY}
+    (SCHED_FIFO, both cores) would starve it of every state until the flight ends. The mapper
+    below the daemon (its maps feed the next cycles, but never before this one's command) and
+    above the machine's other work: at the normal policy, on a loaded 2-core machine, its maps
+    left 150-450 ms late (forest_4m_sensed seed 51, load 4-6)."""
+    prio = {"sim": SIM_FIFO_PRIORITY, "logger": LOGGER_FIFO_PRIORITY, "inject": LOGGER_FIFO_PRIORITY,
+            "mapper": MAPPER_FIFO_PRIORITY}
     return {k: (["chrt", "-f", str(prio[k])] + c if k in prio else c) for k, c in cmds.items()}
 
 
@@ -157,8 +162,7 @@ class SimFlight(Flight):
                 "logger": logger_command(spec, self.out, log_exclusions(scen))}
         if sensed(scen):
             # The trees exist only in the simulator's world: mppid knows what the mapper makes
-            # of the sensors (docs/sensing.md). Normal policy: below the FIFO daemon, as a
-            # companion computer's perception would run.
+            # of the sensors (docs/sensing.md).
             cmds["mapper"] = mapper_command(spec, scen, self.out)
         if spec.params:
             cmds["inject"] = inject_command(spec)

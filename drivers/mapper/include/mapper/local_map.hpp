@@ -10,11 +10,11 @@
 // place in the world and what was seen stays while it is inside the window.
 //
 // Distance: the exact Euclidean distance transform (Felzenszwalb & Huttenlocher 2012, three
-// separable 1-D passes, O(cells)) of the occupied cells, and of the free cells for the
-// inside; a free cell holds the distance from its centre to the nearest occupied cell's
-// centre less half a cell (so the cell next to an obstacle reads half a cell, the face
-// between them), an occupied cell minus its distance to the nearest free cell, less half a
-// cell; saturated at max_distance.
+// separable 1-D passes, O(cells)) of the occupied cells; a free cell holds the distance from
+// its centre to the nearest occupied cell's centre less half a cell (so the cell next to an
+// obstacle reads half a cell, the face between them), saturated at max_distance. An occupied
+// cell holds minus its distance to the nearest free cell less half a cell, searched within
+// kInsideRadius cells (exact there; trunks are a few cells across).
 #pragma once
 
 #include <array>
@@ -86,6 +86,7 @@ class LocalMap {
   int cell_at(const double* p) const;
   void walk(const double* d, const int* last, bool clear_end, std::uint16_t weight);
   void touch(std::size_t u);
+  int inside_d2(int x, int y, int z) const;
   void edt_line(float* line, int n);
   void edt_axis(float* f, int axis);
 
@@ -100,7 +101,10 @@ class LocalMap {
   std::vector<int> frame_cells_;                    // the cells tallied this frame
   std::uint32_t frame_ = 0;
   double origin_[3] = {0, 0, 0};                    // this frame's sensor, in window cells
-  std::vector<float> out_, in_;           // squared distances, cells^2
+  static constexpr int kInsideRadius = 4;  // cells: how deep inside an obstacle distances go
+  std::vector<float> out_;                // squared distances, cells^2
+  std::vector<std::int16_t> mm_of_d2_;    // signed-field mm of a squared distance, saturated
+  std::vector<std::array<int, 4>> inside_offsets_;  // x, y, z, x^2 + y^2 + z^2, nearest first
   std::vector<float> block_, line_z_, line_d_;
   std::vector<int> line_v_;
   Stats stats_;

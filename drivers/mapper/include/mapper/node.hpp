@@ -73,7 +73,9 @@ class MapperNode {
   double last_pos_[3] = {0, 0, 0};
   double heading_[2] = {0, 0};  // unit horizontal direction of motion (lead)
   bool have_pos_ = false;
-  std::vector<float> integrate_ms_, publish_ms_;  // reserved at start: no allocation per frame
+  // Wall and CPU time per frame and per map, and each map's age as it leaves [ms]; reserved
+  // at start: no allocation per frame.
+  std::vector<float> integrate_ms_, integrate_cpu_ms_, publish_ms_, publish_cpu_ms_, age_ms_;
   std::FILE* sensed_ = nullptr;
   std::unordered_set<std::int64_t> columns_seen_;  // world (x, y) cells ever occupied
   std::vector<std::int64_t> new_columns_;
