@@ -64,7 +64,8 @@ def sensing_figures(out: Path, world: dict, t: np.ndarray | None, X: np.ndarray 
     trees = [o for o in world.get("obstacles", []) if len(o) >= 3]
     first = first_sightings(trees, read_sensed(out / "sensed.jsonl"), float(stats.get("resolution", 0.25)))
     res = {"trees": len(trees), "trees_sensed": sum(f is not None for f in first),
-           "mapper": {k: stats[k] for k in ("frames", "maps", "integrate_ms", "publish_ms", "cells") if k in stats},
+           "mapper": {k: stats[k] for k in ("frames", "maps", "integrate_ms", "integrate_cpu_ms", "publish_ms",
+                                             "publish_cpu_ms", "map_age_ms", "cells") if k in stats},
            "sensors": sim.get("sensors", {})}
     if t is None or X is None or not len(t) or not trees:
         return {"sensing": res}
