@@ -42,9 +42,14 @@ void SensorRig::step(double t, const Pose& body, const std::vector<Obstacle>& ob
     capture(t, body, mppi_lcm::point_cloud_t::SENSOR_LIDAR, epoch_us);
     next_lidar_ += 1.0 / lidar_->spec().rate_hz;
   }
-  while (!pending_.empty() && pending_.front().publish_t <= t + 1e-9) {
-    lcm_->publish(*pending_.front().channel, &pending_.front().msg);
-    pending_.pop_front();
+  // In capture order, but the sensors' latencies differ: any that is due, not only the front.
+  for (auto it = pending_.begin(); it != pending_.end();) {
+    if (it->publish_t > t + 1e-9) {
+      ++it;
+      continue;
+    }
+    lcm_->publish(*it->channel, &it->msg);
+    it = pending_.erase(it);
   }
 }
 

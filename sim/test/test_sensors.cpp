@@ -4,10 +4,13 @@
 
 #include <cmath>
 #include <limits>
+#include <lcm/lcm-cpp.hpp>
+#include <mppi_lcm/point_cloud_t.hpp>
 #include <stdexcept>
 
 #include "sim/rng.hpp"
 #include "sim/scenario.hpp"
+#include "sim/sensor_rig.hpp"
 #include "sim/sensors.hpp"
 
 namespace {
@@ -218,6 +221,48 @@ TEST(SensingScenario, ParsesTheSensorsAndRejectsUnknownKeys) {
       base + "world: {forest: {height: 4.5, x_range: [4, 26], y_range: [-8, 8]}}\n", "t.yaml", 3);
   ASSERT_FALSE(f.obstacles.empty());
   for (const auto& o : f.obstacles) EXPECT_DOUBLE_EQ(o.height, 4.5);
+}
+
+}  // namespace
+
+namespace {
+
+struct CloudSink {
+  std::vector<mppi_lcm::point_cloud_t> got;
+  void on(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::point_cloud_t* m) { got.push_back(*m); }
+};
+
+TEST(SensorRig, CapturesAtItsRateAndPublishesItsLatencyLaterStampedWithTheCapture) {
+  sim::Scenario s = sim::load_scenario_text(
+      "task: quadrotor_forest\nplant: {model: quadrotor}\n"
+      "sensing: {depth_camera: {width: 8, height: 6, rate_hz: 30, latency: 0.03}, lidar: {beams: 2, azimuth_steps: 8}}\n",
+      "t.yaml", 1);
+  s.obstacles.push_back(tree(5, 0, 0.5, 8));
+  lcm::LCM lc("memq://");
+  ASSERT_TRUE(lc.good());
+  CloudSink depth, lidar;
+  lc.subscribe("D", &CloudSink::on, &depth);
+  lc.subscribe("L", &CloudSink::on, &lidar);
+  sim::SensorRig rig(s, &lc, "D", "L");
+  sim::Pose body;
+  body.p = {0, 0, 2};
+  for (int k = 0; k <= 100; ++k) {  // 0.1 s at 1 kHz
+    rig.step(k * 1e-3, body, s.obstacles, 1000000);
+    while (lc.handleTimeout(0) > 0) {
+    }
+  }
+  // Captures at 0, 1/30, 2/30 and 0.1 s; the first three out by 0.1 s (30 ms later).
+  ASSERT_EQ(depth.got.size(), 3u);
+  for (std::size_t i = 0; i < depth.got.size(); ++i) {
+    EXPECT_NEAR(static_cast<double>(depth.got[i].utime - 1000000), 1e6 * static_cast<double>(i) / 30.0, 1001.0);
+    EXPECT_EQ(depth.got[i].seq, static_cast<std::int64_t>(i));
+    EXPECT_EQ(depth.got[i].sensor, mppi_lcm::point_cloud_t::SENSOR_DEPTH_CAMERA);
+    EXPECT_EQ(depth.got[i].n, static_cast<std::int32_t>(depth.got[i].x.size()));
+    EXPECT_FLOAT_EQ(depth.got[i].position[0], 0.1f);  // the mount's offset
+  }
+  ASSERT_EQ(lidar.got.size(), 2u);  // 10 Hz, no latency: t = 0 and 0.1 s
+  EXPECT_EQ(lidar.got[1].utime, 1100000);
+  EXPECT_EQ(lidar.got[0].n, 16);
 }
 
 }  // namespace
