@@ -133,3 +133,31 @@ TEST(MapperSettings, OverridesApplyAndUnknownKeysFail) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(MapperNode, ACountTheBytesDoNotBackIsUndecodable) {
+  mppi_lcm::point_cloud_t m;
+  m.n = 2;
+  m.x = {1, 2};
+  m.y = {0, 0};
+  m.z = {0, 0};
+  m.hit = {1, 0};
+  std::vector<unsigned char> buf(static_cast<std::size_t>(m.getEncodedSize()));
+  ASSERT_EQ(m.encode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
+  mppi_lcm::point_cloud_t out;
+  ASSERT_TRUE(mapper::decode_cloud(buf.data(), buf.size(), &out));
+  EXPECT_EQ(out.n, 2);
+  EXPECT_EQ(out.hit[1], 0);
+  // n sits after the fingerprint, utime, seq, sensor, position, orientation and the ranges.
+  const std::size_t at = 8 + 8 + 8 + 1 + 12 + 16 + 4 + 4;
+  ASSERT_EQ(buf[at + 3], 2);
+  for (const int lie : {0x7F, 0xFF}) {  // 2^31 - 1 points, or a negative count
+    auto bad = buf;
+    bad[at] = static_cast<unsigned char>(lie);
+    EXPECT_FALSE(mapper::decode_cloud(bad.data(), bad.size(), &out));
+  }
+  EXPECT_FALSE(mapper::decode_cloud(buf.data(), buf.size() - 1, &out));  // truncated
+}
+
+}  // namespace
