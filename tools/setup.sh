@@ -62,6 +62,9 @@ APT_PACKAGES=(
   libsystemd-dev libglib2.0-dev
   # tests and benchmarks
   googletest libgtest-dev libgmock-dev libbenchmark-dev
+  # mppid-mapper-bench's comparison (docs/sensing.md): OctoMap and DynamicEDT3D on the same
+  # frames as mppid-mapper's grid (the mapper itself does not use them)
+  liboctomap-dev libdynamicedt3d-dev
   # Python venv (lcm wheel, tools, pytest)
   python3 python3-venv python3-pip
   # Java: javac builds the LCM type jar; the non-headless JRE has the AWT/X11 part that

@@ -19,13 +19,14 @@ int usage(const char* why) {
   std::fprintf(stderr,
                "usage: mppid-sim --scenario FILE [--seed S] [--lockstep | --realtime] [--lcm-url URL]\n"
                "                 [--out DIR] [--channel-prefix P] [--duration S] [--quiet]\n"
-               "                 [--ideal | --latency measured|SECONDS]\n"
+               "                 [--ideal | --latency measured|SECONDS] [--sensor-lcm-url URL]\n"
                "  --lockstep   wait for the command answering each state (deterministic, fast); the\n"
                "               command acts after the controller's measured latency + the delay\n"
                "  --ideal      lock-step without the controller's latency (algorithm studies)\n"
                "  --latency    lock-step latency charged: measured (default) or fixed seconds\n"
                "  --realtime   pace the physics to the wall clock (the default)\n"
                "  --out DIR    where world.json, truth.jsonl and sim_summary.json go (default .)\n"
+               "  --sensor-lcm-url URL  the sensors' frames (point_cloud_t) on this bus (default: --lcm-url's)\n"
                "exit status: 0 run completed (see sim_summary.json for its outcome), 1 error,\n"
                "             2 usage, 3 controller stopped answering (lock-step), 4 interrupted\n");
   return 2;
@@ -63,6 +64,10 @@ int main(int argc, char** argv) {
       const char* v = value();
       if (v == nullptr) return usage("--lcm-url needs a URL");
       opt.lcm_url = v;
+    } else if (a == "--sensor-lcm-url") {
+      const char* v = value();
+      if (v == nullptr) return usage("--sensor-lcm-url needs a URL");
+      opt.sensor_lcm_url = v;
     } else if (a == "--out") {
       const char* v = value();
       if (v == nullptr) return usage("--out needs a directory");
@@ -103,7 +108,7 @@ int main(int argc, char** argv) {
   opt.lockstep = lockstep;
   if (!prefix.empty()) {
     auto& c = opt.channels;
-    for (std::string* ch : {&c.state, &c.command, &c.obstacles, &c.reference, &c.clock}) *ch = prefix + *ch;
+    for (std::string* ch : {&c.state, &c.command, &c.obstacles, &c.reference, &c.clock, &c.depth, &c.lidar}) *ch = prefix + *ch;
   }
 
   std::signal(SIGINT, on_signal);

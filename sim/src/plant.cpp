@@ -44,6 +44,18 @@ Params plant_params(const Scenario& s) {
 
 float clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+// q = qz(yaw) qx(roll) qy(pitch): core's ZXY Euler convention, R_WB = Rz Rx Ry.
+void zxy_quaternion(double roll, double pitch, double yaw, double* q) {
+  const double cz = std::cos(0.5 * yaw), sz = std::sin(0.5 * yaw), cx = std::cos(0.5 * roll), sx = std::sin(0.5 * roll);
+  const double cy = std::cos(0.5 * pitch), sy = std::sin(0.5 * pitch);
+  // qz * qx = (cz cx, cz sx, sz sx, sz cx); then * qy.
+  const double aw = cz * cx, ax = cz * sx, ay = sz * sx, az = sz * cx;
+  q[0] = aw * cy - ay * sy;
+  q[1] = ax * cy - az * sy;
+  q[2] = aw * sy + ay * cy;
+  q[3] = az * cy + ax * sy;
+}
+
 // M vehicles of one core model.
 template <class Model>
 class ModelPlant : public Plant {
@@ -78,6 +90,7 @@ class ModelPlant : public Plant {
     return true;
   }
   void position(int v, double* pos) const override;
+  void attitude(int v, double* q) const override { Plant::attitude(v, q); }
   double speed(int v) const override;
   std::vector<float> hover() const override;
   std::vector<float> failsafe() const override { return hover(); }
@@ -117,6 +130,10 @@ template <> void ModelPlant<Quadrotor>::clamp(float* u) const {
 }
 template <> void ModelPlant<Quadrotor>::position(int v, double* pos) const {
   for (int i = 0; i < 3; ++i) pos[i] = x_[static_cast<std::size_t>(v * Quadrotor::kNx + i)];
+}
+template <> void ModelPlant<Quadrotor>::attitude(int v, double* q) const {
+  const float* x = x_.data() + v * Quadrotor::kNx;
+  zxy_quaternion(x[Quadrotor::ROLL], x[Quadrotor::PITCH], x[Quadrotor::YAW], q);
 }
 template <> double ModelPlant<Quadrotor>::speed(int v) const {
   const float* x = x_.data() + v * Quadrotor::kNx;
@@ -159,6 +176,9 @@ template <> void ModelPlant<QuadrotorRate>::clamp(float* u) const {
 }
 template <> void ModelPlant<QuadrotorRate>::position(int v, double* pos) const {
   for (int i = 0; i < 3; ++i) pos[i] = x_[static_cast<std::size_t>(v * QuadrotorRate::kNx + i)];
+}
+template <> void ModelPlant<QuadrotorRate>::attitude(int v, double* q) const {
+  for (int i = 0; i < 4; ++i) q[i] = x_[static_cast<std::size_t>(v * QuadrotorRate::kNx + QuadrotorRate::QW + i)];
 }
 template <> double ModelPlant<QuadrotorRate>::speed(int v) const {
   const float* x = x_.data() + v * QuadrotorRate::kNx;
@@ -321,6 +341,10 @@ class RateBodyPlant : public Plant {
   }
   void position(int v, double* pos) const override {
     for (int i = 0; i < 3; ++i) pos[i] = body_[static_cast<std::size_t>(v * Quadrotor::kNx + i)];
+  }
+  void attitude(int v, double* q) const override {
+    const float* b = body_.data() + v * Quadrotor::kNx;
+    zxy_quaternion(b[Quadrotor::ROLL], b[Quadrotor::PITCH], b[Quadrotor::YAW], q);
   }
   double speed(int v) const override {
     const float* b = body_.data() + v * Quadrotor::kNx;

@@ -73,6 +73,74 @@ Vec3 Scenario::start_of(int v) const {
 
 namespace {
 Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed);
+
+void parse_depth_camera(const Context& c, const YAML::Node& n, DepthCameraSpec& d) {
+  const std::string w = "sensing.depth_camera";
+  check_keys(c, n, w,
+             {"enabled", "hfov_deg", "vfov_deg", "width", "height", "min_range", "max_range", "rate_hz", "noise",
+              "dropout", "latency", "offset", "pitch_deg"});
+  if (!n) return;
+  d.enabled = true;
+  read(c, n, w, "enabled", d.enabled);
+  read(c, n, w, "hfov_deg", d.hfov_deg);
+  read(c, n, w, "vfov_deg", d.vfov_deg);
+  read(c, n, w, "width", d.width);
+  read(c, n, w, "height", d.height);
+  read(c, n, w, "min_range", d.min_range);
+  read(c, n, w, "max_range", d.max_range);
+  read(c, n, w, "rate_hz", d.rate_hz);
+  read(c, n, w, "noise", d.noise);
+  read(c, n, w, "dropout", d.dropout);
+  read(c, n, w, "latency", d.latency);
+  read_vec3(c, n, w, "offset", d.offset);
+  read(c, n, w, "pitch_deg", d.pitch_deg);
+  if (!(d.hfov_deg > 0.0 && d.hfov_deg < 170.0 && d.vfov_deg > 0.0 && d.vfov_deg < 170.0))
+    c.fail(w, "hfov_deg and vfov_deg must be in (0, 170)");
+  if (d.width < 1 || d.height < 1 || d.width * d.height > 1 << 20) c.fail(w, "width x height must be 1..1048576");
+  if (!(d.min_range >= 0.0 && d.max_range > d.min_range && d.max_range <= 1000.0))
+    c.fail(w, "needs 0 <= min_range < max_range <= 1000");
+  if (!(d.rate_hz > 0.0 && d.rate_hz <= 500.0)) c.fail(w + ".rate_hz", "must be in (0, 500]");
+  if (!(d.noise >= 0.0 && d.dropout >= 0.0 && d.dropout < 1.0 && d.latency >= 0.0 && d.latency < 10.0))
+    c.fail(w, "noise >= 0, dropout in [0, 1), latency in [0, 10) s");
+}
+
+void parse_lidar(const Context& c, const YAML::Node& n, LidarSpec& l) {
+  const std::string w = "sensing.lidar";
+  check_keys(c, n, w,
+             {"enabled", "beams", "min_elevation_deg", "max_elevation_deg", "azimuth_steps", "min_range", "max_range",
+              "rate_hz", "noise", "latency", "offset"});
+  if (!n) return;
+  l.enabled = true;
+  read(c, n, w, "enabled", l.enabled);
+  read(c, n, w, "beams", l.beams);
+  read(c, n, w, "min_elevation_deg", l.min_elevation_deg);
+  read(c, n, w, "max_elevation_deg", l.max_elevation_deg);
+  read(c, n, w, "azimuth_steps", l.azimuth_steps);
+  read(c, n, w, "min_range", l.min_range);
+  read(c, n, w, "max_range", l.max_range);
+  read(c, n, w, "rate_hz", l.rate_hz);
+  read(c, n, w, "noise", l.noise);
+  read(c, n, w, "latency", l.latency);
+  read_vec3(c, n, w, "offset", l.offset);
+  if (l.beams < 1 || l.beams > 256 || l.azimuth_steps < 1 || l.azimuth_steps > 8192)
+    c.fail(w, "beams must be 1..256, azimuth_steps 1..8192");
+  if (!(l.min_elevation_deg >= -90.0 && l.max_elevation_deg <= 90.0 && l.min_elevation_deg <= l.max_elevation_deg))
+    c.fail(w, "elevations must be ordered, within +-90 deg");
+  if (!(l.min_range >= 0.0 && l.max_range > l.min_range && l.max_range <= 1000.0))
+    c.fail(w, "needs 0 <= min_range < max_range <= 1000");
+  if (!(l.rate_hz > 0.0 && l.rate_hz <= 100.0)) c.fail(w + ".rate_hz", "must be in (0, 100]");
+  if (!(l.noise >= 0.0 && l.latency >= 0.0 && l.latency < 10.0)) c.fail(w, "noise >= 0, latency in [0, 10) s");
+}
+
+// sensing: {publish_obstacles, depth_camera: {...}, lidar: {...}}; a sensor's section turns
+// it on (enabled: false keeps it off).
+void parse_sensing(const Context& c, const YAML::Node& n, SensingSpec& s) {
+  check_keys(c, n, "sensing", {"publish_obstacles", "depth_camera", "lidar"});
+  if (!n) return;
+  read(c, n, "sensing", "publish_obstacles", s.publish_obstacles);
+  parse_depth_camera(c, n["depth_camera"], s.depth_camera);
+  parse_lidar(c, n["lidar"], s.lidar);
+}
 }  // namespace
 
 namespace {
@@ -102,7 +170,7 @@ namespace {
 Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed) {
   check_keys(c, root, "scenario",
              {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
-              "success", "mppid", "mission"});  // mppid, mission: the harness's (the controller, the mission tool)
+              "success", "mppid", "mission", "sensing", "mapper"});  // mppid, mission, mapper: the harness's
   Scenario s;
   s.seed = seed;
   read(c, root, "scenario", "name", s.name);
@@ -201,13 +269,15 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   if (world && world["forest"]) {
     const auto f = world["forest"];
     check_keys(c, f, "world.forest",
-               {"spacing", "jitter", "radius", "radius_jitter", "x_range", "y_range", "clear_radius"});
+               {"spacing", "jitter", "radius", "radius_jitter", "x_range", "y_range", "clear_radius", "height"});
     s.forest.enabled = true;
     read(c, f, "world.forest", "spacing", s.forest.spacing);
     read(c, f, "world.forest", "jitter", s.forest.jitter);
     read(c, f, "world.forest", "radius", s.forest.radius);
     read(c, f, "world.forest", "radius_jitter", s.forest.radius_jitter);
     read(c, f, "world.forest", "clear_radius", s.forest.clear_radius);
+    read(c, f, "world.forest", "height", s.forest.height);
+    positive(c, s.forest.height, "world.forest.height");
     std::vector<double> r;
     read(c, f, "world.forest", "x_range", r);
     if (!r.empty()) {
@@ -291,6 +361,7 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   read(c, noise, "noise", "rate", s.noise.rate);
   read(c, noise, "noise", "other", s.noise.other);
 
+  parse_sensing(c, root["sensing"], s.sensing);
   generate_obstacles(s);
   return s;
 }
@@ -323,7 +394,7 @@ void generate_obstacles(Scenario& s) {
         if (r <= 0.05 || !clear_of_ends(px, py, r)) continue;
         bool overlaps = false;
         for (const auto& o : s.obstacles) overlaps = overlaps || std::hypot(px - o.x, py - o.y) < o.radius + r + 0.5;
-        if (!overlaps) s.obstacles.push_back({px, py, r, 0.0, 0.0});
+        if (!overlaps) s.obstacles.push_back({px, py, r, 0.0, 0.0, f.height});
       }
     }
   }

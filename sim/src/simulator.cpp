@@ -25,6 +25,7 @@
 #include "sim/command_input.hpp"
 #include "sim/plant.hpp"
 #include "sim/rng.hpp"
+#include "sim/sensor_rig.hpp"
 
 namespace sim {
 namespace {
@@ -86,7 +87,11 @@ struct PendingCommand {
 class Simulation {
  public:
   Simulation(const Scenario& s, const RunOptions& o)
-      : s_(s), o_(o), plant_(make_plant(s)), lcm_(o.lcm_url), wind_rng_(s.seed, 3), noise_rng_(s.seed, 4) {
+      : s_(s), o_(o), plant_(make_plant(s)), lcm_(o.lcm_url), wind_rng_(s.seed, 3), noise_rng_(s.seed, 4),
+        sensor_lcm_(o.sensor_lcm_url.empty() ? nullptr : std::make_unique<lcm::LCM>(o.sensor_lcm_url)),
+        sensors_(s, sensor_lcm_ ? sensor_lcm_.get() : &lcm_, o.channels.depth, o.channels.lidar) {
+    if (sensor_lcm_ && !sensor_lcm_->good())
+      throw std::runtime_error("LCM init failed for the sensor url '" + o.sensor_lcm_url + "'");
     if (!lcm_.good()) throw std::runtime_error("LCM init failed for url '" + o.lcm_url + "'");
     lcm_.subscribe(o.channels.command, &Simulation::on_command, this);
     nu_total_ = plant_->nu() * plant_->vehicles();
@@ -110,6 +115,7 @@ class Simulation {
   int handle_within(std::int64_t us);
   void advance_obstacles(double h);
   void check_collisions(double t);
+  void sense(double t);
   bool at_goal() const;
   void write_world();
   void write_tick(std::int64_t seq, double t);
@@ -121,6 +127,8 @@ class Simulation {
   std::unique_ptr<Plant> plant_;
   lcm::LCM lcm_;
   Rng wind_rng_, noise_rng_;
+  std::unique_ptr<lcm::LCM> sensor_lcm_;  // the sensors' own bus (RunOptions::sensor_lcm_url)
+  SensorRig sensors_;
   int nu_total_ = 0;
   std::vector<float> u_applied_;
   std::int8_t applied_mode_ = -1;  // -2: the simulator's own failsafe (timing.command_timeout)
@@ -257,7 +265,7 @@ void Simulation::publish_state(std::int64_t seq, double t, bool republish) {
 
 void Simulation::publish_world(double t) {
   const std::int64_t us = stamp(t);
-  if (plant_->flies() && !obstacles_.empty()) {
+  if (plant_->flies() && !obstacles_.empty() && s_.sensing.publish_obstacles) {
     // The nearest obstacles to any vehicle, at most max_published_obstacles.
     std::vector<std::pair<double, std::size_t>> order;
     for (std::size_t i = 0; i < obstacles_.size(); ++i) {
@@ -398,6 +406,7 @@ void Simulation::check_collisions(double t) {
       }
       if (p[2] < s_.ground_z) hit(v, "ground");
       for (const auto& ob : obstacles_) {
+        if (p[2] > s_.ground_z + ob.height + s_.vehicle_radius) continue;  // over its top
         const double c = std::hypot(p[0] - ob.x, p[1] - ob.y) - ob.radius - s_.vehicle_radius;
         clearance_now_ = std::min(clearance_now_, c);
         if (c < 0.0) hit(v, "obstacle");
@@ -421,6 +430,15 @@ void Simulation::check_collisions(double t) {
     const double d = std::pow(x[0] / 13.0, 2) + std::pow(x[1] / 6.0, 2) - 1.0;
     if (!std::isfinite(d) || (s_.off_track > 0.0 && std::fabs(d) > s_.off_track)) hit(0, "off_track");
   }
+}
+
+// Vehicle 0's sensors, from its true pose (sim/sensor_rig.hpp).
+void Simulation::sense(double t) {
+  if (!sensors_.any() || !plant_->flies()) return;
+  Pose body;
+  plant_->position(0, body.p.data());
+  plant_->attitude(0, body.q.data());
+  sensors_.step(t, body, obstacles_, o_.lockstep ? 0 : run_start_wall_us_);
 }
 
 bool Simulation::at_goal() const {
@@ -524,6 +542,7 @@ void Simulation::write_summary(Outcome outcome, double t_end) {
                static_cast<long long>(ignored_commands_), static_cast<long long>(rejected_commands_));
   std::fprintf(f, "\"command_timeouts\":%lld,\"realtime_pauses\":%lld,\"realtime_paused_s\":%.3f,",
                static_cast<long long>(command_timeouts_), static_cast<long long>(realtime_pauses_), realtime_paused_s_);
+  sensors_.write_summary(f);
   std::fprintf(f, "\"wall_s\":%.3f,\"lockstep\":%s,\"collisions\":[", seconds_since(run_start_),
                o_.lockstep ? "true" : "false");
   for (std::size_t i = 0; i < collisions_.size(); ++i) {
@@ -559,6 +578,7 @@ int Simulation::run() {
       outcome = Outcome::kInterrupted;
       break;
     }
+    sense(now_);
     if (step % per_state == 0) {
       const std::int64_t seq = step / per_state;
       if (step % per_world == 0 || any_moving_) publish_world(now_);

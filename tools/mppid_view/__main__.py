@@ -1,6 +1,7 @@
 """tools/view: mppid in rerun's 3D viewer (docs/view.md).
 
-  tools/view live [--lcm-url URL] [--web-port 9090] [--grpc-port 9876] [--save FILE.rrd] [--seconds S]
+  tools/view live [--lcm-url URL] [--sensor-lcm-url URL] [--web-port 9090] [--grpc-port 9876]
+                  [--save FILE.rrd] [--seconds S]
       the live view of the LCM channels; prints the URL to open in a browser
   tools/view convert FLIGHT.lcmlog [OUT.rrd]
       a flight log (tools/record, tools/sitl's flight.lcmlog) as a rerun recording with the layout
@@ -29,6 +30,7 @@ def parser() -> argparse.ArgumentParser:
     lv.add_argument("--grpc-port", type=int, default=9876)
     lv.add_argument("--save", help="also write the recording to this .rrd")
     lv.add_argument("--seconds", type=float, help="stop after this long (default: at SIGINT/SIGTERM)")
+    lv.add_argument("--sensor-lcm-url", help="the sensors' frames (point_cloud_t) on this bus too")
     lv.add_argument("--netns-pid", type=int, default=0,
                     help="read LCM inside the network namespace of this process (a harness flight's), "
                          "serving the viewer in this one")
@@ -50,7 +52,7 @@ def parser() -> argparse.ArgumentParser:
 
 def cmd_live(a) -> int:
     from .live import LiveView
-    view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid)
+    view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid, a.sensor_lcm_url)
     print(f"view: {view.url}", flush=True)
     counts = view.run(a.seconds)
     print("view: drawn " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())), flush=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import select
 import signal
 import time
 from collections import Counter
@@ -14,7 +15,7 @@ import lcm
 import rerun as rr
 
 from .blueprint import blueprint
-from .scene import CHANNELS, Scene, lcm_types
+from .scene import CHANNELS, DECODE_EVERY_S, SENSOR_CHANNELS, Scene, lcm_types
 
 
 def viewer_url(web_port: int, grpc_port: int, host: str = "127.0.0.1") -> str:
@@ -39,7 +40,8 @@ def join_network_namespace(pid: int) -> None:
 
 
 class LiveView:
-    def __init__(self, lcm_url: str, grpc_port: int, web_port: int, save: str | None = None, netns_pid: int = 0):
+    def __init__(self, lcm_url: str, grpc_port: int, web_port: int, save: str | None = None, netns_pid: int = 0,
+                 sensor_lcm_url: str | None = None):
         self.types = lcm_types()
         self.rec = rr.RecordingStream("mppid", recording_id=f"live-{int(time.time())}")
         # The gRPC server on loopback only; with --save, the same stream to a file too.
@@ -52,11 +54,23 @@ class LiveView:
         self.counts: Counter = Counter()
         if netns_pid:
             join_network_namespace(netns_pid)
+        self.decoded_at: dict[str, float] = {}
         self.lc = lcm.LCM(lcm_url)
-        for ch in CHANNELS:
+        for ch in CHANNELS + SENSOR_CHANNELS:
             self.lc.subscribe(ch, self.on_message)
+        # A sensed flight's frames are on a bus of their own (tools/sitl: the next UDP port).
+        self.sensor_lc = lcm.LCM(sensor_lcm_url) if sensor_lcm_url else None
+        if self.sensor_lc is not None:
+            for ch in SENSOR_CHANNELS:
+                self.sensor_lc.subscribe(ch, self.on_message)
 
     def on_message(self, channel: str, data: bytes) -> None:
+        every = DECODE_EVERY_S.get(channel)
+        if every is not None:  # a map or a frame: only those the scene will draw are decoded
+            now = time.monotonic()
+            if now - self.decoded_at.get(channel, -1e9) < every:
+                return
+            self.decoded_at[channel] = now
         try:
             msg = self.types[channel].decode(data)
         except ValueError:
@@ -70,7 +84,14 @@ class LiveView:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: stop.append(1))
         end = None if seconds is None else time.monotonic() + seconds
+        buses = [self.lc] + ([self.sensor_lc] if self.sensor_lc is not None else [])
         while not stop and (end is None or time.monotonic() < end):
-            self.lc.handle_timeout(100)
+            if len(buses) == 1:
+                self.lc.handle_timeout(100)
+                continue
+            ready, _, _ = select.select([b.fileno() for b in buses], [], [], 0.1)
+            for b in buses:
+                if b.fileno() in ready:
+                    b.handle()
         self.rec.flush()
         return self.counts

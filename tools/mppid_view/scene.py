@@ -8,6 +8,10 @@ Entities (the blueprint arranges them):
   /world/rollouts/top         LineStrips3D, the lowest-cost sampled rollouts, coloured by weight
   /world/rollouts/random      LineStrips3D, a random subsample of the others, coloured by weight
   /world/goal                 Points3D, each vehicle's goal; /world/reference the reference path
+  /world/map/occupied         Boxes3D, the local map's occupied cells (local_map_t: distance <= 0)
+                              within MAP_BAND_M of the vehicle's altitude, at most every MAP_EVERY_S
+  /world/sensors/<s>/points   Points3D, a sensor frame's returns (point_cloud_t, world frame; a
+                              subsample), /world/sensors/<s>/rays a few of its rays from the sensor
   /timing/compute_ms          Scalars: each command's cycle start -> command out
   /timing/state_to_command_ms Scalars: each command's state sample -> command out (age + compute)
   /timing/misses              Scalars: the daemon's deadline misses so far (status)
@@ -29,6 +33,14 @@ PLAN_RGB = (255, 0, 255)
 TRAIL_RGB = (0, 220, 220)
 GOAL_RGB = (255, 220, 0)
 OBSTACLE_RGB = (70, 150, 60)
+MAP_RGB = (230, 120, 40)
+SENSOR_RGB = {"depth": (250, 250, 250), "lidar": (120, 200, 255)}
+RAY_RGB = (160, 160, 160)
+MAP_EVERY_S = 0.5       # flight seconds between drawn maps (a map is 0.5 M cells, 10 Hz)
+MAP_BAND_M = 1.0        # the occupied cells drawn: within this of the vehicle's altitude
+SENSOR_EVERY_S = 0.25   # between drawn sensor frames
+SENSOR_POINTS = 2000    # returns drawn per frame, at most
+SENSOR_RAYS = 48        # rays drawn per frame
 # Rollouts: weight (log scale, relative to the fan's largest) from LOW to HIGH.
 ROLLOUT_LOW_RGB = np.array((40, 110, 255), dtype=np.float32)
 ROLLOUT_HIGH_RGB = np.array((255, 90, 0), dtype=np.float32)
@@ -40,16 +52,21 @@ MODEL_QUADROTOR, MODEL_QUADROTOR_RATE, MODEL_CARTPOLE, MODEL_RACECAR = 1, 2, 3, 
 REFERENCE_CIRCLE, REFERENCE_FIGURE_EIGHT = 1, 2
 
 CHANNELS = ("MPPI_STATE", "MPPI_PLAN", "MPPI_ROLLOUTS", "MPPI_OBSTACLES", "MPPI_REFERENCE", "MPPI_COMMAND",
-            "MPPI_STATUS")
+            "MPPI_STATUS", "MPPI_LOCAL_MAP")
+# The sensors' frames: on the flight's sensor bus (tools/sitl: the next UDP port), or anywhere.
+SENSOR_CHANNELS = ("MPPI_DEPTH", "MPPI_LIDAR")
+# Heavy messages: decoding each costs the view more than drawing one now and then.
+DECODE_EVERY_S = {"MPPI_LOCAL_MAP": MAP_EVERY_S, "MPPI_DEPTH": SENSOR_EVERY_S, "MPPI_LIDAR": SENSOR_EVERY_S}
 
 
 def lcm_types() -> dict:
     """{channel: mppi_lcm type} of the channels the scene draws."""
-    from mppi_lcm import (command_t, controller_status_t, obstacles_t, plan_t, reference_t, rollouts_t,
-                          vehicle_state_t)
+    from mppi_lcm import (command_t, controller_status_t, local_map_t, obstacles_t, plan_t, point_cloud_t,
+                          reference_t, rollouts_t, vehicle_state_t)
     return {"MPPI_STATE": vehicle_state_t, "MPPI_PLAN": plan_t, "MPPI_ROLLOUTS": rollouts_t,
             "MPPI_OBSTACLES": obstacles_t, "MPPI_REFERENCE": reference_t, "MPPI_COMMAND": command_t,
-            "MPPI_STATUS": controller_status_t}
+            "MPPI_STATUS": controller_status_t, "MPPI_LOCAL_MAP": local_map_t, "MPPI_DEPTH": point_cloud_t,
+            "MPPI_LIDAR": point_cloud_t}
 
 
 def vehicle_positions(msg) -> np.ndarray:
@@ -90,6 +107,31 @@ def reference_path(msg, points: int = 200) -> np.ndarray | None:
     return p
 
 
+def occupied_cells(msg, z: float | None, band: float = MAP_BAND_M) -> np.ndarray:
+    """Centres (n, 3) of a local_map_t's occupied cells (distance <= 0), those within `band` of
+    altitude z (all with z None)."""
+    nx, ny, nz = msg.nx, msg.ny, msg.nz
+    d = np.asarray(msg.distance_mm, dtype=np.int16)
+    if nx <= 0 or ny <= 0 or nz <= 0 or d.size != nx * ny * nz:
+        return np.zeros((0, 3), np.float32)
+    k, j, i = np.nonzero(d.reshape(nz, ny, nx) <= 0)
+    c = (np.stack([i, j, k], axis=1).astype(np.float32) + 0.5) * msg.resolution + np.asarray(msg.origin, np.float32)
+    return c if z is None else c[np.abs(c[:, 2] - z) <= band]
+
+
+def cloud_world(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A point_cloud_t in the world frame: (sensor position (3,), points (n, 3), hit (n,))."""
+    w, x, y, z = (float(v) for v in msg.orientation)
+    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
+    w, x, y, z = w / n, x / n, y / n, z / n
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                  [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                  [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]], np.float32)
+    p = np.stack([np.asarray(msg.x, np.float32), np.asarray(msg.y, np.float32), np.asarray(msg.z, np.float32)], 1)
+    o = np.asarray(msg.position, np.float32)
+    return o, p @ R.T + o, np.asarray(msg.hit, np.int8)
+
+
 class Scene:
     """Logs decoded mppi_lcm messages into a rerun RecordingStream."""
 
@@ -101,7 +143,10 @@ class Scene:
         self.states = 0
         self.handlers = {"MPPI_STATE": self.state, "MPPI_PLAN": self.plan, "MPPI_ROLLOUTS": self.rollouts,
                          "MPPI_OBSTACLES": self.obstacles, "MPPI_REFERENCE": self.reference,
-                         "MPPI_COMMAND": self.command, "MPPI_STATUS": self.status}
+                         "MPPI_COMMAND": self.command, "MPPI_STATUS": self.status,
+                         "MPPI_LOCAL_MAP": self.local_map, "MPPI_DEPTH": self.depth, "MPPI_LIDAR": self.lidar}
+        self.altitude: float | None = None  # vehicle 0's, for the map's band
+        self.drawn_at: dict[str, float] = {}
 
     def log(self, channel: str, msg) -> bool:
         """Draws one message; False for a channel not drawn."""
@@ -117,9 +162,19 @@ class Scene:
         h(msg)
         return True
 
+    def due(self, what: str, every: float) -> bool:
+        """At most one `what` drawn per `every` flight seconds."""
+        now = self.now_us * 1e-6
+        if now - self.drawn_at.get(what, -math.inf) < every:
+            return False
+        self.drawn_at[what] = now
+        return True
+
     def state(self, msg) -> None:
         pos = vehicle_positions(msg)
         self.states += 1
+        if len(pos):
+            self.altitude = float(pos[0][2])
         for j, p in enumerate(pos):
             self.rec.log(f"world/vehicles/{j}", rr.Points3D([p], radii=rr.Radius.ui_points(8.0), colors=[TRAIL_RGB]))
             trail = self.trails.setdefault(j, deque(maxlen=TRAIL_POINTS))
@@ -175,3 +230,33 @@ class Scene:
     def status(self, msg) -> None:
         self.rec.log("timing/misses", rr.Scalars(float(msg.misses)))
         self.rec.log("optimizer/ess", rr.Scalars(float(msg.ess)))
+
+    def local_map(self, msg) -> None:
+        if not self.due("map", MAP_EVERY_S):
+            return
+        c = occupied_cells(msg, self.altitude)
+        if not len(c):
+            self.rec.log("world/map/occupied", rr.Clear(recursive=False))
+            return
+        half = [0.5 * msg.resolution] * 3
+        self.rec.log("world/map/occupied", rr.Boxes3D(centers=c, half_sizes=[half] * len(c), colors=[MAP_RGB],
+                                                      fill_mode="solid"))
+
+    def depth(self, msg) -> None:
+        self.cloud("depth", msg)
+
+    def lidar(self, msg) -> None:
+        self.cloud("lidar", msg)
+
+    def cloud(self, name: str, msg) -> None:
+        if msg.n <= 0 or not self.due(name, SENSOR_EVERY_S):
+            return
+        o, p, hit = cloud_world(msg)
+        hits = p[hit != 0]
+        step = max(1, len(hits) // SENSOR_POINTS)
+        self.rec.log(f"world/sensors/{name}/points",
+                     rr.Points3D(hits[::step], radii=rr.Radius.ui_points(1.5), colors=[SENSOR_RGB[name]]))
+        rays = p[:: max(1, len(p) // SENSOR_RAYS)]
+        self.rec.log(f"world/sensors/{name}/rays",
+                     rr.LineStrips3D([np.stack([o, q]) for q in rays], radii=rr.Radius.ui_points(0.5),
+                                     colors=[RAY_RGB]))

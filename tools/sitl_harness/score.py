@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import logs, paths, timing
+from . import logs, paths, sensing, timing
 
 QUAD_MODELS = ("quadrotor", "quadrotor_rate", "quadrotor_rate_body")
 
@@ -82,6 +82,8 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         t = np.array([tk["t"] for tk in ticks])
         X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
         res["mean_speed"] = _mean_speed(scen["plant"]["model"], world, X)
+    if scen["plant"]["model"] in QUAD_MODELS:
+        res.update(sensing.sensing_figures(out, world, t if ticks else None, X))
     res["reason"] = _not_the_vehicles_failure(info, summary, res["collisions"])
     if res["reason"] is not None or not ticks:
         res["reason"] = res["reason"] or "no truth log"

@@ -39,6 +39,13 @@ class Plant {
   // Clamp a command to the plant's physical limits in place; false if not finite.
   virtual bool saturate(float* u) const = 0;
   virtual void position(int v, double* p) const = 0;
+  // Body -> world rotation, unit quaternion w, x, y, z (what the sensors are mounted on);
+  // the identity for the ground plants.
+  virtual void attitude(int v, double* q) const {
+    (void)v;
+    q[0] = 1.0;
+    q[1] = q[2] = q[3] = 0.0;
+  }
   virtual double speed(int v) const = 0;
   virtual std::vector<float> hover() const = 0;  // the control that holds the vehicles
   // What an autopilot's failsafe would command now (timing.command_timeout): the

@@ -17,6 +17,7 @@ using Vec3 = std::array<double, 3>;
 struct Obstacle {
   double x = 0.0, y = 0.0, radius = 0.0;
   double vx = 0.0, vy = 0.0;  // m/s; moving obstacles bounce inside the arena
+  double height = 10.0;       // m above the ground: what the sensors see; collisions above it miss
 };
 
 struct ForestSpec {
@@ -28,6 +29,7 @@ struct ForestSpec {
   double x_min = 4.0, x_max = 36.0; // m, corridor along x
   double y_min = -8.0, y_max = 8.0; // m, corridor across
   double clear_radius = 2.5;        // m, kept free around the start and goal points
+  double height = 10.0;             // m, every tree's (the sensors see their tops)
 };
 
 struct MovingSpec {
@@ -49,6 +51,40 @@ struct NoiseSpec {
   double attitude = 0.0;  // rad (quaternion models: small-angle, renormalised)
   double rate = 0.0;      // rad/s
   double other = 0.0;     // any remaining state (motor speeds, cart-pole, car)
+};
+
+struct DepthCameraSpec {
+  bool enabled = false;
+  double hfov_deg = 87.0, vfov_deg = 58.0;  // RealSense D435 depth
+  int width = 160, height = 120;            // the D435's 848 x 480 decimated
+  double min_range = 0.2, max_range = 10.0; // m
+  double rate_hz = 30.0;
+  double noise = 0.002;     // 1/m: range error standard deviation = noise * range^2 (stereo)
+  double dropout = 0.02;    // probability a pixel has no value (not sent)
+  double latency = 0.03;    // s from capture to publish
+  Vec3 offset{0.1, 0.0, 0.0};  // m, body frame
+  double pitch_deg = 0.0;      // down-tilt of the optical axis
+};
+
+struct LidarSpec {
+  bool enabled = false;
+  int beams = 16;                           // a VLP-16 class unit
+  double min_elevation_deg = -15.0, max_elevation_deg = 15.0;
+  int azimuth_steps = 900;                  // per revolution (0.4 deg)
+  double min_range = 0.3, max_range = 30.0; // m
+  double rate_hz = 10.0;
+  double noise = 0.03;                      // m, range standard deviation
+  double latency = 0.0;                     // s
+  Vec3 offset{0.0, 0.0, 0.1};
+};
+
+// Sensors on vehicle 0 (sim/sensors.hpp), published as point_cloud_t. With
+// publish_obstacles false the trees exist only in the world: the controller gets no
+// obstacles_t and knows only what a mapper makes of the sensors (docs/sensing.md).
+struct SensingSpec {
+  bool publish_obstacles = true;
+  DepthCameraSpec depth_camera;
+  LidarSpec lidar;
 };
 
 struct ReferenceSpec {
@@ -111,6 +147,7 @@ struct Scenario {
   ReferenceSpec reference;
   WindSpec wind;
   NoiseSpec noise;
+  SensingSpec sensing;
 
   std::uint64_t seed = 1;
   std::vector<Obstacle> obstacles;  // generated: fixed + forest + moving

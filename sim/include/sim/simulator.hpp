@@ -25,11 +25,16 @@ struct Channels {
   std::string obstacles = "MPPI_OBSTACLES";
   std::string reference = "MPPI_REFERENCE";
   std::string clock = "MPPI_SIM_CLOCK";
+  std::string depth = "MPPI_DEPTH";  // point_cloud_t: the depth camera's frames
+  std::string lidar = "MPPI_LIDAR";  // point_cloud_t: the LiDAR's revolutions
 };
 
 struct RunOptions {
   bool lockstep = false;
   std::string lcm_url;  // empty: LCM's default
+  // The sensors' frames (point_cloud_t, up to megabytes a second) on a bus of their own, as a
+  // camera's driver would be: the controller's bus then carries none. Empty: lcm_url's.
+  std::string sensor_lcm_url;
   std::string out_dir = ".";
   Channels channels;
   bool quiet = false;

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,6 +70,19 @@ def lcm_url_for_port(port: int) -> str:
     return f"udpm://239.255.76.67:{int(port)}?ttl=0"
 
 
+def sensor_bus(lcm_url: str) -> str:
+    """The sensors' own bus: the flight's URL on the next UDP port (each flight has its own
+    network namespace), so the controller's socket never receives the frames; a receive buffer
+    that holds a few of them (the kernel caps it at net.core.rmem_max)."""
+    m = re.match(r"^(udpm://[^:]+):(\d+)(\?.*)?$", lcm_url)
+    if m is None:
+        raise ValueError(f"cannot derive the sensor bus from the LCM URL {lcm_url}")
+    port = int(m.group(2))
+    port = port + 1 if port < 65535 else port - 1
+    query = (m.group(3) or "?ttl=0") + f"&recv_buf_size={LOGGER_RECV_BUF}"
+    return f"{m.group(1)}:{port}{query}"
+
+
 def lcm_logger() -> Path:
     """The lcm-logger binary itself: the venv's entry point is a Python wrapper that would
     run it as a grandchild (and leave it behind on SIGTERM)."""
@@ -82,10 +96,13 @@ def lcm_logger() -> Path:
     return paths.VENV_BIN / "lcm-logger"
 
 
-def logger_command(spec: FlightSpec, out: Path) -> list[str]:
-    """lcm-logger recording the flight's bus into OUT/flight.lcmlog."""
-    return [str(lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
-            str(out / "flight.lcmlog")]
+def logger_command(spec: FlightSpec, out: Path, exclude: tuple[str, ...] = ()) -> list[str]:
+    """lcm-logger recording the flight's bus into OUT/flight.lcmlog, but the channels named in
+    `exclude` (LCM's channel patterns are PCRE: a negative look-ahead leaves them out)."""
+    cmd = [str(lcm_logger()), "-q", "-f", f"--lcm-url={spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}"]
+    if exclude:
+        cmd.append("--channel=^(?!(" + "|".join(exclude) + ")$).*")
+    return cmd + [str(out / "flight.lcmlog")]
 
 
 def mppid_binary() -> Path:

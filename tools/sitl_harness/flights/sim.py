@@ -13,11 +13,48 @@ import yaml
 
 from .. import paths
 from ..sandbox import fifo_allowed
-from .base import (LOGGER_FIFO_PRIORITY, SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, logger_command,
-                   mppid_binary)
+from .base import (LOGGER_FIFO_PRIORITY, LOGGER_RECV_BUF, SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan,
+                   logger_command, mppid_binary, sensor_bus)
 from .view import FlightView, view_sets
 
 INJECT_READY_TIMEOUT_S = 30.0  # the injector imports lcm and subscribes (seconds under load)
+# What a sensed flight's log leaves out by default: the raw frames (a depth camera's are ~0.3 MB
+# at 30 Hz) and the maps (1 MB at 10 Hz: 300 MB a 30-s flight). mapper.log_maps: true keeps the
+# maps (tools/replay needs them); sensed.jsonl and mapper_stats.json say what was sensed.
+SENSOR_CHANNELS = ("MPPI_DEPTH", "MPPI_LIDAR")
+MAP_CHANNEL = "MPPI_LOCAL_MAP"
+MAPPER_FIFO_PRIORITY = 70  # below the daemon (80) and the logger (79)
+
+
+def sensed(scen: dict) -> bool:
+    """The scenario has a sensor on (sensing.depth_camera or sensing.lidar, not enabled: false)."""
+    sensing = scen.get("sensing") or {}
+    return any(isinstance(sensing.get(k), dict) and sensing[k].get("enabled", True) for k in ("depth_camera", "lidar"))
+
+
+def mapper_command(spec: FlightSpec, scen: dict, out: Path) -> list[str]:
+    """mppid-mapper for a sensed flight: the scenario's mapper.config (default
+    config/mapper/mapper.yaml) and mapper.set overrides; its timings and what it sensed into OUT."""
+    exe = paths.find_binary("mppid-mapper")
+    if exe is None:
+        raise FlightError("mppid-mapper not built (searched %s)" % ", ".join(map(str, paths.build_dirs())))
+    mp = scen.get("mapper") or {}
+    cfg = paths.ROOT / mp.get("config", "config/mapper/mapper.yaml")
+    if not cfg.is_file():
+        raise FlightError(f"scenario {spec.scenario} names mapper config {cfg}, which does not exist")
+    cmd = [str(exe), "--config", str(cfg), "--lcm-url", f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}",
+           "--sensor-lcm-url", sensor_bus(spec.lcm_url), "--stats", str(out / "mapper_stats.json"),
+           "--sensed", str(out / "sensed.jsonl")]
+    for kv in mp.get("set", []):
+        cmd += ["--set", str(kv)]
+    return cmd
+
+
+def log_exclusions(scen: dict) -> tuple[str, ...]:
+    if not sensed(scen):
+        return ()
+    keep_maps = bool((scen.get("mapper") or {}).get("log_maps", False))
+    return SENSOR_CHANNELS + (() if keep_maps else (MAP_CHANNEL,))
 
 
 def controller_config(spec: FlightSpec, scen: dict) -> Path:
@@ -33,7 +70,9 @@ def controller_config(spec: FlightSpec, scen: dict) -> Path:
 def mppid_command(spec: FlightSpec, scen: dict, cfg: Path, fifo: bool) -> list[str]:
     """mppid (or its DDP baseline) for a flight of the scenario `scen`."""
     lockstep = not spec.realtime
-    cmd = [str(mppid_binary()), "--config", str(cfg), "--lcm-url", spec.lcm_url]
+    # A sensed flight's maps are 1 MB (local_map_t): a socket buffer that holds a few of them.
+    url = f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}" if sensed(scen) else spec.lcm_url
+    cmd = [str(mppid_binary()), "--config", str(cfg), "--lcm-url", url]
     # As the systemd unit runs it (SCHED_FIFO, locked memory; it runs on with a
     # warning where the OS refuses), in lock-step too: there its measured latency is
     # what the simulator charges, and it must be the service's, not a busy machine's.
@@ -56,10 +95,12 @@ def mppid_command(spec: FlightSpec, scen: dict, cfg: Path, fifo: bool) -> list[s
     return cmd
 
 
-def sim_command(spec: FlightSpec, scen_path: Path, out: Path, sim_bin: Path) -> list[str]:
+def sim_command(spec: FlightSpec, scen_path: Path, out: Path, sim_bin: Path, scen: dict | None = None) -> list[str]:
     lockstep = not spec.realtime
     cmd = [str(sim_bin), "--scenario", str(scen_path), "--seed", str(spec.seed), "--lcm-url", spec.lcm_url,
            "--out", str(out), "--lockstep" if lockstep else "--realtime"]
+    if scen is not None and sensed(scen):
+        cmd += ["--sensor-lcm-url", sensor_bus(spec.lcm_url)]
     if lockstep and spec.ideal:
         cmd.append("--ideal")
     elif lockstep and spec.latency is not None:
@@ -86,8 +127,12 @@ def realtime_priorities(cmds: dict) -> dict:
     runs SCHED_FIFO 80, the simulator above). The logger just below the daemon: a lock-step
     flight runs many times faster than real time and a logger starved meanwhile loses
     datagrams. The parameter injector as the logger: at the normal policy a lock-step flight
-    (SCHED_FIFO, both cores) would starve it of every state until the flight ends."""
-    prio = {"sim": SIM_FIFO_PRIORITY, "logger": LOGGER_FIFO_PRIORITY, "inject": LOGGER_FIFO_PRIORITY}
+    (SCHED_FIFO, both cores) would starve it of every state until the flight ends. The mapper
+    below the daemon (its maps feed the next cycles, but never before this one's command) and
+    above the machine's other work: at the normal policy, on a loaded 2-core machine, its maps
+    left 150-450 ms late (forest_4m_sensed seed 51, load 4-6)."""
+    prio = {"sim": SIM_FIFO_PRIORITY, "logger": LOGGER_FIFO_PRIORITY, "inject": LOGGER_FIFO_PRIORITY,
+            "mapper": MAPPER_FIFO_PRIORITY}
     return {k: (["chrt", "-f", str(prio[k])] + c if k in prio else c) for k, c in cmds.items()}
 
 
@@ -113,8 +158,12 @@ class SimFlight(Flight):
         else:
             ctrl = [sys.executable, "-m", "sitl_harness.standin", "--scenario", str(scen_path), "--lcm-url",
                     spec.lcm_url]
-        cmds = {"sim": sim_command(spec, scen_path, self.out, sim_bin), "controller": ctrl,
-                "logger": logger_command(spec, self.out)}
+        cmds = {"sim": sim_command(spec, scen_path, self.out, sim_bin, scen), "controller": ctrl,
+                "logger": logger_command(spec, self.out, log_exclusions(scen))}
+        if sensed(scen):
+            # The trees exist only in the simulator's world: mppid knows what the mapper makes
+            # of the sensors (docs/sensing.md).
+            cmds["mapper"] = mapper_command(spec, scen, self.out)
         if spec.params:
             cmds["inject"] = inject_command(spec)
         if fifo:
@@ -135,8 +184,12 @@ class SimFlight(Flight):
             self.view.start()
         sb.spawn("logger", cmds["logger"])
         sb.spawn("controller", cmds["controller"])
-        time.sleep(0.5)  # let both subscribe before the first state
-        for name in ("logger", "controller"):
+        if "mapper" in cmds:
+            sb.spawn("mapper", cmds["mapper"])
+        time.sleep(0.5)  # let them subscribe before the first state
+        for name in ("logger", "controller", "mapper"):
+            if name not in cmds:
+                continue
             if self.exited(name):
                 raise FlightError(f"{name} exited at start (rc={self.returncode(name)}); see {name}.log")
         if "inject" in cmds:
@@ -166,6 +219,9 @@ class SimFlight(Flight):
                 return "controller_died"
             if self.exited("logger"):
                 return "logger_died"
+            if "mapper" in plan.commands and self.exited("mapper"):
+                self.events.append(f"mapper exited rc={self.returncode('mapper')} at {now:.2f} s")
+                return "mapper_died"
             if now > plan.wall_timeout:
                 return "wall_timeout"
 

@@ -11,7 +11,7 @@ import time
 
 from .. import paths
 from ..sandbox import Sandbox, SandboxError
-from .base import LOGGER_RECV_BUF, FlightSpec
+from .base import LOGGER_RECV_BUF, FlightSpec, sensor_bus
 
 VIEW_READY_TIMEOUT_S = 60.0    # the view imports rerun and starts its servers (seconds under load)
 VIEW_GRPC_OFFSET = 786         # 9090 -> 9876, rerun's default pair
@@ -36,7 +36,8 @@ class FlightView:
         # reader drains. What the view still drops shows live only: flight.rrd is converted
         # from the complete log after the flight (fly()).
         cmd = [sys.executable, "-m", "mppid_view", "live", "--lcm-url",
-               f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}", "--netns-pid", str(self.sandbox.holder.pid),
+               f"{spec.lcm_url}&recv_buf_size={LOGGER_RECV_BUF}", "--sensor-lcm-url", sensor_bus(spec.lcm_url),
+               "--netns-pid", str(self.sandbox.holder.pid),
                "--web-port", str(spec.view_port), "--grpc-port", str(spec.view_port + VIEW_GRPC_OFFSET)]
         self.proc = subprocess.Popen(cmd, stdout=self.sandbox.open_log("view"), stderr=subprocess.STDOUT,
                                      stdin=subprocess.DEVNULL, cwd=paths.ROOT, process_group=0,

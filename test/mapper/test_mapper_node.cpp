@@ -1,0 +1,163 @@
+// mppid-mapper's node over memq://: a simulated depth frame in, a valid local_map_t out.
+#include <gtest/gtest.h>
+
+#include <lcm/lcm-cpp.hpp>
+#include <mppi_lcm/local_map_t.hpp>
+#include <mppi_lcm/point_cloud_t.hpp>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mapper/node.hpp"
+#include "sim/rng.hpp"
+#include "sim/sensors.hpp"
+
+namespace {
+
+struct MapSink {
+  std::vector<mppi_lcm::local_map_t> maps;
+  void on(const lcm::ReceiveBuffer*, const std::string&, const mppi_lcm::local_map_t* m) { maps.push_back(*m); }
+};
+
+mppi_lcm::point_cloud_t depth_frame(const std::vector<sim::Obstacle>& trees, const sim::Pose& pose) {
+  sim::RayWorld world(&trees, 0.0);
+  sim::DepthCameraSpec spec;
+  sim::Rng rng(4, 0);
+  sim::Frame f;
+  sim::DepthCamera(spec).capture(world, pose, rng, &f);
+  mppi_lcm::point_cloud_t m;
+  m.utime = 123456789;
+  m.seq = 7;
+  m.sensor = mppi_lcm::point_cloud_t::SENSOR_DEPTH_CAMERA;
+  for (int i = 0; i < 3; ++i) m.position[i] = static_cast<float>(pose.p[static_cast<std::size_t>(i)]);
+  for (int i = 0; i < 4; ++i) m.orientation[i] = static_cast<float>(pose.q[static_cast<std::size_t>(i)]);
+  m.min_range = static_cast<float>(spec.min_range);
+  m.max_range = static_cast<float>(spec.max_range);
+  m.n = static_cast<std::int32_t>(f.x.size());
+  m.x = f.x;
+  m.y = f.y;
+  m.z = f.z;
+  m.hit = f.hit;
+  return m;
+}
+
+TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
+  lcm::LCM lc("memq://");
+  ASSERT_TRUE(lc.good());
+  mapper::MapperNode node(mapper::load_settings("", {}), &lc);
+  std::FILE* sensed = std::tmpfile();
+  ASSERT_NE(sensed, nullptr);
+  node.record_sensed(sensed);
+  MapSink sink;
+  lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
+  EXPECT_FALSE(node.publish());  // nothing seen yet: nothing to say
+
+  std::vector<sim::Obstacle> trees(1);
+  trees[0].x = 6.0;
+  trees[0].y = -1.0;
+  trees[0].radius = 0.3;
+  sim::Pose pose;
+  pose.p = {10.0, -1.0, 2.0};
+  pose.q = {0.0, 0.0, 0.0, 1.0};  // yawed 180 deg: looking along -x, at the tree
+  const auto frame = depth_frame(trees, pose);
+  lc.publish("MPPI_DEPTH", &frame);
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_TRUE(node.publish());
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_EQ(sink.maps.size(), 1u);
+
+  const auto& m = sink.maps[0];
+  EXPECT_EQ(m.utime, frame.utime);
+  EXPECT_EQ(m.seq, 0);
+  EXPECT_FLOAT_EQ(m.resolution, 0.25f);
+  EXPECT_EQ(m.nx, 128);
+  EXPECT_EQ(m.ny, 128);
+  EXPECT_EQ(m.nz, 32);
+  EXPECT_EQ(m.n_cells, m.nx * m.ny * m.nz);
+  ASSERT_EQ(m.distance_mm.size(), static_cast<std::size_t>(m.n_cells));
+  EXPECT_FLOAT_EQ(m.max_distance, 5.0f);
+  // Centred on the sensor, on the grid.
+  EXPECT_NEAR(m.origin[0], 10.0 - 16.0, 0.25);
+  EXPECT_NEAR(m.origin[2], 2.0 - 4.0, 0.25);
+  // Between the vehicle and the tree, 2 m before its surface: ~2 m.
+  const auto cell = [&](double x, double y, double z) {
+    const int i = static_cast<int>((x - m.origin[0]) / m.resolution), j = static_cast<int>((y - m.origin[1]) / m.resolution),
+              k = static_cast<int>((z - m.origin[2]) / m.resolution);
+    return 1e-3 * m.distance_mm[static_cast<std::size_t>(i + m.nx * (j + m.ny * k))];
+  };
+  EXPECT_NEAR(cell(8.3, -1.0, 2.0), 2.0, 0.25);
+  EXPECT_LT(cell(6.0, -1.0, 2.0), 0.0);  // inside the trunk
+  EXPECT_NEAR(cell(20.0, 10.0, 2.0), 5.0, 1e-3);  // behind the camera: unknown, free, saturated
+  EXPECT_FALSE(node.publish());  // no new frame since
+
+  // What was sensed: the tree's columns, the first time they were occupied, nothing else.
+  std::rewind(sensed);
+  char line[65536];
+  ASSERT_NE(std::fgets(line, sizeof line, sensed), nullptr);
+  const std::string rec = line;
+  EXPECT_NE(rec.find("\"t\":0.000"), std::string::npos) << rec;
+  EXPECT_NE(rec.find("\"sensor\":[10.000,-1.000,2.000]"), std::string::npos) << rec;
+  int columns = 0;
+  for (std::size_t at = rec.find("[", rec.find("columns")) + 1; (at = rec.find('[', at)) != std::string::npos; ++at) {
+    double x = 0, y = 0;
+    ASSERT_EQ(std::sscanf(rec.c_str() + at, "[%lf,%lf]", &x, &y), 2);
+    EXPECT_LT(std::hypot(x - 6.0, y + 1.0), 0.3 + 0.4) << x << " " << y;
+    ++columns;
+  }
+  EXPECT_GE(columns, 2);
+  EXPECT_EQ(std::fgets(line, sizeof line, sensed), nullptr);  // one map, one line
+  std::fclose(sensed);
+}
+
+TEST(MapperNode, CountsAndIgnoresUndecodableFrames) {
+  lcm::LCM lc("memq://");
+  mapper::MapperNode node(mapper::load_settings("", {}), &lc);
+  const unsigned char junk[70] = {1, 2, 3};
+  lc.publish("MPPI_DEPTH", junk, sizeof junk);
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  EXPECT_FALSE(node.publish());
+  EXPECT_NE(node.stats_json().find("\"undecodable\":1"), std::string::npos);
+}
+
+TEST(MapperSettings, OverridesApplyAndUnknownKeysFail) {
+  const auto s = mapper::load_settings(MPPID_SOURCE_DIR "/config/mapper/mapper.yaml",
+                                       {"map.resolution=0.2", "rate_hz=20", "inputs=[MPPI_LIDAR]"});
+  EXPECT_DOUBLE_EQ(s.map.resolution, 0.2);
+  EXPECT_DOUBLE_EQ(s.rate_hz, 20.0);
+  ASSERT_EQ(s.inputs.size(), 1u);
+  EXPECT_EQ(s.inputs[0], "MPPI_LIDAR");
+  EXPECT_THROW(mapper::load_settings("", {"map.resolutio=0.2"}), std::runtime_error);
+  EXPECT_THROW(mapper::load_settings("", {"rate_hz=0"}), std::runtime_error);
+}
+
+}  // namespace
+
+namespace {
+
+TEST(MapperNode, ACountTheBytesDoNotBackIsUndecodable) {
+  mppi_lcm::point_cloud_t m;
+  m.n = 2;
+  m.x = {1, 2};
+  m.y = {0, 0};
+  m.z = {0, 0};
+  m.hit = {1, 0};
+  std::vector<unsigned char> buf(static_cast<std::size_t>(m.getEncodedSize()));
+  ASSERT_EQ(m.encode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
+  mppi_lcm::point_cloud_t out;
+  ASSERT_TRUE(mapper::decode_cloud(buf.data(), buf.size(), &out));
+  EXPECT_EQ(out.n, 2);
+  EXPECT_EQ(out.hit[1], 0);
+  // n sits after the fingerprint, utime, seq, sensor, position, orientation and the ranges.
+  const std::size_t at = 8 + 8 + 8 + 1 + 12 + 16 + 4 + 4;
+  ASSERT_EQ(buf[at + 3], 2);
+  for (const int lie : {0x7F, 0xFF}) {  // 2^31 - 1 points, or a negative count
+    auto bad = buf;
+    bad[at] = static_cast<unsigned char>(lie);
+    EXPECT_FALSE(mapper::decode_cloud(bad.data(), bad.size(), &out));
+  }
+  EXPECT_FALSE(mapper::decode_cloud(buf.data(), buf.size() - 1, &out));  // truncated
+}
+
+}  // namespace
