@@ -7,7 +7,7 @@
 #
 #   tools/gpu/run-all.sh [--stages setup,build,test,bench,daemon,campaign] [--quick]
 #                        [--forest-seeds 20] [--team-seeds 10] [--first-seed 51]
-#                        [--team-scenarios LIST] [--realtime-jobs 1] [--daemon-seconds 60]
+#                        [--forest-scenarios LIST] [--team-scenarios LIST] [--realtime-jobs 1] [--daemon-seconds 60]
 #                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR]
 #
 #   --stages          which stages (default: all; setup always runs; also: cudatest = the CUDA
@@ -18,6 +18,8 @@
 #                     --stages campaign alone without rebuilding.
 #   --quick           a short end-to-end check: daemon-bench 20 s, 2 seeds of forest_4m and 1
 #                     of each team scenario, fewer benchmark iterations
+#   --forest-scenarios the forest campaign's scenarios (default forest_4m; e.g. forest_4m_sensed,
+#                     forest_4m_sensed_lidar: the sensed forests, docs/sensing.md)
 #   --team-scenarios  the team campaign's scenarios (default team3_fixed,team3_moving,
 #                     team9_fixed,team9_moving)
 #   --realtime-jobs N real-time flights at once, each pinned to its own 1/N of the cores
@@ -34,6 +36,7 @@ cd "$ROOT"
 D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
 B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"  # outside a carried folder, a warm machine keeps it
 STAGES="build,test,bench,daemon,campaign"
+FOREST_SCEN=forest_4m
 TEAM_SCEN=team3_fixed,team3_moving,team9_fixed,team9_moving
 QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGER=state CAMP_TIMEOUT=7200
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
@@ -44,13 +47,14 @@ while (($#)); do
     --forest-seeds) FOREST_SEEDS="$2"; shift ;;
     --team-seeds) TEAM_SEEDS="$2"; shift ;;
     --first-seed) FIRST_SEED="$2"; shift ;;
+    --forest-scenarios) FOREST_SCEN="$2"; shift ;;
     --team-scenarios) TEAM_SCEN="$2"; shift ;;
     --realtime-jobs) RT_JOBS="$2"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
     --trigger) TRIGGER="$2"; shift ;;
     --campaign-timeout) CAMP_TIMEOUT="$2"; shift ;;
     --results) RES="$2"; shift ;;
-    -h|--help) sed -n '2,27s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,29s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "run-all.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -240,7 +244,7 @@ if want campaign; then
     note ""
     cat "$RES/$1/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
   }
-  camp campaign_forest forest_4m "$FOREST_SEEDS"
+  camp campaign_forest "$FOREST_SCEN" "$FOREST_SEEDS"
   camp campaign_teams "$TEAM_SCEN" "$TEAM_SEEDS"
   say "campaigns done"
 fi
