@@ -7,7 +7,7 @@
 #
 #   tools/gpu/run-all.sh [--stages setup,build,test,bench,daemon,campaign] [--quick]
 #                        [--forest-seeds 20] [--team-seeds 10] [--first-seed 51]
-#                        [--forest-scenarios LIST] [--team-scenarios LIST] [--realtime-jobs 1] [--daemon-seconds 60]
+#                        [--forest-scenarios LIST] [--team-scenarios LIST] [--campaign-set K=V]... [--realtime-jobs 1] [--daemon-seconds 60]
 #                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR]
 #
 #   --stages          which stages (default: all; setup always runs; also: cudatest = the CUDA
@@ -20,6 +20,7 @@
 #                     of each team scenario, fewer benchmark iterations
 #   --forest-scenarios the forest campaign's scenarios (default forest_4m; e.g. forest_4m_sensed,
 #                     forest_4m_sensed_lidar: the sensed forests, docs/sensing.md)
+#   --campaign-set K=V  mppid's --set for every campaign flight (repeatable; e.g. cost.w_speed=0.5)
 #   --team-scenarios  the team campaign's scenarios (default team3_fixed,team3_moving,
 #                     team9_fixed,team9_moving)
 #   --realtime-jobs N real-time flights at once, each pinned to its own 1/N of the cores
@@ -40,6 +41,7 @@ FOREST_SCEN=forest_4m
 TEAM_SCEN=team3_fixed,team3_moving,team9_fixed,team9_moving
 QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGER=state CAMP_TIMEOUT=7200
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
+CAMP_SETS=()
 while (($#)); do
   case "$1" in
     --stages) STAGES="$2"; shift ;;
@@ -48,13 +50,14 @@ while (($#)); do
     --team-seeds) TEAM_SEEDS="$2"; shift ;;
     --first-seed) FIRST_SEED="$2"; shift ;;
     --forest-scenarios) FOREST_SCEN="$2"; shift ;;
+    --campaign-set) CAMP_SETS+=(--set "$2"); shift ;;
     --team-scenarios) TEAM_SCEN="$2"; shift ;;
     --realtime-jobs) RT_JOBS="$2"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
     --trigger) TRIGGER="$2"; shift ;;
     --campaign-timeout) CAMP_TIMEOUT="$2"; shift ;;
     --results) RES="$2"; shift ;;
-    -h|--help) sed -n '2,29s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,30s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "run-all.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -237,10 +240,10 @@ if want campaign; then
   camp() {  # name scenarios seeds
     (($3 > 0)) || return 0
     timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$2" \
-      --seeds "$3" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" --out "$RES/$1" >"$RES/$1.log" 2>&1 ||
+      --seeds "$3" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" "${CAMP_SETS[@]}" --out "$RES/$1" >"$RES/$1.log" 2>&1 ||
       fail "campaign $1 (see $1.log)"
     note ""
-    note "### $1 (seeds $FIRST_SEED..$((FIRST_SEED + $3 - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER)"
+    note "### $1 (seeds $FIRST_SEED..$((FIRST_SEED + $3 - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER${CAMP_SETS[*]:+, ${CAMP_SETS[*]}})"
     note ""
     cat "$RES/$1/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
   }
