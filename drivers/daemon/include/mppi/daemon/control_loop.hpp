@@ -101,7 +101,7 @@ struct LoopSettings {
   // The local map (local_map_t, forest tasks; the inbox takes it): a map older than this behind
   // the newest state is stale. Arriving, it is refused; in use (no newer one came), the cost
   // keeps it and its cycles are counted (map_stale_cycles): the trees it holds are still
-  // there, while a map dropped would leave the cost blind to them (docs/sensing-cost.md).
+  // there, while a map dropped would leave the cost blind to them (docs/sensing.md).
   std::int64_t map_timeout_ns = 500 * rt::kNsPerMs;
 };
 
