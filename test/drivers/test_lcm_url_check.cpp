@@ -58,3 +58,23 @@ TEST(LcmUrlCheck, EveryShippedUrlStaysOnTheHost) {
   }
   EXPECT_GE(seen, 6);  // the scan found the URLs it is about
 }
+
+// A daemon that takes local maps opens udpm with a receive buffer a map fits in.
+TEST(LcmUrlCheck, MapsGetAReceiveBufferOnUdpmOnly) {
+  using mppi::daemon::kMapReceiveBufferBytes;
+  using mppi::daemon::map_receive_buffer_warning;
+  using mppi::daemon::with_map_receive_buffer;
+  const std::string four = std::to_string(kMapReceiveBufferBytes);
+  EXPECT_EQ(with_map_receive_buffer("udpm://239.255.76.67:7667?ttl=0"), "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=" + four);
+  EXPECT_EQ(with_map_receive_buffer("udpm://239.255.76.67:7667"), "udpm://239.255.76.67:7667?recv_buf_size=" + four);
+  EXPECT_EQ(with_map_receive_buffer("mpudpm://239.255.76.67:7667?ttl=0"), "mpudpm://239.255.76.67:7667?ttl=0&recv_buf_size=" + four);
+  EXPECT_EQ(with_map_receive_buffer("udpm://239.255.76.67:7667?ttl=0&recv_buf_size=123"),
+            "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=123");  // the URL's own wins
+  EXPECT_EQ(with_map_receive_buffer("memq://"), "memq://");
+  EXPECT_EQ(with_map_receive_buffer("tcpq://127.0.0.1:7700"), "tcpq://127.0.0.1:7700");
+  const std::string url = with_map_receive_buffer("udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_EQ(map_receive_buffer_warning(url, kMapReceiveBufferBytes), "");
+  EXPECT_EQ(map_receive_buffer_warning(url, 0), "");  // unknown: nothing to say
+  EXPECT_NE(map_receive_buffer_warning(url, 212992).find("net.core.rmem_max"), std::string::npos);
+  EXPECT_EQ(map_receive_buffer_warning("udpm://239.255.76.67:7667?ttl=0", 212992), "");  // asks for nothing
+}

@@ -25,6 +25,27 @@ bool loopback_host(const std::string& host) {
 
 }  // namespace
 
+std::string with_map_receive_buffer(const std::string& url) {
+  const std::size_t sep = url.find("://");
+  if (sep == std::string::npos) return url;
+  const std::string provider = url.substr(0, sep);
+  if (provider != "udpm" && provider != "mpudpm") return url;
+  const std::size_t q = url.find('?');
+  if (q != std::string::npos && !option(url.substr(q + 1), "recv_buf_size").empty()) return url;
+  return url + (q == std::string::npos ? "?" : "&") + "recv_buf_size=" + std::to_string(kMapReceiveBufferBytes);
+}
+
+std::string map_receive_buffer_warning(const std::string& url, long rmem_max) {
+  const std::size_t q = url.find('?');
+  if (q == std::string::npos || rmem_max <= 0) return {};
+  const std::string asked = option(url.substr(q + 1), "recv_buf_size");
+  const long bytes = asked.empty() ? 0 : std::strtol(asked.c_str(), nullptr, 10);
+  if (bytes <= rmem_max) return {};
+  return "the socket receive buffer is capped at net.core.rmem_max = " + std::to_string(rmem_max) + " bytes, below the " +
+         std::to_string(bytes) + " asked: large local maps may be dropped (sysctl -w net.core.rmem_max=" +
+         std::to_string(bytes) + ")";
+}
+
 std::string lcm_url_leaves_host(const std::string& url) {
   const std::size_t sep = url.find("://");
   if (sep == std::string::npos) return "not provider://address: cannot tell where it sends";

@@ -13,6 +13,7 @@
 
 #include <atomic>
 #include <cstdlib>
+#include <fstream>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -123,6 +124,13 @@ void apply_options(const Options& o, DaemonSettings* ds) {
   if (const std::string why = mppi::daemon::lcm_url_leaves_host(ds->lcm_url); !why.empty())
     spdlog::warn("lcm_url {}: {}", ds->lcm_url, why);  // legal, but the bus would leave this machine
   if (o.lockstep) ds->loop.lockstep = true;
+  if (ds->local_map) {
+    ds->lcm_url = mppi::daemon::with_map_receive_buffer(ds->lcm_url);
+    long rmem_max = 0;
+    std::ifstream("/proc/sys/net/core/rmem_max") >> rmem_max;
+    if (const std::string why = mppi::daemon::map_receive_buffer_warning(ds->lcm_url, rmem_max); !why.empty())
+      spdlog::warn("lcm_url {}: {}", ds->lcm_url, why);
+  }
   // The deadline guard must preempt a stalled optimizer (and its OpenMP workers).
   if (o.realtime && ds->realtime.fifo_priority > 0)
     ds->loop.guard_fifo_priority = std::min(99, ds->realtime.fifo_priority + 2);

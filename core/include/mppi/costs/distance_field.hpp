@@ -14,9 +14,9 @@
 // Why not the cells inside the parameters, as the cylinders are: Mppi::iterate copies the
 // parameters every cycle (Task::prepare's working copy), the CUDA backend copies them into its
 // per-cycle input, and the daemon copies its inputs into them: 2 MiB each time, ~0.2 ms of a
-// loaded host core and ~80 us of PCIe a cycle, for a map that changes at the sensor's rate
-// (10-30 Hz), not the loop's. Through the pointer a cycle copies 48 bytes and the GPU takes
-// the cells once per map.
+// loaded host core and ~0.2 ms of copy to the device a cycle (1 MB: ~100-130 us measured), for
+// a map that changes at the sensor's rate (10-30 Hz), not the loop's. Through the pointer a
+// cycle copies 48 bytes and the GPU takes the cells once per map.
 //
 // The cell type and the capacity, with numbers. int16 millimetres is local_map_t's own type
 // (the daemon takes a message without a conversion), spans +-32.7 m (far beyond the cost's
@@ -26,12 +26,13 @@
 // (config/tasks/quadrotor_forest.yaml: T = 100, dt = 0.02) the plan reaches 20 m, and a
 // rollout's lateral spread a few metres; obstacles weigh in within ~6 m of a rollout. A window
 // of 32 x 32 x 6.4 m at 0.2 m cells (160 x 160 x 32 = 819,200 cells, 1.6 MB) rolling with the
-// vehicle covers 1.6 s of the horizon at 10 m/s with the vehicle centred, the whole horizon
-// when the mapper shifts it half ahead along the velocity, and the trees' full height at
-// forest altitude. kMaxCells = 2^20 (2 MiB) leaves room for 0.2 m cells over 32 x 32 x 8 m or
-// 0.25 m over 40 x 40 x 10 m. Cost per sample and step: 8 corner reads (4 32-bit gathers on
-// the SIMD lanes, the two x-neighbours of each read in one word) and ~25 flops, about one
-// cylinder's distance.
+// vehicle covers 1.6 s of the horizon at 10 m/s with the vehicle centred, the whole 20 m when
+// the mapper keeps the vehicle a quarter in from the window's back edge (24 m ahead), and the
+// trees' full height at forest altitude. kMaxCells = 2^20 (2 MiB) leaves room for 0.2 m cells
+// over 32 x 32 x 8 m or 0.25 m over 40 x 40 x 10 m. Cost per sample and step: 8 corner reads
+// (4 32-bit gathers on the SIMD lanes, the two x-neighbours of each read in one word) and ~25
+// flops; measured (docs/sensing-cost.md), a rollout step with the field alone is cheaper than
+// with the cylinders on every SIMD target (AVX-512: 12.4 against 15.1 ns a sample-step).
 //
 // Lookup. The cell (i, j, k) holds the distance at its centre. A point inside the grid's box
 // [origin, origin + n * resolution) reads the trilinear interpolation of the eight cell centres
