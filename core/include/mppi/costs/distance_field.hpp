@@ -31,7 +31,7 @@
 // trees' full height at forest altitude. kMaxCells = 2^20 (2 MiB) leaves room for 0.2 m cells
 // over 32 x 32 x 8 m or 0.25 m over 40 x 40 x 10 m. Cost per sample and step: 8 corner reads
 // (4 32-bit gathers on the SIMD lanes, the two x-neighbours of each read in one word) and ~25
-// flops; measured (docs/sensing-cost.md), a rollout step with the field alone is cheaper than
+// flops; measured (docs/sensing.md), a rollout step with the field alone is cheaper than
 // with the cylinders on every SIMD target (AVX-512: 12.4 against 15.1 ns a sample-step).
 //
 // Lookup. The cell (i, j, k) holds the distance at its centre. A point inside the grid's box
