@@ -108,4 +108,4 @@ def test_ardupilot_sequences():
     p.land(ap)
     assert ap.sent[-1] == (SET_MODE, [1, 9])
     p.hold(ap)
-    assert ap.sent[-1] == (SET_MODE, [1, 5])
+    assert ap.sent[-1] == (SET_MODE, [1, 17])  # BRAKE: holds whatever the sticks say (LOITER reads the throttle)
