@@ -1,0 +1,131 @@
+"""The score of a flight through PX4 SITL with SIH (flights/px4.py): px4_truth.py's record
+turned into truth.jsonl (ap_truth.py's format), then scored as ArduCopter's flights are
+(ap_score.py: per leg, the true and the estimated distance to the reference; crashes, tilt,
+the forest's clearance), plus what only PX4 shows: its clock against ours, and how old the
+bridge's states looked to mppid.
+
+The truth's local frame is PX4's estimator's: SIH's geodetic position projected as PX4
+projects GPS (its MapProjection: azimuthal equidistant on a sphere of 6 371 000 m) about the
+estimator's origin (GPS_GLOBAL_ORIGIN; without one, about the first truth sample, shifted
+onto the estimate there). Its times: PX4's boot clock for PX4's own controller (the mission
+tool ran on it); for mppid, the boot clock mapped onto this host's wall clock by
+mppi_mavlink.clock_sync, as the bridge maps the states' (SIH's clock runs ~1 % slow).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import ap_score
+from .logs import read_jsonl
+
+PX4_EARTH_R = 6_371_000.0   # CONSTANTS_RADIUS_OF_EARTH (PX4's geo library)
+
+
+def project(lat_e7, lon_e7, ref_lat_e7, ref_lon_e7):
+    """(north, east) [m] of points from a reference, as PX4's MapProjection::project."""
+    lat, lon = np.radians(np.asarray(lat_e7, float) * 1e-7), np.radians(np.asarray(lon_e7, float) * 1e-7)
+    lat0, lon0 = math.radians(ref_lat_e7 * 1e-7), math.radians(ref_lon_e7 * 1e-7)
+    cos_dlon = np.cos(lon - lon0)
+    c = np.arccos(np.clip(math.sin(lat0) * np.sin(lat) + math.cos(lat0) * np.cos(lat) * cos_dlon, -1.0, 1.0))
+    k = np.where(np.abs(c) > 0, c / np.where(np.abs(c) > 0, np.sin(c), 1.0), 1.0)
+    north = k * (math.cos(lat0) * np.sin(lat) - math.sin(lat0) * np.cos(lat) * cos_dlon) * PX4_EARTH_R
+    east = k * np.cos(lat) * np.sin(lon - lon0) * PX4_EARTH_R
+    return north, east
+
+
+def tilt_deg(q) -> float:
+    w, x, y, z = q
+    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+
+
+def _local(truth, est, origin) -> np.ndarray:
+    """ENU positions of the truth in the estimator's frame."""
+    lat, lon, alt = (np.array([r[k] for r in truth], float) for k in ("lat", "lon", "alt"))
+    if origin:
+        n, e = project(lat, lon, origin["lat_e7"], origin["lon_e7"])
+        return np.stack([e, n, alt * 1e-3 - origin["alt_mm"] * 1e-3], axis=1)
+    n, e = project(lat, lon, lat[0], lon[0])
+    X = np.stack([e, n, (alt - alt[0]) * 1e-3], axis=1)
+    if est:  # the estimate at the first truth sample (at rest): the shared origin
+        e0 = min(est, key=lambda r: abs(r["boot_us"] - truth[0]["boot_us"]))
+        X += np.array(e0["est"])
+    return X
+
+
+def _mission_clock(truth, clock: str) -> np.ndarray:
+    boot = np.array([r["boot_us"] for r in truth], float)
+    if clock == "boot":
+        return boot
+    from mppi_mavlink import clock_sync
+    sync = clock_sync.ClockSync()
+    return np.array([sync.update(int(r["boot_us"]), int(r["wall_us"])) for r in truth], float)
+
+
+def convert(out: Path) -> list[dict]:
+    """truth_raw.jsonl -> truth.jsonl (ap_truth.py's lines, each with `mission_us`); the lines."""
+    raw = read_jsonl(out / "truth_raw.jsonl")
+    truth = [r for r in raw if "truth" in r]
+    est = [r for r in raw if "est" in r]
+    if not truth:
+        return []
+    mission = read_jsonl(out / "mission.jsonl") if (out / "mission.jsonl").is_file() else []
+    clock = next((m.get("clock", "state") for m in mission if m.get("event") == "mission"), "state")
+    origin = next((r for r in raw if r.get("event") == "origin"), None)
+    X, t_mission = _local(truth, est, origin), _mission_clock(truth, clock)
+    est_t = np.array([r["boot_us"] for r in est], float)
+    lines, mode, armed = [], "", False
+    events = iter(sorted((r for r in raw if "event" in r), key=lambda r: r["wall_us"]))
+    ev = next(events, None)
+    for i, r in enumerate(truth):
+        while ev is not None and ev["wall_us"] <= r["wall_us"]:
+            mode = ev["mode"] if ev["event"] == "mode" else mode
+            armed = {"armed": True, "disarmed": False}.get(ev["event"], armed)
+            lines.append({**ev, "boot_us": r["boot_us"]})
+            ev = next(events, None)
+        j = int(np.searchsorted(est_t, r["boot_us"], side="right")) - 1
+        lines.append({"boot_us": r["boot_us"], "wall_us": r["wall_us"], "mission_us": int(t_mission[i]),
+                      "x": [round(float(c), 4) for c in X[i]], "v": r["v"], "tilt_deg": round(tilt_deg(r["q"]), 2),
+                      "est": est[j]["est"] if j >= 0 else None, "mode": mode, "armed": armed})
+    with open(out / "truth.jsonl", "w") as f:
+        f.writelines(json.dumps(line) + "\n" for line in lines)
+    return lines
+
+
+def clock_rate(truth: list[dict]) -> dict:
+    """PX4's clock against ours: the least-squares slope of boot vs receive time."""
+    rows = [r for r in truth if "x" in r]
+    if len(rows) < 10:
+        return {}
+    w = np.array([r["wall_us"] for r in rows], float) * 1e-6
+    b = np.array([r["boot_us"] for r in rows], float) * 1e-6
+    slope = np.polyfit(w - w[0], b - b[0], 1)[0]
+    return {"px4_clock_rate_ppm": round(float((slope - 1.0) * 1e6)),
+            "px4_behind_at_end_s": round(float((w[-1] - w[0]) - (b[-1] - b[0])), 3)}
+
+
+def state_ages(out: Path) -> dict:
+    """How old the bridge's states looked to mppid (utime - sample_utime), from the LCM log."""
+    from . import logs
+    log = out / "flight.lcmlog"
+    if not log.is_file():
+        return {}
+    states = [m for _, m in logs.read_lcm_log(log, {"MPPI_STATE"}).get("MPPI_STATE", [])]
+    if not states:
+        return {}
+    a = np.array([m.utime - m.sample_utime for m in states], float) * 1e-3
+    return {"state_age_ms": {"p50": round(float(np.median(a)), 2), "p99": round(float(np.percentile(a, 99)), 2),
+                             "max": round(float(a.max()), 2)}}
+
+
+def score_flight(out: Path, spec, info: dict) -> dict:
+    out = Path(out)
+    truth = convert(out)
+    res = ap_score.score_flight(out, spec, info, autopilot="px4")
+    res["px4_clock"] = clock_rate(truth)
+    if spec.controller != "px4":
+        res.update(state_ages(out))
+    return res
