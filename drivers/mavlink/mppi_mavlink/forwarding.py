@@ -1,7 +1,11 @@
 """mppid's commands -> the wire: each command_t through the gate (gate.py), converted (thrust
 map, FLU -> FRD) and sent as one SET_ATTITUDE_TARGET at once, while engaged; mppid's status;
 the counters by reason; whether the setpoint stream runs; the stream check `offboard` makes;
-the trace of every forwarded setpoint. Nothing is ever re-sent or made up."""
+the trace of every forwarded setpoint. Nothing is ever re-sent or made up, but for one
+setpoint: where the autopilot flies the last rate setpoint on (PX4, until COM_OF_LOSS_T), a
+stream that stops while engaged ends with zero body rates at hover thrust, so that a pause
+(mppid holding on a stale state, a stall) stops the vehicle turning instead of letting it fly
+mppid's last rates for up to COM_OF_LOSS_T."""
 from __future__ import annotations
 
 import json
@@ -19,7 +23,8 @@ from .state import mono_us
 log = logging.getLogger("mppi_mavlink")
 ATTITUDE_IGNORE = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 COUNTERS = ("setpoints_sent", "dropped_not_advanced", "dropped_unhealthy", "dropped_nonfinite", "dropped_stale",
-            "dropped_refused", "dropped_disengaged", "dropped_undecodable", "states_published", "states_rejected")
+            "dropped_refused", "dropped_disengaged", "dropped_undecodable", "states_published", "states_rejected",
+            "stop_setpoints_sent")
 
 
 class Forwarder:
@@ -136,7 +141,20 @@ class Forwarder:
             log.info("setpoint stream started")
         else:
             log.warning("setpoint stream stopped (%s)", reason or "no fresh command")
+            self._stop_turning()
         self.on_stream_change(on, reason)
+
+    def _stop_turning(self):
+        """The stream stopped while engaged, on an autopilot that flies the last setpoint on:
+        one setpoint of zero body rates at hover thrust (the module docstring)."""
+        if not (self.ap.profile.flies_last_setpoint and self.engagement.forwarding and self.checks.thrust is not None):
+            return
+        hover = self.checks.thrust.hover
+        boot_ms = int(time.monotonic() * 1000) & 0xFFFFFFFF
+        target = self.ap.target_system
+        if self.link.send(lambda mv: mv.set_attitude_target_send(
+                boot_ms, target, self.target_component, ATTITUDE_IGNORE, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, hover)):
+            self.counters["stop_setpoints_sent"] += 1
 
     # ---- housekeeping and `offboard` ----------------------------------------------------
     def check_stream(self):

@@ -18,7 +18,7 @@ position, velocity and acceleration at 50 Hz; no mppid, no bridge): the baseline
 
 PX4 runs in a folder of the flight's own (OUT/px4: fresh parameters every flight, its ULog in
 OUT/px4/log/), with config/px4/px4_mppid.params (the parameters docs/failsafes.md argues)
-given as PX4_PARAM_ variables, which PX4's SITL start-up script applies after the airframe's.
+and config/px4/offboard_baseline.params given as PX4_PARAM_ variables, which PX4's SITL start-up script applies after the airframe's.
 PX4 and the bridge run at SCHED_FIFO 85 (above mppid's 80), as the bridge's unit runs it: at
 normal priority SIH's loop stalls for 0.2 s now and then on a loaded machine (docs/px4.md).
 """
@@ -38,6 +38,9 @@ from .ardupilot import IO_FIFO_PRIORITY, mission_command, mppid_and_bridge
 from .base import Flight, FlightError, FlightSpec, Plan, logger_command
 
 PARAMS = paths.ROOT / "config" / "px4" / "px4_mppid.params"
+# The offboard baseline's position-controller tuning (argued in the file): loaded for every
+# flight, mppid's too, so both controllers take off and land on the same vehicle.
+BASELINE = paths.ROOT / "config" / "px4" / "offboard_baseline.params"
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "px4_sitl.yaml"
 # mppid's settings through PX4, over the task file (argued there), then the mission's, then --set.
 OVERLAY = paths.ROOT / "config" / "px4" / "mppid_overlay.yaml"
@@ -105,7 +108,7 @@ class Px4Flight(Flight):
         fifo = fifo_allowed()
         work = self.out / "px4"
         work.mkdir(exist_ok=True)
-        params = {**px4_params(), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0))}
+        params = {**px4_params(PARAMS), **px4_params(BASELINE), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0))}
         cmds = {
             "logger": logger_command(spec, self.out),
             "recorder": [sys.executable, "-m", "sitl_harness.px4_truth", "--out", str(self.out)],
