@@ -76,6 +76,11 @@ def _add_run_parser(sub):
                    help="a parameter update sent in flight, T seconds (state time) after the first state, e.g. "
                         "2:mppi.rollouts=512; the answers go to score.json (param_results)")
     r.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit [s] (default from the scenario)")
+    r.add_argument("--fault", action="append", default=[], metavar="ACTION@T",
+                   help="--autopilot px4: a failsafe flight; ACTION (kill_mppid, stop_bridge, gcs_hold, gcs_position, "
+                        "link_cut:SECONDS) T seconds after the first path leg starts (docs/px4.md)")
+    r.add_argument("--autopilot-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="--autopilot px4: a PX4 parameter over config/px4's files (e.g. COM_OBL_RC_ACT=0)")
     r.add_argument("--kill-controller-after", type=float, default=0.0, help=argparse.SUPPRESS)
     r.add_argument("--lcm-port", type=int, default=0, help=argparse.SUPPRESS)   # campaigns: one bus per flight
     r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
@@ -244,14 +249,31 @@ def _run_spec(a):
                       ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
                       kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
                       params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, px4_bin=a.px4_bin, view=a.view,
-                      view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
+                      view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd,
+                      faults=a.fault, autopilot_params=a.autopilot_param)
     try:
+        _fault_check(a)
         for u in a.param:
             parse_update(u)
         paths.scenario_label(a.scenario)
     except (ValueError, FileNotFoundError) as e:
         raise UsageError(str(e)) from None
     return spec
+
+
+def _fault_check(a) -> None:
+    """--fault and --autopilot-param: PX4 flights only, well-formed (ValueError otherwise)."""
+    from .px4_faults import parse_fault
+
+    if (a.fault or a.autopilot_param) and a.autopilot != "px4":
+        raise ValueError("--fault and --autopilot-param are for --autopilot px4")
+    if a.fault and a.controller != "mppid":
+        raise ValueError("--fault: failsafe flights fly mppid")
+    for f in a.fault:
+        parse_fault(f)
+    for kv in a.autopilot_param:
+        if "=" not in kv:
+            raise ValueError(f"--autopilot-param {kv!r}: expected NAME=VALUE")
 
 
 def _set_niceness(niceness: int) -> None:

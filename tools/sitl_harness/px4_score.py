@@ -121,6 +121,25 @@ def state_ages(out: Path) -> dict:
                              "max": round(float(a.max()), 2)}}
 
 
+def fault_report(truth: list[dict], fault: dict, window_s: float = 10.0) -> dict:
+    """What PX4 did after a fault (a failsafe flight): its modes and messages, and the truth
+    over the next `window_s`: the largest tilt, the lowest altitude, the horizontal drift."""
+    t_f = fault["wall_us"]
+    rel = lambda r: round((r["wall_us"] - t_f) * 1e-6, 2)  # noqa: E731
+    after = [r for r in truth if "x" in r and 0 <= r["wall_us"] - t_f <= window_s * 1e6]
+    events = [r for r in truth if "event" in r and r["wall_us"] >= t_f]
+    rep = {**fault,
+           "modes": [(rel(e), e["mode"]) for e in events if e["event"] == "mode"][:8],
+           "armed": [(rel(e), e["event"]) for e in events if e["event"] in ("armed", "disarmed")][:4],
+           "statustexts": [(rel(e), e["text"]) for e in events if e["event"] == "statustext"][:16]}
+    if after:
+        X = np.array([r["x"] for r in after])
+        rep.update(alt_at_fault=round(float(X[0, 2]), 2), min_alt=round(float(X[:, 2].min()), 2),
+                   max_tilt_deg=max(r["tilt_deg"] for r in after),
+                   drift_m=round(float(np.max(np.linalg.norm(X[:, :2] - X[0, :2], axis=1))), 2))
+    return rep
+
+
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
     truth = convert(out)
@@ -128,4 +147,7 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     res["px4_clock"] = clock_rate(truth)
     if spec.controller != "px4":
         res.update(state_ages(out))
+    res.pop("state_to_command_samples_ms", None)
+    if info.get("faults"):
+        res["faults"] = [fault_report(truth, f) for f in info["faults"]]
     return res

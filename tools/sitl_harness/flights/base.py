@@ -47,6 +47,8 @@ class FlightSpec:
     autopilot: str = "sim"           # the plant: a name of flights.PLANTS (sim, ardupilot, px4)
     ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
     px4_bin: str | None = None       # PX4 SITL's bin/px4 (px4_sitl_sih; else $MPPID_PX4_BIN)
+    faults: list[str] = field(default_factory=list)  # PX4: ACTION@T after the first path leg (px4_faults.py)
+    autopilot_params: list[str] = field(default_factory=list)  # PX4: NAME=VALUE over config/px4's files
     view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
     view_hold: float = 0.0           # ... kept serving this long after the flight [s]
     view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]

@@ -26,13 +26,14 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import sys
 import time
 from pathlib import Path
 
 import yaml
 
-from .. import paths
+from .. import paths, px4_faults
 from ..sandbox import fifo_allowed
 from .ardupilot import IO_FIFO_PRIORITY, mission_command, mppid_and_bridge
 from .base import Flight, FlightError, FlightSpec, Plan, logger_command
@@ -44,9 +45,12 @@ BASELINE = paths.ROOT / "config" / "px4" / "offboard_baseline.params"
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "px4_sitl.yaml"
 # mppid's settings through PX4, over the task file (argued there), then the mission's, then --set.
 OVERLAY = paths.ROOT / "config" / "px4" / "mppid_overlay.yaml"
-# The airframe mppid and the bridge are given; `--set vehicle=FILE` replaces it for both.
-VEHICLE = paths.ROOT / "config" / "vehicles" / "sim_rate_1kg.yaml"
+# The airframe mppid and the bridge are given (tools/sysid's fit of SIH's quadrotor from a PX4
+# ULog); `--set vehicle=FILE` replaces it for both.
+VEHICLE = paths.ROOT / "config" / "vehicles" / "px4_sih_identified.yaml"
 OFFBOARD_URL = "udpin:127.0.0.1:14540"
+# A failsafe flight ends this long after its last fault (what PX4 did is seen by then).
+FAULT_WATCH_S = 20.0
 SIH_ENV = {"PX4_SIM_MODEL": "sihsim_quadx", "PX4_SIMULATOR": "sihsim"}
 BUILD_HINT = ("build PX4 SITL with SIH (`make px4_sitl_sih`) from a PX4 checkout, outside this repository "
               "(docs/px4.md names the build flown here), then pass --px4-bin <checkout>/build/px4_sitl_sih/bin/px4 "
@@ -85,6 +89,8 @@ class Px4Flight(Flight):
     def __init__(self, spec: FlightSpec, binary: Path):
         super().__init__(spec)
         self.binary = binary
+        self.faults_done: list[dict] = []
+        self.last_fault = None
 
     @classmethod
     def create(cls, spec: FlightSpec) -> "Px4Flight":
@@ -98,6 +104,8 @@ class Px4Flight(Flight):
             raise FlightError(f"{mission_path} is not a mission (config/missions/*.yaml): --autopilot px4 flies missions")
         cmds = self._commands(mission_path, mission)
         record = {"autopilot": "px4", "px4_bin": str(self.binary), "commands": cmds, "mission": str(mission_path),
+                  "faults": self.faults_done, "autopilot_params": spec.autopilot_params,
+                  "load_avg_start": [round(x, 2) for x in os.getloadavg()],  # the machine is shared: SIH lags under load
                   "spec": {"scenario": spec.scenario, "seed": spec.seed, "controller": spec.controller,
                            "realtime": True, "lcm_url": spec.lcm_url}}
         return Plan(commands=cmds, wall_timeout=spec.wall_timeout or float(mission.get("wall_timeout", 240.0)),
@@ -108,7 +116,8 @@ class Px4Flight(Flight):
         fifo = fifo_allowed()
         work = self.out / "px4"
         work.mkdir(exist_ok=True)
-        params = {**px4_params(PARAMS), **px4_params(BASELINE), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0))}
+        params = {**px4_params(PARAMS), **px4_params(BASELINE), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0)),
+                  **dict(kv.split("=", 1) for kv in spec.autopilot_params)}
         cmds = {
             "logger": logger_command(spec, self.out),
             "recorder": [sys.executable, "-m", "sitl_harness.px4_truth", "--out", str(self.out)],
@@ -122,6 +131,11 @@ class Px4Flight(Flight):
                                               vehicle=VEHICLE, overlay=OVERLAY)
         cmds.update(controller=ctrl, bridge=bridge,
                     mission=mission_command(spec, mission_path, self.out) + ["--bridge", str(sock)])
+        cut = [px4_faults.parse_fault(f) for f in spec.faults if f.startswith("link_cut")]
+        if cut:  # the bridge behind the relay, which can cut the link
+            cmds["bridge"] += ["--set", f"mavlink.url=udpin:127.0.0.1:{px4_faults.BRIDGE_PORT}"]
+            cmds["relay"] = [sys.executable, "-m", "sitl_harness.px4_faults", "relay", "--out", str(self.out),
+                             "--cut-s", str(cut[0][2])]
         return cmds
 
     def start(self, plan: Plan) -> None:
@@ -131,16 +145,31 @@ class Px4Flight(Flight):
         time.sleep(0.3)
         sb.spawn("sim", cmds["sim"])
         sb.wait_ready("recorder", 60.0)          # SIH's truth flows: PX4 is up
+        if "relay" in cmds:
+            sb.spawn("relay", cmds["relay"])
+            sb.wait_ready("relay", 10.0)
         if self.spec.controller != "px4":
             sb.spawn("controller", cmds["controller"])
             sb.spawn("bridge", cmds["bridge"])
         sb.spawn("mission", cmds["mission"])
 
     def watch(self, plan: Plan, t0: float) -> str | None:
-        """Until the mission tool exits, or something it needs dies, or the wall-clock limit."""
+        """Until the mission tool exits, or something it needs dies, or the wall-clock limit;
+        a failsafe flight: its faults injected, until FAULT_WATCH_S after the last."""
         watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger") if n in self.sandbox.procs]
+        faults = sorted((px4_faults.parse_fault(f) for f in self.spec.faults), key=lambda f: f[1])
+        path_t0 = None
         while True:
             time.sleep(0.1)
+            now = time.monotonic()
+            if faults and path_t0 is None and px4_faults.path_started(self.out):
+                path_t0 = now
+            while faults and path_t0 is not None and now - path_t0 >= faults[0][1]:
+                self._inject(*faults.pop(0), watched)
+                self.last_fault = now
+            if self.last_fault is not None and not faults and now - self.last_fault > FAULT_WATCH_S:
+                self.events.append(f"failsafe flight over {FAULT_WATCH_S:g} s after its last fault")
+                return None
             if self.exited("mission"):
                 return None
             for name in watched:
@@ -150,9 +179,28 @@ class Px4Flight(Flight):
             if time.monotonic() - t0 > plan.wall_timeout:
                 return "wall_timeout"
 
+    def _inject(self, action: str, at: float, dur: float, watched: list) -> None:
+        """One fault (px4_faults.py), recorded in harness.json's events with its wall time."""
+        sb = self.sandbox
+        if action == "kill_mppid":
+            watched.remove("controller")
+            sb.procs["controller"].send_signal(signal.SIGKILL)
+        elif action == "stop_bridge":
+            watched.remove("bridge")
+            sb.procs["bridge"].send_signal(signal.SIGSTOP)
+        elif action == "link_cut":
+            sb.procs["relay"].send_signal(signal.SIGUSR1)
+        else:
+            main, sub = px4_faults.GCS_MODES[action]
+            sb.spawn("gcs", [sys.executable, "-m", "sitl_harness.px4_faults", "mode", str(main), str(sub)])
+        self.events.append(f"fault {action}" + (f" for {dur:g} s" if dur else "") + f" at path+{at:g} s")
+        self.faults_done.append({"action": action, "at_s": at, "for_s": dur, "wall_us": time.time_ns() // 1000})
+
     def score(self, info: dict) -> dict:
         from .. import px4_score
-        return px4_score.score_flight(self.out, self.spec, info)
+        res = px4_score.score_flight(self.out, self.spec, info)
+        res["load_avg"] = {"start": info.get("load_avg_start"), "end": [round(x, 2) for x in os.getloadavg()]}
+        return res
 
     def plot(self) -> list:
         from .. import ap_plots
