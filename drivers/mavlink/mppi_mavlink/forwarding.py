@@ -17,6 +17,7 @@ import time
 
 from . import frames
 from .autopilots.base import mavlink
+from .engagement import ENGAGED
 from .gate import GateContext, gate, seq_restarted
 from .state import mono_us
 
@@ -147,7 +148,8 @@ class Forwarder:
     def _stop_turning(self):
         """The stream stopped while engaged, on an autopilot that flies the last setpoint on:
         one setpoint of zero body rates at hover thrust (the module docstring)."""
-        if not (self.ap.profile.flies_last_setpoint and self.engagement.forwarding and self.checks.thrust is not None):
+        engaged = self.engagement.snapshot().state == ENGAGED   # not a pre-stream: the autopilot flies it
+        if not (self.ap.profile.flies_last_setpoint and engaged and self.checks.thrust is not None):
             return
         hover = self.checks.thrust.hover
         boot_ms = int(time.monotonic() * 1000) & 0xFFFFFFFF
