@@ -10,7 +10,8 @@
   The bridge's hover thrust in use (mavlink_link_t on MPPI_MAVLINK_LINK), when logged.
   When the log holds the bridge's link messages with `engaged`, only the engaged intervals
   count (mppid's setpoints reached the autopilot; before `offboard`, during ArduPilot's own
-  takeoff and after land or hold they did not): states and commands outside are dropped.
+  takeoff and after land or hold they did not; on PX4 only in OFFBOARD: its pre-stream reaches
+  the autopilot but is not flown): states and commands outside are dropped.
 * An ArduPilot dataflash log (.BIN, pymavlink's DFReader): RATE (desired and achieved body
   rates), CTUN (throttle out), ATT and the EKF's position and velocity (XKF1, NKF1), turned
   into the same arrays (NED/FRD -> ENU/FLU; throttle -> newtons through the vehicle's mass and
@@ -109,7 +110,8 @@ def _lcm_messages(path) -> dict:
                 out["ticks"].setdefault(m.seq, (m.sim_utime, m.utime))
             elif ev.channel == LINK_CHANNEL and link_t is not None:
                 m = link_t.decode(ev.data)
-                out["link"].append((m.utime, bool(m.engaged)))
+                # PX4 takes setpoints only in OFFBOARD: its pre-stream (`engaged` too) is not flown.
+                out["link"].append((m.utime, bool(m.engaged) and (m.dialect != "px4" or m.mode == "OFFBOARD")))
                 if m.hover_thrust > 0 and math.isfinite(m.hover_thrust):
                     out["hover"].append(m.hover_thrust)
         except ValueError:
