@@ -140,6 +140,37 @@ def fault_report(truth: list[dict], fault: dict, window_s: float = 10.0) -> dict
     return rep
 
 
+# vehicle_status.nav_state (PX4's uORB vehicle_status.msg).
+NAV_STATES = {0: "MANUAL", 1: "ALTCTL", 2: "POSCTL", 3: "MISSION", 4: "HOLD", 5: "RTL", 10: "ACRO", 12: "DESCEND",
+              13: "TERMINATION", 14: "OFFBOARD", 15: "STABILIZED", 17: "TAKEOFF", 18: "LAND", 19: "FOLLOW",
+              20: "PRECLAND", 21: "ORBIT"}
+
+
+def ulog_modes(out: Path, truth: list[dict], fault: dict, window_s: float = 30.0) -> list | None:
+    """PX4's own record of its modes after a fault (the ULog's vehicle_status, to the
+    millisecond; the GCS link's HEARTBEAT comes once a second): [(s after the fault, mode)].
+    The fault's wall time goes onto PX4's clock through the nearest truth sample."""
+    logs = sorted((out / "px4" / "log").glob("*/*.ulg"))
+    rows = [r for r in truth if "x" in r]
+    if not logs or not rows:
+        return None
+    try:
+        from pyulog import ULog
+    except ImportError:
+        return None
+    near = min(rows, key=lambda r: abs(r["wall_us"] - fault["wall_us"]))
+    boot_f = near["boot_us"] + (fault["wall_us"] - near["wall_us"])
+    st = next((d.data for d in ULog(str(logs[-1]), ["vehicle_status"]).data_list), None)
+    if st is None:
+        return None
+    out_, last = [], None
+    for t, n in zip(st["timestamp"], st["nav_state"]):
+        if n != last and boot_f <= t <= boot_f + window_s * 1e6:
+            out_.append((round((int(t) - boot_f) * 1e-6, 3), NAV_STATES.get(int(n), str(n))))
+        last = n
+    return out_
+
+
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
     truth = convert(out)
@@ -149,5 +180,5 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         res.update(state_ages(out))
     res.pop("state_to_command_samples_ms", None)
     if info.get("faults"):
-        res["faults"] = [fault_report(truth, f) for f in info["faults"]]
+        res["faults"] = [{**fault_report(truth, f), "px4_modes": ulog_modes(out, truth, f)} for f in info["faults"]]
     return res
