@@ -149,8 +149,9 @@ def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
     """PX4 with COM_OF_LOSS_T 2 s: mppid silent for 0.8 s while the vehicle is still in
     OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out while the
     vehicle is in OFFBOARD, so PX4's own offboard-loss failsafe acts (COM_OBL_RC_ACT; the
-    simulated one lands). Out of OFFBOARD the pre-stream resumes (PX4 ignores it there), and
-    the vehicle never goes back to OFFBOARD by itself."""
+    simulated one lands). Out of OFFBOARD nothing is pre-streamed either: PX4's offboard loss
+    is a fallback, and setpoints arriving would take it back into OFFBOARD by itself; the
+    vehicle never goes back to OFFBOARD, and `offboard` is what flies again."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=2.0"])
     try:
@@ -165,12 +166,43 @@ def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
         assert c.status()["mode"] == "OFFBOARD" and c.status()["engagement"] == "disengaged"
         assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "forwarded while still in OFFBOARD"
         c.wait_event("failsafe", 5)
-        wait_for(lambda: c.status().get("engagement") == "prestream", 3, "the pre-stream out of OFFBOARD")
-        time.sleep(1.0)
+        t_fs = time.monotonic_ns() // 1000
+        time.sleep(1.5)
+        assert c.status()["engagement"] == "disengaged", "pre-streamed after PX4's offboard-loss fallback"
+        assert _between(tap, t_fs, time.monotonic_ns() // 1000) == []
         modes = [e["mode"] for e in c.events("mode")]
         assert modes[-1] == "AUTO.LAND" and modes.count("OFFBOARD") == 1, modes
+        assert not c.events("offboard_resumed")
         texts = [t for _, t in _statustexts(tap)]
         assert any("disengaged" in t and "stopped" in t for t in texts), texts
+    finally:
+        ctl.close()
+
+
+def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
+    """PX4, engaged: the link cut for 2 s. PX4's offboard-loss failsafe holds (COM_OBL_RC_ACT
+    5) with OFFBOARD still its intended mode, so any setpoint after the link returns would take
+    it back into OFFBOARD by itself (the real PX4 did: docs/px4.md, the link-cut flight). The
+    bridge, disengaged by the link loss, sends nothing when the link is back, the vehicle stays
+    in Hold, and `offboard` is what flies again."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, vehicle_params=["COM_OBL_RC_ACT=5"])
+    try:
+        _engage_armed(c, tap, "px4")
+        tap.cut = True
+        c.wait_event("failsafe", 5)
+        time.sleep(1.0)
+        tap.cut = False
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: c.status().get("link_up"), 5, "the link back")
+        time.sleep(2.0)
+        assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "setpoints after the link returned"
+        modes = [e["mode"] for e in c.events("mode")]
+        assert modes[-1] == "AUTO.LOITER" and not c.events("offboard_resumed"), modes
+        assert c.status()["engagement"] == "disengaged"
+        t_offboard = time.monotonic_ns() // 1000
+        assert "OFFBOARD" in _engage(c, tap)
+        assert _between(tap, t_offboard, time.monotonic_ns() // 1000)
     finally:
         ctl.close()
 

@@ -4,6 +4,9 @@ SIH, docs/px4.md), checked on the stand-in itself, stepped in this process (no l
 * PX4 flies the last rate setpoint on until COM_OF_LOSS_T runs out, then does COM_OBL_RC_ACT
   (a 3 rad/s roll rate flown through a 0.5 s pause turned the SIH vehicle over); ArduPilot's
   GUIDED stand-in levels 0.1 s after its last target, as before.
+* PX4's offboard-loss failsafe is a mode fallback: OFFBOARD stays the intended mode, and
+  setpoints arriving again take the vehicle back into it, unless a mode was commanded since
+  (PX4 SITL: the link cut for 3 s, Hold, then OFFBOARD again on the bridge's pre-stream).
 * PX4's data-link-loss failsafe: NAV_DLL_ACT after COM_DL_LOSS_T without a ground station's
   HEARTBEAT, once one was heard (the ground-link-loss row of docs/failsafes.md)."""
 import math
@@ -93,3 +96,22 @@ def test_px4_data_link_loss_off_by_default():
     _last_setpoint(v, (0.0, 0.0, 0.0))
     _fly(v, 11.0)
     assert v.mode == "OFFBOARD" and not [e for e in v.events if e["event"] == "failsafe"]
+
+
+def test_px4_fallback_ends_on_a_setpoint_unless_a_mode_was_commanded():
+    from pymavlink import mavutil
+    ml = mavutil.mavlink
+    mav = ml.MAVLink(None, srcSystem=1, srcComponent=191)
+    sp = mav.set_attitude_target_encode(0, 1, 1, ml.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE, [1, 0, 0, 0],
+                                        0.0, 0.0, 0.0, 0.4)
+    sp.pack(mav)   # the header a received message has
+    for commanded in (False, True):
+        v = _airborne("px4", {"COM_OF_LOSS_T": 0.5, "COM_OBL_RC_ACT": 5})
+        v.on_setpoint(sp, 0)
+        _fly(v, 0.6)
+        assert v.mode == "AUTO.LOITER"
+        if commanded:   # a ground station (or RC) chose Hold: the intended mode moved
+            v.set_mode("AUTO.LOITER", "command")
+        v.on_setpoint(sp, 0)
+        assert v.mode == ("AUTO.LOITER" if commanded else "OFFBOARD")
+        assert bool([e for e in v.events if e["event"] == "offboard_resumed"]) is not commanded

@@ -17,7 +17,7 @@ import time
 
 from . import frames
 from .autopilots.base import mavlink
-from .engagement import ENGAGED
+from .engagement import ENGAGED, PRESTREAM
 from .gate import GateContext, gate, seq_restarted
 from .state import mono_us
 
@@ -171,8 +171,12 @@ class Forwarder:
         now = mono_us()
         if self.ready_since is None or self.last_ready_mono is None or now - self.last_ready_mono > 500_000:
             return False, "no command stream (is mppid running, healthy and getting states?)"
-        if now - self.ready_since < o["prestream_s"] * 1e6:
-            return False, f"stream only {(now - self.ready_since) / 1e6:.2f} s old"
+        since = self.ready_since
+        snap = self.engagement.snapshot()
+        if snap.state == PRESTREAM:   # on the wire only since the pre-stream began (after a latch: now)
+            since = max(since, int(self.engagement.since * 1e6))
+        if now - since < o["prestream_s"] * 1e6:
+            return False, f"stream only {(now - since) / 1e6:.2f} s old"
         window = [t for t in self.ready_times if now - t <= o["prestream_s"] * 1e6]
         rate = len(window) / o["prestream_s"]
         if rate < o["min_rate_hz"]:

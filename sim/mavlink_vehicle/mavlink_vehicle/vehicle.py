@@ -93,6 +93,10 @@ class Vehicle:
         self.takeoff_alt = None
         self.hold_sp = None                # position setpoint of the vehicle's own controller
         self.stale_hold = None
+        # PX4: in its offboard-loss fallback (COM_OBL_RC_ACT) with OFFBOARD still the user's
+        # intended mode: setpoints arriving again take it back into OFFBOARD by itself, as the
+        # real one does (PX4 SITL, docs/px4.md: the link cut for 3 s, PX4 went Hold and back).
+        self.offboard_fallback = False
         self.landed_since = None
         self.counters = {"setpoints": 0, "setpoints_rejected": 0, "nonfinite_rejected": 0, "failsafes": 0,
                          "overruns": 0, "heartbeats_from_companion": 0, "states_sent": 0}
@@ -118,6 +122,8 @@ class Vehicle:
         self.conn.mav.statustext_send(severity, text.encode()[:50])
 
     def set_mode(self, mode, why=""):
+        # PX4: any mode change but its own offboard-loss fallback moves the user's intended mode.
+        self.offboard_fallback = self.offboard_fallback and why == "offboard lost"
         if mode != self.mode:
             self.event("mode", mode=mode, previous=self.mode, why=why)
             self.mode = mode
@@ -211,6 +217,10 @@ class Vehicle:
         self.setpoint = (min(max(vals[0], 0.0), 1.0), vals[1], vals[2], vals[3])
         self.setpoint_t = self.t
         self.counters["setpoints"] += 1
+        if self.ap == "px4" and self.offboard_fallback and self.armed:
+            self.set_mode("OFFBOARD", "offboard lost")   # the fallback ends: back to the intended mode
+            self.offboard_fallback = False
+            self.event("offboard_resumed", reason="setpoints back, OFFBOARD still the intended mode")
         if self.ap == "ardupilot" and self.mode == "GUIDED" and self.taking_off:
             self.taking_off = False
             self.event("takeoff_taken_over", z=round(self.plant.x[2], 3))
@@ -425,6 +435,7 @@ class Vehicle:
             self.hold_sp = list(self.plant.x[0:3])
             action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
             self.set_mode(action, "offboard lost")
+            self.offboard_fallback = True
             self.event("failsafe", reason="offboard setpoints lost", action=action,
                        last_setpoint_age_s=round(self.t - self.setpoint_t, 4))
             self.statustext(f"Failsafe: offboard lost, {action}", mavlink.MAV_SEVERITY_CRITICAL)

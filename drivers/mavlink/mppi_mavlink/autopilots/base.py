@@ -29,6 +29,10 @@ class AutopilotProfile:
     # offboard-loss timeout (PX4: COM_OF_LOSS_T): a paused stream then ends with one setpoint
     # of zero body rates at hover thrust (forwarding.py).
     flies_last_setpoint = False
+    # The autopilot's offboard-loss failsafe is a fallback that ends by itself when setpoints
+    # arrive again (PX4: OFFBOARD stays the intended mode): after the bridge's own failsafe
+    # disengaged it, nothing may be pre-streamed until `offboard` (engagement.py).
+    offboard_loss_resumes = False
 
     def decode_param(self, msg) -> float:
         """PARAM_VALUE's value as a number."""
