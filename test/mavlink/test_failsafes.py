@@ -348,9 +348,9 @@ def test_ground_station_lost_disengages(netns, procs, tmp_path, tap, autopilot):
 def test_a_stopped_stream_ends_with_zero_rates_on_px4(netns, procs, tmp_path, tap, autopilot):
     """A real PX4 flies the last rate setpoint on until COM_OF_LOSS_T (docs/px4.md): mppid
     turning at 1 rad/s goes silent while engaged, and the bridge's last setpoint is zero body
-    rates at hover thrust, once, so PX4 stops the turn; ArduPilot (which levels by itself after
-    its last target) gets nothing made up."""
-    ctl = StandInController(make_u=lambda seq: [9.81, 1.0, 0.0, 0.0])
+    rates at the last thrust, once, so PX4 stops the turn; ArduPilot (which levels by itself
+    after its last target) gets nothing made up."""
+    ctl = StandInController(make_u=lambda seq: [12.0, 1.0, 0.0, 0.0])
     kw = ARDUPILOT if autopilot == "ardupilot" else {"vehicle_params": ["COM_OF_LOSS_T=5"]}
     c = _chain(procs, tmp_path, **kw)
     try:
@@ -363,7 +363,7 @@ def test_a_stopped_stream_ends_with_zero_rates_on_px4(netns, procs, tmp_path, ta
         last = sps[-1]
         if autopilot == "px4":
             assert (last.body_roll_rate, last.body_pitch_rate, last.body_yaw_rate) == (0.0, 0.0, 0.0)
-            assert last.thrust == pytest.approx(0.4, abs=1e-3)   # the stand-in's MPC_THR_HOVER
+            assert last.thrust == pytest.approx(0.4 * 12.0 / 9.81, abs=1e-3)   # mppid's last, not hover (0.4)
             assert sum(1 for m in sps if m.body_roll_rate == 0.0) == 1
         else:
             assert last.body_roll_rate == pytest.approx(1.0), "ArduPilot: nothing made up"

@@ -28,7 +28,7 @@ def _start_link(c):
 
 def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, tap):
     """SIGKILL mppid in flight: mppid's last setpoint reaches the wire within 100 ms of the kill;
-    after it only the bridge's one stop setpoint (zero rates at hover thrust: PX4 flies the last
+    after it only the bridge's one stop setpoint (zero rates at the last thrust: PX4 flies the last
     setpoint on until COM_OF_LOSS_T), within 250 ms; the autopilot's offboard-loss failsafe
     (0.5 s) lands the vehicle."""
     c = _chain(procs, tmp_path, world="circle")

@@ -58,7 +58,7 @@ def test_px4_flies_the_last_rate_setpoint_until_com_of_loss_t():
 
 def test_px4_zero_rates_stop_the_turn():
     """What the bridge sends when its stream stops while engaged (forwarding.py): zero body
-    rates at hover thrust. PX4 flies that on instead: the turn stops where it was."""
+    rates (at the last thrust). PX4 flies that on instead: the turn stops where it was."""
     v = _airborne("px4", {"COM_OF_LOSS_T": 0.5})
     _last_setpoint(v)
     _fly(v, 0.1)

@@ -27,7 +27,7 @@ class AutopilotProfile:
     state_messages = ()       # message ids the states are built from (telemetry.py asks for them)
     # The autopilot flies the last rate setpoint on when the stream stops, until its own
     # offboard-loss timeout (PX4: COM_OF_LOSS_T): a paused stream then ends with one setpoint
-    # of zero body rates at hover thrust (forwarding.py).
+    # of zero body rates at the last thrust (forwarding.py).
     flies_last_setpoint = False
     # The autopilot's offboard-loss failsafe is a fallback that ends by itself when setpoints
     # arrive again (PX4: OFFBOARD stays the intended mode): after the bridge's own failsafe
