@@ -14,11 +14,18 @@
 #      installed /etc/mppid, lcm-logger; every ELF file in it an AArch64 one; the same Depends
 #      as the amd64 package.
 #
-#   tools/package-test.sh [--no-build] [--amd64-only] [-- package_flight.py arguments]
+#   tools/package-test.sh [--no-build] [--amd64-only] [--ardupilot-bin BIN] [--keep DIR]
+#                         [-- package_flight.py arguments]
 #
 #   --no-build     the packages in build/packages as they are
 #   --amd64-only   no arm64 part (with flight arguments: a measurement, docs/first-flight.md's
 #                  latency budget: `-- --cpu 1 --flights circle_3ms:px4 --set mppi.rollouts=1024`)
+#   --ardupilot-bin BIN  ArduCopter SITL (BIN: <ardupilot checkout>/build/sitl/bin/arducopter, built
+#                  outside this tree; never in CI) in place of the stand-in, copied into the root
+#                  as a fixture with its checkout's copter.parm (test/deploy/package_sitl.py);
+#                  implies --amd64-only; flights by default hover, circle_3ms and circle_3ms with
+#                  mppid killed mid-circle (tools/ardupilot/package-flights.sh scores them)
+#   --keep DIR     the flights' folder (/tmp/package-flight in the root) copied to DIR
 #
 # Environment: MPPID_PACKAGE_STAGE=0 skips the stage (tools/test.sh runs it by default);
 # MPPID_DEBIAN_MIRROR (http://deb.debian.org/debian); MPPID_PACKAGE_DIR (build/packages).
@@ -28,14 +35,16 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 log() { printf '[package-test] %s\n' "$*"; }
 if [[ "${MPPID_PACKAGE_STAGE:-1}" == 0 ]]; then log "skipped (MPPID_PACKAGE_STAGE=0)"; exit 0; fi
-build=1 arm64=1
+build=1 arm64=1 ardupilot_bin="" keep=""
 flight_args=()
 while (($#)); do
   case "$1" in
     --no-build) build=0 ;;
     --amd64-only) arm64=0 ;;
+    --ardupilot-bin) ardupilot_bin="$(realpath "$2")"; arm64=0; shift ;;
+    --keep) keep="$2"; shift ;;
     --) shift; flight_args=("$@"); break ;;
-    -h|--help) sed -n '2,25s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,31s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "package-test.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -84,7 +93,17 @@ fi
 # The test's fixtures: the stand-in autopilot and the driver; nothing else of this tree.
 mkdir -p "$R/opt/standin"
 cp -r sim/mavlink_vehicle/mavlink_vehicle "$R/opt/standin/"
-cp test/deploy/package_flight.py "$R/opt/"
+cp test/deploy/package_flight.py test/deploy/package_sitl.py "$R/opt/"
+if [[ -n "$ardupilot_bin" ]]; then
+  F="$R/opt/ardupilot"
+  mkdir -p "$F"
+  cp "$ardupilot_bin" "$F/arducopter"
+  cp "$(dirname "$ardupilot_bin")/../../../Tools/autotest/default_params/copter.parm" "$F/"
+  cp config/ardupilot/guided_baseline.parm tools/sitl_harness/ap_truth.py "$F/"
+  cp config/vehicles/arducopter_sitl.yaml "$F/vehicle.yaml"
+  ((${#flight_args[@]})) || flight_args=(--no-doc --flights
+    hover:arducopter,circle_3ms:arducopter,circle_3ms:arducopter:kill)
+fi
 t2=$(date +%s)
 log "flights from the installed files (private network namespace)"
 status=0
@@ -92,6 +111,7 @@ unshare --net --mount --pid --fork --kill-child sh -c "
   mount -t proc proc '$R/proc' && mount --rbind /dev '$R/dev' &&
   exec chroot '$R' /usr/bin/python3 /opt/package_flight.py \"\$@\"" sh "${flight_args[@]}" || status=1
 cat "$R/tmp/package-flight/results.json" 2>/dev/null || true
+if [[ -n "$keep" ]]; then mkdir -p "$keep" && cp -r "$R/tmp/package-flight/." "$keep/"; fi
 if ((status)); then
   for f in "$R"/tmp/package-flight/*.log; do [[ -f "$f" ]] && { echo "--- $f"; tail -n 30 "$f"; }; done
 fi

@@ -30,6 +30,8 @@ import sys
 import time
 from pathlib import Path
 
+import package_sitl
+
 UNITS = Path("/usr/lib/systemd/system")
 OUT = Path("/tmp/package-flight")
 STANDIN = Path("/opt/standin")
@@ -41,6 +43,8 @@ MISSION_TIMEOUT_S = {"hover": 120, "circle_3ms": 150}
 SERVICES = ("mppid-lcm-route.service", "mppid-recorder.service", "mppid.service", "mppid-mavlink-bridge.service")
 # Each autopilot's stand-in: the port its profile (NAME_udp.yaml) listens on, its parameters.
 AUTOPILOTS = {"px4": (14540, ()), "ardupilot": (14550, ("GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"))}
+# `arducopter`: ArduCopter SITL in place of the stand-in (package_sitl.py), on the ArduPilot profile.
+PROFILE = {"px4": "px4", "ardupilot": "ardupilot", "arducopter": "ardupilot"}
 
 
 def exec_lines(unit: str) -> list[list[str]]:
@@ -67,6 +71,7 @@ class Stack:
 
     def __init__(self, cpu: int | None, standin_cpu: int | None):
         self.procs: dict[str, subprocess.Popen] = {}
+        self.mppid_cmd: list[str] = []
         self.pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
         self.standin_pin = ["taskset", "-c", str(standin_cpu)] if standin_cpu is not None else []
 
@@ -121,17 +126,21 @@ def start_stack(st: Stack, mppid_sets: list[str]):
                 Path(base, unit_value(unit, key)).mkdir(parents=True, exist_ok=True)
     st.start("recorder", exec_lines("mppid-recorder.service")[0])
     extra = ["--stats"] + [w for kv in mppid_sets for w in ("--set", kv)]
-    st.start("mppid", exec_lines("mppid.service")[0] + extra)
+    st.mppid_cmd = exec_lines("mppid.service")[0] + extra
+    st.start("mppid", st.mppid_cmd)
 
 
 def start_link(st: Stack, flight: str, autopilot: str):
     """The operator's edit for this autopilot, the bridge (re)started, the stand-in booted."""
-    port, params = AUTOPILOTS[autopilot]
     (OUT / flight).mkdir(parents=True, exist_ok=True)
-    shutil.copy(f"/usr/share/mppid/bridge/{autopilot}_udp.yaml", "/etc/mppid/mavlink-bridge.yaml")
+    shutil.copy(f"/usr/share/mppid/bridge/{PROFILE[autopilot]}_udp.yaml", "/etc/mppid/mavlink-bridge.yaml")
     prio = unit_value("mppid-mavlink-bridge.service", "CPUSchedulingPriority")
     st.start("bridge", ["chrt", "-f", prio] + exec_lines("mppid-mavlink-bridge.service")[0]
              + ["--set", f"trace.file={OUT / flight / 'bridge_trace.jsonl'}"])
+    if autopilot == "arducopter":
+        package_sitl.start(st, OUT / flight)
+        return
+    port, params = AUTOPILOTS[autopilot]
     cmd = ["chrt", "-f", prio, "python3", "-m", "mavlink_vehicle", "--url", f"udpout:127.0.0.1:{port}",
            "--autopilot", autopilot, "--out", str(OUT / flight / "standin")]
     for p in params:
@@ -156,8 +165,8 @@ def bridge_ready(timeout=40.0) -> dict:
                      + (OUT / "bridge.log").read_text(errors="replace")[-3000:])
 
 
-def fly(name: str) -> dict:
-    out = OUT / name
+def fly(name: str, key: str) -> dict:
+    out = OUT / key
     t0 = time.monotonic()
     r = subprocess.run(["mppid-mission", "fly", f"/usr/share/mppid/missions/{name}.yaml", "--bridge", SOCK,
                         "--out", str(out)], capture_output=True, text=True, timeout=MISSION_TIMEOUT_S.get(name, 180))
@@ -241,11 +250,59 @@ def mppid_stats() -> dict:
     return {}
 
 
+def fly_one(st: Stack, token: str, doc_first: bool, results: dict, alive: dict) -> str:
+    """One flight of --flights (NAME:AUTOPILOT[:kill]) on a fresh link; its results key."""
+    name, autopilot, *variant = token.split(":")
+    key = name + ("_kill" if variant == ["kill"] else "")
+    start_link(st, key, autopilot)
+    bridge_ready(90.0 if autopilot == "arducopter" else 40.0)
+    if doc_first:
+        results["doc_blocks"]["stand-in"] = run_doc("stand-in")
+    if variant == ["kill"]:
+        results[key] = package_sitl.fly_kill(st, name, OUT / key, SOCK, st.mppid_cmd)
+    else:
+        results[key] = fly(name, key)
+    results[key]["cpu_share"] = {n: st.cpu_share(n) for n in ("mppid", "bridge", "recorder", "standin")}
+    alive.update({f"{n} ({key})": st.alive(n) for n in ("recorder", "mppid", "bridge")})
+    for n in ("referee", "standin", "bridge"):
+        if n in st.procs:
+            st.stop(n)
+    return key
+
+
+def operator_edits(flights: list[str], sets: list[str]) -> list[str]:
+    """For ArduCopter SITL: its airframe's vehicle file in /etc/mppid (package_sitl.py) and
+    mppid's cycle on each state (config/ardupilot/mppid_overlay.yaml's one line)."""
+    if not any(":arducopter" in f for f in flights):
+        return sets
+    shutil.copy(package_sitl.FIXTURE / "vehicle.yaml", "/etc/mppid/vehicle.yaml")
+    return ["daemon.trigger=state"] + sets
+
+
+def failures_of(results: dict, keys: list[str], doc: bool) -> list[str]:
+    failures = []
+    for k in keys:
+        r = results[k]
+        if "ok" in r:
+            bad = not r["ok"]
+        else:
+            bad = r["rc"] != 0 or r["outcome"] != "done" or r["worst_leg_rmse_m"] > MAX_RMSE.get(k, 0.3)
+        if bad:
+            failures.append(f"{k}: {r}")
+    failures += [f"{n} exited during the flights" for n, ok in results["alive"].items() if not ok]
+    if doc and results["enabled"] != sorted(SERVICES):
+        failures.append(f"`systemctl enable mppid.target` enabled {results['enabled']}, not {sorted(SERVICES)}")
+    if not results["recorder_files"] or sum(results["recorder_files"].values()) < 100_000:
+        failures.append(f"the recorder wrote too little: {results['recorder_files']}")
+    return failures
+
+
 def main() -> int:
     global OUT
     ap = argparse.ArgumentParser(description="the flight stack from the installed package, and missions")
     ap.add_argument("--out", type=Path, default=OUT)
-    ap.add_argument("--flights", default="hover:px4,circle_3ms:ardupilot", help="MISSION:AUTOPILOT,...")
+    ap.add_argument("--flights", default="hover:px4,circle_3ms:ardupilot",
+                    help="MISSION:AUTOPILOT[:kill],... (AUTOPILOT: px4, ardupilot (stand-ins), arducopter (SITL))")
     ap.add_argument("--cpu", type=int, help="mppid, the bridge and the recorder on this one CPU (taskset)")
     ap.add_argument("--standin-cpu", type=int, help="the stand-in autopilot on this CPU")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="mppid --set")
@@ -255,40 +312,26 @@ def main() -> int:
     OUT = a.out
     OUT.mkdir(parents=True, exist_ok=True)
     st = Stack(a.cpu, a.standin_cpu)
-    flights = [f.split(":") for f in a.flights.split(",")]
+    flights = a.flights.split(",")
     results: dict = {"cpu": a.cpu, "mppid_sets": a.set, "doc_blocks": {}}
+    keys, alive = [], {}
     try:
         if a.doc:
             results["doc_blocks"]["no-vehicle"] = run_doc("no-vehicle")
             results["enabled"] = sorted(p.name for p in Path("/etc/systemd/system/mppid.target.wants").iterdir())
-        start_stack(st, a.set)
-        alive = {}
-        for i, (name, autopilot) in enumerate(flights):
-            start_link(st, name, autopilot)
-            bridge_ready()
-            if a.doc and i == 0:
-                results["doc_blocks"]["stand-in"] = run_doc("stand-in")
-            results[name] = fly(name)
-            alive.update({f"{n} ({name})": st.alive(n) for n in ("recorder", "mppid", "bridge")})
-            results[name]["cpu_share"] = {n: st.cpu_share(n) for n in ("mppid", "bridge", "recorder", "standin")}
-            st.stop("standin")
-            st.stop("bridge")
-        results["alive"] = alive
+        start_stack(st, operator_edits(flights, a.set))
+        for i, token in enumerate(flights):
+            keys.append(fly_one(st, token, a.doc and i == 0, results, alive))
     finally:
         st.stop_all()
+    results["alive"] = alive
     if a.doc:
         results["doc_blocks"]["after-flight"] = run_doc("after-flight")
     results["mppid"] = mppid_stats()
     logs = sorted(Path("/var/lib/mppid-recorder").glob("mppid.lcmlog*"))
     results["recorder_files"] = {p.name: p.stat().st_size for p in logs}
     (OUT / "results.json").write_text(json.dumps(results, indent=1))
-    failures = [f"{n}: {results[n]}" for n, _ in flights
-                if results[n]["rc"] != 0 or results[n]["outcome"] != "done" or results[n]["worst_leg_rmse_m"] > MAX_RMSE.get(n, 0.3)]
-    failures += [f"{n} exited during the flights" for n, ok in results["alive"].items() if not ok]
-    if a.doc and results["enabled"] != sorted(SERVICES):
-        failures.append(f"`systemctl enable mppid.target` enabled {results['enabled']}, not {sorted(SERVICES)}")
-    if not logs or sum(results["recorder_files"].values()) < 100_000:
-        failures.append(f"the recorder wrote too little: {results['recorder_files']}")
+    failures = failures_of(results, keys, a.doc)
     for f in failures:
         print(f"[package-flight] FAILED {f}", flush=True)
     return 1 if failures else 0

@@ -90,6 +90,7 @@ class StandInController:
         self.sent = []       # (seq, u)
         self.states = 0
         self.last_state_seq = 0
+        self.last_x = None   # the newest state's x (position first, ENU)
         self.stop = threading.Event()
         self.t = threading.Thread(target=self._run, daemon=True)
         self.t.start()
@@ -109,6 +110,7 @@ class StandInController:
         st = self.mppi_lcm.vehicle_state_t.decode(data)
         self.states += 1
         self.last_state_seq = st.seq
+        self.last_x = list(st.x)
         if self.answer:
             self.command(st.seq, self.make_u(self.seq + 1))
 

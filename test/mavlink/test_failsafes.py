@@ -88,7 +88,7 @@ def _assert_not_reengaged(c, tap, t_back, what):
 
 def test_mppid_restart_never_reengages(netns, procs, tmp_path, tap):
     """ArduPilot, engaged in GUIDED: mppid killed and back 1.5 s later (its seq from 1): the
-    bridge disengaged when the stream stopped, hands the vehicle to LOITER (GUIDED would only
+    bridge disengaged when the stream stopped, hands the vehicle to BRAKE (GUIDED would only
     level and drift), and forwards nothing of the new mppid until `offboard`."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, **ARDUPILOT)
@@ -97,7 +97,7 @@ def test_mppid_restart_never_reengages(netns, procs, tmp_path, tap):
         ctl.close()                       # mppid dies
         wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
         assert "stopped" in c.status()["disengaged_why"]
-        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the hand-back to LOITER")
+        wait_for(lambda: c.status().get("mode") == "BRAKE", 5, "the hand-back to BRAKE")
         time.sleep(1.0)
         ctl = StandInController()         # mppid restarted (systemd: Restart=on-failure)
         t_back = time.monotonic_ns() // 1000
@@ -107,9 +107,38 @@ def test_mppid_restart_never_reengages(netns, procs, tmp_path, tap):
         ctl.close()
 
 
+def test_hand_back_holds_altitude_whatever_the_throttle_stick(netns, procs, tmp_path, tap):
+    """ArduPilot, in the air and engaged, its throttle stick low (SIM_RC_THROTTLE 0: no RC, as
+    ArduCopter SITL): mppid dies; the vehicle handed back must hold its altitude. LOITER reads
+    the stick as a climb rate and sinks (ArduCopter SITL hit the ground 1.7 s after a LOITER
+    hand-back at 2 m: docs/ardupilot.md); BRAKE holds whatever the sticks say."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, **ARDUPILOT)
+    try:
+        c.ok("arm")
+        c.ok("takeoff 2")
+        _engage(c, tap)
+        ctl.close()                       # mppid dies
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("mode") not in ("GUIDED", None), 5, "the hand-back")
+        watch = StandInController()
+        watch.answer = False
+        wait_for(lambda: watch.last_x is not None, 3, "states")
+        z0, zs = watch.last_x[2], []
+        for _ in range(30):               # 3 s in the hand-back's mode
+            time.sleep(0.1)
+            zs.append(watch.last_x[2])
+        watch.close()
+        assert z0 > 1.0, f"not in the air at the hand-back: z {z0:.2f} m"
+        assert max(abs(z - z0) for z in zs) < 0.3, (
+            f"{c.status().get('mode')}: altitude {z0:.2f} m -> {zs[-1]:.2f} m in 3 s after the hand-back")
+    finally:
+        ctl.close()
+
+
 def test_link_back_never_reengages(netns, procs, tmp_path, tap):
     """ArduPilot, engaged: the link cut for 3 s and restored: no setpoint after it returns;
-    the bridge disengaged and, the link back, hands the vehicle to LOITER."""
+    the bridge disengaged and, the link back, hands the vehicle to BRAKE."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, **ARDUPILOT)
     try:
@@ -121,7 +150,7 @@ def test_link_back_never_reengages(netns, procs, tmp_path, tap):
         tap.cut = False
         t_back = time.monotonic_ns() // 1000
         wait_for(lambda: c.status().get("link_up"), 5, "the link back")
-        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the hand-back to LOITER")
+        wait_for(lambda: c.status().get("mode") == "BRAKE", 5, "the hand-back to BRAKE")
         _assert_not_reengaged(c, tap, t_back, "the link")
     finally:
         ctl.close()
@@ -254,7 +283,7 @@ def test_px4_offboard_loss_does_what_com_obl_rc_act_says(netns, procs, tmp_path,
 
 def test_geofence_holds_the_vehicle_and_refuses_offboard_outside(netns, procs, tmp_path, tap):
     """ArduPilot with a cylinder fence of 10 m, max_z 2.5 m: mppid (stood in) climbing past it
-    after `offboard` is disengaged at the fence, the vehicle put in LOITER (the autopilot holds
+    after `offboard` is disengaged at the fence, the vehicle put in BRAKE (the autopilot holds
     it), the operator told; `offboard` out there is refused, naming the fence."""
     ctl = StandInController(lambda seq: [9.81 * 1.3, 0.0, 0.0, 0.0])   # climbs
     c = _chain(procs, tmp_path, bridge_sets=["fence.shape=cylinder", "fence.radius=10", "fence.max_z=2.5"], **ARDUPILOT)
@@ -265,7 +294,7 @@ def test_geofence_holds_the_vehicle_and_refuses_offboard_outside(netns, procs, t
         wait_for(lambda: "geofence" in c.status().get("disengaged_why", ""), 10, "the fence")
         st = c.status()
         assert st["engaged"] is False and "above the fence's max_z 2.5" in st["disengaged_why"], st
-        wait_for(lambda: c.status().get("mode") == "LOITER", 5, "the autopilot holding")
+        wait_for(lambda: c.status().get("mode") == "BRAKE", 5, "the autopilot holding")
         texts = [e["text"] for e in c.events("statustext")]
         assert any("geofence" in t for t in texts), texts
         wait_for(lambda: "geofence" in c.ctl("offboard", 10)["message"], 10, "offboard refused outside the fence")

@@ -35,7 +35,7 @@ OFFBOARD_LOSS_ACTIONS = {0: "POSCTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
 # PX4's NAV_DLL_ACT (data link lost) values this stand-in has (0: disabled; others: land).
 DATALINK_LOSS_ACTIONS = {1: "AUTO.LOITER", 3: "AUTO.LAND"}
 # ArduPilot Copter custom modes.
-APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9}
+APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9, "BRAKE": 17}
 
 
 def wall_us():
@@ -70,7 +70,8 @@ class Vehicle:
                        "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
                        "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
                        "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
-                       "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0}
+                       "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
+                       "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
         self.battery = 90.0                # % remaining
         self.last_gcs_t = None
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
@@ -252,7 +253,7 @@ class Vehicle:
                 return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
             if mode == "OFFBOARD" and not self.fresh_setpoint():
                 return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
-            if mode in ("AUTO.LOITER", "LOITER"):
+            if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
                 self.hold_sp = list(self.plant.x[0:3])
             if mode == "GUIDED":
                 self.hold_sp = list(self.plant.x[0:3])
@@ -399,7 +400,22 @@ class Vehicle:
             self.hold_sp = list(x[0:3])
         if self.plant.on_ground and self.mode not in ("AUTO.TAKEOFF", "GUIDED"):
             return [0.0, 0.0, 0.0, 0.0]  # armed, idle on the ground
+        if self.ap == "ardupilot" and self.mode == "LOITER":
+            return self.position_control(self.hold_sp, vz_sp=self.pilot_climb_rate())
         return self.position_control(self.hold_sp)
+
+    def pilot_climb_rate(self) -> float:
+        """ArduCopter's LOITER (and ALT_HOLD, POSHOLD) read the throttle stick as a climb rate:
+        SIM_RC_THROTTLE (0 low .. 1 high; 0: no RC, as ArduCopter SITL's own) outside a 10 %
+        dead band around the middle, scaled to PILOT_SPEED_UP and PILOT_SPEED_DN (cm/s; 0:
+        PILOT_SPEED_UP). BRAKE and GUIDED read no stick."""
+        stick = self.params["SIM_RC_THROTTLE"]
+        down = self.params["PILOT_SPEED_DN"] or self.params["PILOT_SPEED_UP"]
+        if stick < 0.45:
+            return -down / 100.0 * (0.45 - stick) / 0.45
+        if stick > 0.55:
+            return self.params["PILOT_SPEED_UP"] / 100.0 * (stick - 0.55) / 0.45
+        return 0.0
 
     def other_failsafes(self):
         """The battery and the ground station (the constructor's comment), at the physics rate."""

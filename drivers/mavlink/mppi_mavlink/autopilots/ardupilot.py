@@ -2,13 +2,20 @@
 over its own take-off, so nothing is streamed before `offboard` (no pre-stream) and `offboard`
 waits for a take-off to end. The thrust is read as thrust only with GUID_OPTIONS bit 3. A lost
 stream in GUIDED only levels the vehicle after GUID_TIMEOUT and holds its altitude, drifting:
-so the bridge hands it to LOITER itself (`hand_back`, failsafe.py)."""
+so the bridge hands it to BRAKE itself (`hand_back`, failsafe.py), as it does for `hold`.
+
+BRAKE, not LOITER: LOITER reads the pilot's throttle stick as a climb rate, and a vehicle flown
+in GUIDED may have its stick anywhere, or no RC at all. ArduCopter SITL (no RC: the stick at
+its minimum), handed to LOITER at 3 m/s in mid-circle, braked and then sank at 2.4 m/s into the
+ground 1.7 s later (tools/ardupilot/package-flights.sh, docs/ardupilot.md). BRAKE stops the
+vehicle and holds its position and altitude whatever the sticks do, until the pilot or the
+ground station changes mode."""
 from __future__ import annotations
 
 from .base import CUSTOM, AutopilotProfile, mavlink
 
 GUIDED = 4
-LOITER = 5
+BRAKE = 17
 LAND = 9
 GUID_OPTIONS_THRUST_AS_THRUST = 8
 
@@ -55,11 +62,11 @@ class ArduPilot(AutopilotProfile):
         ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LAND], "mode LAND")
 
     def hold(self, ap) -> None:
-        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LOITER], "mode LOITER")
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, BRAKE], "mode BRAKE")
 
     def hand_back(self, ap) -> str:
         self.hold(ap)
-        return "LOITER"
+        return "BRAKE"
 
 
 PROFILE = ArduPilot()
