@@ -178,8 +178,9 @@ def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
     """PX4 with COM_OF_LOSS_T 2 s: mppid silent for 0.8 s while the vehicle is still in
     OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out while the
     vehicle is in OFFBOARD, so PX4's own offboard-loss failsafe acts (COM_OBL_RC_ACT; the
-    simulated one lands). Out of OFFBOARD the pre-stream resumes (PX4 ignores it there), and
-    the vehicle never goes back to OFFBOARD by itself."""
+    simulated one lands). Out of OFFBOARD nothing is pre-streamed either: PX4's offboard loss
+    is a fallback, and setpoints arriving would take it back into OFFBOARD by itself; the
+    vehicle never goes back to OFFBOARD, and `offboard` is what flies again."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=2.0"])
     try:
@@ -194,12 +195,43 @@ def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
         assert c.status()["mode"] == "OFFBOARD" and c.status()["engagement"] == "disengaged"
         assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "forwarded while still in OFFBOARD"
         c.wait_event("failsafe", 5)
-        wait_for(lambda: c.status().get("engagement") == "prestream", 3, "the pre-stream out of OFFBOARD")
-        time.sleep(1.0)
+        t_fs = time.monotonic_ns() // 1000
+        time.sleep(1.5)
+        assert c.status()["engagement"] == "disengaged", "pre-streamed after PX4's offboard-loss fallback"
+        assert _between(tap, t_fs, time.monotonic_ns() // 1000) == []
         modes = [e["mode"] for e in c.events("mode")]
         assert modes[-1] == "AUTO.LAND" and modes.count("OFFBOARD") == 1, modes
+        assert not c.events("offboard_resumed")
         texts = [t for _, t in _statustexts(tap)]
         assert any("disengaged" in t and "stopped" in t for t in texts), texts
+    finally:
+        ctl.close()
+
+
+def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
+    """PX4, engaged: the link cut for 2 s. PX4's offboard-loss failsafe holds (COM_OBL_RC_ACT
+    5) with OFFBOARD still its intended mode, so any setpoint after the link returns would take
+    it back into OFFBOARD by itself (the real PX4 did: docs/px4.md, the link-cut flight). The
+    bridge, disengaged by the link loss, sends nothing when the link is back, the vehicle stays
+    in Hold, and `offboard` is what flies again."""
+    ctl = StandInController()
+    c = _chain(procs, tmp_path, vehicle_params=["COM_OBL_RC_ACT=5"])
+    try:
+        _engage_armed(c, tap, "px4")
+        tap.cut = True
+        c.wait_event("failsafe", 5)
+        time.sleep(1.0)
+        tap.cut = False
+        t_back = time.monotonic_ns() // 1000
+        wait_for(lambda: c.status().get("link_up"), 5, "the link back")
+        time.sleep(2.0)
+        assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "setpoints after the link returned"
+        modes = [e["mode"] for e in c.events("mode")]
+        assert modes[-1] == "AUTO.LOITER" and not c.events("offboard_resumed"), modes
+        assert c.status()["engagement"] == "disengaged"
+        t_offboard = time.monotonic_ns() // 1000
+        assert "OFFBOARD" in _engage(c, tap)
+        assert _between(tap, t_offboard, time.monotonic_ns() // 1000)
     finally:
         ctl.close()
 
@@ -298,13 +330,21 @@ def test_battery_failsafe_disengages(netns, procs, tmp_path, tap, autopilot):
         ctl.close()
 
 
-def test_ground_station_lost_disengages(netns, procs, tmp_path, tap):
-    """ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5, LAND, after FS_GCS_TIMEOUT 1 s): the
-    ground station's HEARTBEATs stop while mppid flies; ArduPilot lands, the bridge disengages
-    on the mode change and does not re-engage."""
+GROUND_STATION_LOSS = {
+    # ArduPilot's FS_GCS_ENABLE 5 (LAND) after FS_GCS_TIMEOUT; PX4's NAV_DLL_ACT 1 (Hold) after COM_DL_LOSS_T.
+    "ardupilot": (["FS_GCS_ENABLE=5", "FS_GCS_TIMEOUT=1", "GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"], "LAND"),
+    "px4": (["NAV_DLL_ACT=1", "COM_DL_LOSS_T=1", "COM_OF_LOSS_T=5"], "AUTO.LOITER"),
+}
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_ground_station_lost_disengages(netns, procs, tmp_path, tap, autopilot):
+    """The autopilot's ground-station failsafe (ArduPilot FS_GCS_ENABLE, PX4 NAV_DLL_ACT): the
+    ground station's HEARTBEATs stop while mppid flies; the autopilot changes mode, the bridge
+    disengages on the mode change and does not re-engage."""
+    params, mode = GROUND_STATION_LOSS[autopilot]
     ctl = StandInController()
-    c = _chain(procs, tmp_path, autopilot="ardupilot",
-               vehicle_params=["FS_GCS_ENABLE=5", "FS_GCS_TIMEOUT=1", "GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"])
+    c = _chain(procs, tmp_path, autopilot=autopilot, vehicle_params=params)
     try:
         gcs, quiet = mavlink.MAVLink(None, srcSystem=255, srcComponent=190), threading.Event()
 
@@ -313,17 +353,49 @@ def test_ground_station_lost_disengages(netns, procs, tmp_path, tap):
                 hb = gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
                 tap.a.sendto(hb.pack(gcs), tap.vehicle)
         threading.Thread(target=ground_station, daemon=True).start()
-        _engage_armed(c, tap, "ardupilot")
+        _engage_armed(c, tap, autopilot)
         time.sleep(1.5)
         assert c.status()["engagement"] == "engaged" and not c.events("failsafe")
         quiet.set()
         fs = c.wait_event("failsafe", 5)[0]
-        assert fs["reason"] == "ground station lost"
+        assert fs["reason"] == "ground station lost" and fs["action"] == mode
         wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
-        assert c.status()["disengaged_why"] == "mode changed to LAND by someone else"
+        assert c.status()["disengaged_why"].startswith("mode changed to"), c.status()["disengaged_why"]
         t = time.monotonic_ns() // 1000
         time.sleep(1.0)
-        assert _between(tap, t, time.monotonic_ns() // 1000) == []
+        if autopilot == "ardupilot":
+            assert _between(tap, t, time.monotonic_ns() // 1000) == []
+        else:  # out of OFFBOARD the pre-stream resumes, which PX4 ignores there; never OFFBOARD again
+            assert c.status()["engagement"] == "prestream"
+            modes = [e["mode"] for e in c.events("mode")]
+            assert modes[-1] == mode and modes.count("OFFBOARD") == 1, modes
+    finally:
+        ctl.close()
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_stopped_stream_ends_with_zero_rates_on_px4(netns, procs, tmp_path, tap, autopilot):
+    """A real PX4 flies the last rate setpoint on until COM_OF_LOSS_T (docs/px4.md): mppid
+    turning at 1 rad/s goes silent while engaged, and the bridge's last setpoint is zero body
+    rates at the last thrust, once, so PX4 stops the turn; ArduPilot (which levels by itself
+    after its last target) gets nothing made up."""
+    ctl = StandInController(make_u=lambda seq: [12.0, 1.0, 0.0, 0.0])
+    kw = ARDUPILOT if autopilot == "ardupilot" else {"vehicle_params": ["COM_OF_LOSS_T=5"]}
+    c = _chain(procs, tmp_path, **kw)
+    try:
+        _engage(c, tap)
+        ctl.answer = False
+        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        sps = [m for _, m in tap.setpoints()]
+        turning = [m for m in sps if m.body_roll_rate == pytest.approx(1.0)]
+        assert len(turning) > 25
+        last = sps[-1]
+        if autopilot == "px4":
+            assert (last.body_roll_rate, last.body_pitch_rate, last.body_yaw_rate) == (0.0, 0.0, 0.0)
+            assert last.thrust == pytest.approx(0.4 * 12.0 / 9.81, abs=1e-3)   # mppid's last, not hover (0.4)
+            assert sum(1 for m in sps if m.body_roll_rate == 0.0) == 1
+        else:
+            assert last.body_roll_rate == pytest.approx(1.0), "ArduPilot: nothing made up"
     finally:
         ctl.close()
 

@@ -27,8 +27,10 @@ def _start_link(c):
 
 
 def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, tap):
-    """SIGKILL mppid in flight: the last setpoint reaches the wire within 100 ms of the kill,
-    nothing after; the autopilot's offboard-loss failsafe (0.5 s) lands the vehicle."""
+    """SIGKILL mppid in flight: mppid's last setpoint reaches the wire within 100 ms of the kill;
+    after it only the bridge's one stop setpoint (zero rates at the last thrust: PX4 flies the last
+    setpoint on until COM_OF_LOSS_T), within 250 ms; the autopilot's offboard-loss failsafe
+    (0.5 s) lands the vehicle."""
     c = _chain(procs, tmp_path, world="circle")
     c.start_mppid()
     _start_link(c)
@@ -42,11 +44,14 @@ def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, 
     procs.p["mppid"].wait(5)
     fs = c.wait_event("failsafe", 5)[0]
     sp = tap.setpoints()
-    last = max(t for t, _ in sp)
+    stop = sp[-1]
+    assert (stop[1].body_roll_rate, stop[1].body_pitch_rate, stop[1].body_yaw_rate) == (0.0, 0.0, 0.0)
+    assert stop[0] - t_kill <= 250_000, f"the stop setpoint {(stop[0] - t_kill) / 1000:.1f} ms after the kill"
+    last = max(t for t, _ in sp[:-1])
     after = [t for t, _ in sp if t > t_kill]
     print(f"last setpoint {(last - t_kill) / 1000:.1f} ms after the kill; {len(after)} after it; failsafe {fs}")
     assert last - t_kill <= 100_000, f"setpoints still on the wire {(last - t_kill) / 1000:.1f} ms after the kill"
-    assert len(after) <= 5
+    assert len(after) <= 6
     wait_for(lambda: not c.status().get("streaming", True), 2, "the bridge to report the stream stopped")
     assert any(not m.streaming for _, m in c.link_msgs[-20:])
     modes = [e["mode"] for e in c.events("mode")]

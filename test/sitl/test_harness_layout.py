@@ -17,6 +17,7 @@ from sitl_harness import cli, paths
 from sitl_harness.flights import PLANTS, flight_class
 from sitl_harness.flights.ardupilot import BASELINE, HOME, OVERLAY, PARAMS, VEHICLE, ArduPilotFlight
 from sitl_harness.flights.base import FlightError, FlightSpec
+from sitl_harness.flights.px4 import Px4Flight
 from sitl_harness.flights.sim import SimFlight
 from sitl_harness.overlay import load_sets
 from sitl_harness.results import load_campaign, write_campaign
@@ -79,10 +80,11 @@ def test_sandbox_wait_ready_names_the_log_of_a_helper_that_died(tmp_path):
 
 # ---- the flights ---------------------------------------------------------------------------
 def test_every_plant_has_its_flight_class():
-    assert set(PLANTS) == {"sim", "ardupilot"}
+    assert set(PLANTS) == {"sim", "ardupilot", "px4"}
     assert flight_class("sim") is SimFlight and flight_class("ardupilot") is ArduPilotFlight
-    with pytest.raises(KeyError, match="px4.*known: sim, ardupilot"):
-        flight_class("px4")
+    assert flight_class("px4") is Px4Flight
+    with pytest.raises(KeyError, match="gazebo.*known: sim, ardupilot, px4"):
+        flight_class("gazebo")
 
 
 def _fake_ardupilot(tmp_path) -> Path:

@@ -150,10 +150,11 @@ def write_lcm_flight(path: Path, data: FlightData, commands: np.ndarray, link: l
         m.utime, m.seq, m.state_seq, m.mode, m.kind = T0_US + int(round(t * 1e6)), k, k, 0, 2
         m.n, m.u = 4, list(map(float, u))
         events.append((m.utime, "MPPI_COMMAND", m.encode()))
-    for k, (t, engaged) in enumerate(link):
+    for k, (t, engaged, *mode) in enumerate(link):   # (t, engaged) on ArduPilot, (t, engaged, mode) on PX4
         m = link_t()
         m.utime, m.seq, m.engaged, m.hover_thrust = T0_US + int(round(t * 1e6)), k, int(engaged), -1.0
-        m.dialect, m.mode, m.hover_source, m.error = "ardupilot", "GUIDED", "", ""
+        m.dialect, m.mode = ("px4", mode[0]) if mode else ("ardupilot", "GUIDED")
+        m.hover_source, m.error = "", ""
         events.append((m.utime, "MPPI_MAVLINK_LINK", m.encode()))
     log = lcm.EventLog(str(path), "w", overwrite=True)
     for utime, channel, msg in sorted(events, key=lambda e: e[0]):
@@ -192,6 +193,24 @@ def test_only_the_flight_the_bridge_was_engaged_for_is_fitted(tmp_path):
     assert whole["engaged_s"] is None and whole["fit_s"] > 16.0
     off = [abs(whole["fit"]["axes"][ax]["gain"] / truth.gain[i] - 1.0) for i, ax in enumerate("xyz")]
     assert max(off) > 0.05, off   # the unfollowed commands bias it
+
+
+def test_px4s_pre_stream_is_not_fitted(tmp_path):
+    """On PX4 the bridge's `engaged` covers its pre-stream too (mppid's setpoints reach PX4,
+    which flies its own take-off and landing meanwhile): only OFFBOARD counts."""
+    truth = RateModel(mass=1.0, drag=0.0, tau=[0.1, 0.12, 0.12], gain=[1.1, 1.0, 0.8], delay=0.024)
+    data = synthetic_flight(truth, seconds=24.0, seed=11)
+    sent = data.u.copy()
+    outside = (data.tc < 4.0) | (data.tc >= 20.0)
+    sent[outside, 1:] = np.random.default_rng(12).uniform(-1.5, 1.5, (int(outside.sum()), 3))
+    link = [(t, True, "OFFBOARD" if 4.0 <= t < 20.0 else "TAKEOFF" if t < 4.0 else "LAND")
+            for t in np.arange(0.0, 24.0, 0.5)]
+    write_lcm_flight(tmp_path / "px4.lcmlog", data, sent, link)
+    p = sysid("fit", tmp_path / "px4.lcmlog", "--report", tmp_path / "fit.json")
+    assert "bridge engaged 16.0 s" in p.stdout
+    fit = json.loads((tmp_path / "fit.json").read_text())["fit"]
+    for i, ax in enumerate("xyz"):
+        assert fit["axes"][ax]["gain"] == pytest.approx(truth.gain[i], rel=0.03)
 
 
 def test_an_axis_the_flight_did_not_excite_keeps_the_prior(tmp_path):
@@ -278,3 +297,16 @@ def test_an_ardupilot_dataflash_log_reads_as_the_same_flight(tmp_path):
     assert delay == pytest.approx(truth.delay, abs=0.0005)
     for a in range(3):
         assert axes[a].gain == pytest.approx(truth.gain[a], rel=0.02)
+
+
+def test_ulog_offboard_intervals_and_hover():
+    """PX4's ULog: only OFFBOARD (vehicle_status.nav_state 14) is fitted; the hover throttle is
+    the vehicle file's, else PX4's estimate while valid, else MPC_THR_HOVER."""
+    from sysid_fit import logs
+    status = {"timestamp": np.array([0.0, 1e6, 2e6, 5e6, 6e6, 9e6]), "nav_state": np.array([4, 17, 14, 4, 14, 14])}
+    assert logs._offboard_spans(status) == [(2e6, 5e6), (6e6, 9e6)]
+    assert logs._offboard_spans(None) is None
+    est = {"hover_thrust": np.full(20, 0.47), "valid": np.ones(20)}
+    assert logs._ulog_hover({"hover_thrust_estimate": est}, {"MPC_THR_HOVER": 0.5}, None) == pytest.approx(0.47)
+    assert logs._ulog_hover({}, {"MPC_THR_HOVER": 0.42}, None) == pytest.approx(0.42)
+    assert logs._ulog_hover({"hover_thrust_estimate": est}, {}, 0.6) == 0.6

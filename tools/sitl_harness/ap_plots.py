@@ -13,12 +13,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from . import ap_score, plots  # noqa: E402
+from .logs import read_jsonl  # noqa: E402
+
+# How each plant is named in the title (harness.json's `autopilot`).
+PLANT_NAMES = {"ardupilot": "ArduCopter SITL", "px4": "PX4 SITL (SIH)"}
 
 
 def plot_flight(out: Path) -> list[Path]:
     out = Path(out)
-    truth = [r for r in ap_score._jsonl(out / "truth.jsonl") if "x" in r]
-    mission = ap_score._jsonl(out / "mission.jsonl")
+    truth = [r for r in read_jsonl(out / "truth.jsonl") if "x" in r]
+    mission = read_jsonl(out / "mission.jsonl")
     if not truth or not mission:
         return []
     made = [_path(out, truth, mission)]
@@ -29,7 +33,7 @@ def plot_flight(out: Path) -> list[Path]:
 
 
 def _path(out, truth, mission):
-    reference = ap_score._reference()
+    from mppi_mission import reference
     head = next((m for m in mission if m.get("event") == "mission"), {})
     t_truth = ap_score._truth_clock(truth, head.get("clock", "state"))
     X = np.array([r["x"] for r in truth])
@@ -60,7 +64,8 @@ def _path(out, truth, mission):
     side.set_xlabel("time [s]")
     side.legend(loc="upper right", fontsize=8)
     score = json.loads((out / "score.json").read_text()) if (out / "score.json").is_file() else {}
-    fig.suptitle(f"{head.get('name', '')} seed {head.get('seed', '')} through ArduCopter SITL: "
+    plant = PLANT_NAMES.get(score.get("autopilot", "ardupilot"), score.get("autopilot"))
+    fig.suptitle(f"{head.get('name', '')} seed {head.get('seed', '')} through {plant}: "
                  f"{score.get('reason', '')}", fontsize=10)
     fig.tight_layout()
     p = out / "path.png"

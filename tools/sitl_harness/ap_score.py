@@ -25,13 +25,17 @@ CRASH_TILT_DEG = 80.0
 GROUND_Z = 0.05
 
 
-def score_flight(out: Path, spec, info: dict) -> dict:
+# The controllers that are the autopilot's own (no mppid, no LCM log to time).
+AUTOPILOT_CONTROLLERS = ("guided", "px4")
+
+
+def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> dict:
     out = Path(out)
     truth = [r for r in read_jsonl(out / "truth.jsonl") if "x" in r]
     events = [r for r in read_jsonl(out / "truth.jsonl") if "event" in r]
     mission = read_jsonl(out / "mission.jsonl")
     summary = json.loads((out / "mission_summary.json").read_text()) if (out / "mission_summary.json").is_file() else {}
-    res = {"scenario": paths.scenario_label(spec.scenario), "seed": spec.seed, "autopilot": "ardupilot",
+    res = {"scenario": paths.scenario_label(spec.scenario), "seed": spec.seed, "autopilot": autopilot,
            "controller": spec.controller, "success": False, "reason": None,
            "harness_outcome": info.get("harness_outcome"), "mission_outcome": summary.get("outcome"),
            "wall_s": info.get("wall_s")}
@@ -46,7 +50,7 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     flying = np.array([r.get("armed", False) for r in truth])
     res.update(_legs(mission, t_truth, X, est, settle=float(head.get("settle", 3.0))))
     res.update(_safety(truth, events, X, flying, head))
-    res.update(_timing(out) if spec.controller != "guided" else {})
+    res.update(_timing(out) if spec.controller not in AUTOPILOT_CONTROLLERS else {})
     done = summary.get("outcome") == "done"
     res["success"] = bool(done and not res["crashes"] and (res.get("min_clearance") is None or res["min_clearance"] > 0))
     res["reason"] = ("mission done" if res["success"] else
@@ -61,7 +65,10 @@ def _truth_clock(truth, clock: str) -> np.ndarray:
     baseline's), or this host's wall clock as the bridge maps boot times onto it (mppid's
     states): boot time + the smallest receipt delay, one offset for the flight. ArduCopter
     SITL's clock keeps pace with this host's; an autopilot whose clock drifts (PX4 SIH) needs
-    the drift followed, as the bridge does (mppi_mavlink/clock_sync.py)."""
+    the drift followed, as the bridge does (mppi_mavlink/clock_sync.py): its truth lines carry
+    their time on the mission's clock already (`mission_us`, px4_score.py)."""
+    if all("mission_us" in r for r in truth):
+        return np.array([r["mission_us"] for r in truth], float)
     boot = np.array([r["boot_us"] for r in truth], float)
     if clock == "boot":
         return boot

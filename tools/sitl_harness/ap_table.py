@@ -1,4 +1,4 @@
-"""Campaigns through ArduCopter SITL side by side (e.g. mppid and ArduCopter's own GUIDED
+"""Campaigns through ArduCopter or PX4 SITL side by side (e.g. mppid and ArduCopter's own GUIDED
 position controller over the same missions and seeds): one markdown row per mission and
 controller. Errors are the simulated truth's (ap_score.py), means over the successful
 flights (max: the largest of any); `estimate` is the same against the autopilot's own
@@ -20,11 +20,21 @@ def _leg_key(r):
     return "tracking_rmse" if r.get("tracking_rmse") is not None else "hover_rmse"
 
 
+def _load(rs) -> str:
+    """The 1-minute load average over the flights (start and end of each; PX4 flights record
+    it: the machine is shared and SIH lags under load), or '-'."""
+    vals = [v[0] for r in rs for v in ((r.get("load_avg") or {}).get("start"), (r.get("load_avg") or {}).get("end"))
+            if v]
+    return f"{min(vals):.1f}-{max(vals):.1f}" if vals else "-"
+
+
 def table(folders: list[Path], labels: list[str]) -> str:
     camps = [(label, load_campaign(f).runs) for f, label in zip(folders, labels)]
     missions = list(dict.fromkeys(r["scenario"] for _, runs in camps for r in runs))  # first-seen order, once each
+    with_load = any(r.get("load_avg") for _, runs in camps for r in runs)
     lines = ["| mission | controller | flights | success | RMS error [m] | largest error [m] | RMS, estimate [m] "
-             "| largest tilt [deg] | failures |", "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+             "| largest tilt [deg] | failures |" + (" load |" if with_load else ""),
+             "|---|---|---:|---:|---:|---:|---:|---:|---|" + ("---|" if with_load else "")]
     for m in missions:
         for label, runs in camps:
             rs = [r for r in runs if r["scenario"] == m]
@@ -37,5 +47,6 @@ def table(folders: list[Path], labels: list[str]) -> str:
             lines.append(f"| {m} | {label} | {len(rs)} | {len(ok)}/{len(rs)} | "
                          f"{_m([r.get(_leg_key(r)) for r in ok])} | {_m([leg['max'] for leg in legs], agg=max)} | "
                          f"{_m([leg['rmse_estimate'] for leg in legs])} | "
-                         f"{_m([r.get('max_tilt_deg') for r in rs], '{:.0f}', max)} | {fails} |")
+                         f"{_m([r.get('max_tilt_deg') for r in rs], '{:.0f}', max)} | {fails} |"
+                         + (f" {_load(rs)} |" if with_load else ""))
     return "\n".join(lines) + "\n"

@@ -67,7 +67,8 @@ def resolve_scenarios(names) -> list[tuple[str, str]]:
 
 
 def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", realtime=False, sets=(), plots=True,
-              timeout=0.0, ideal=False, latency=None, autopilot="sim", ardupilot_bin=None) -> list[FlightJob]:
+              timeout=0.0, ideal=False, latency=None, autopilot="sim", ardupilot_bin=None,
+              px4_bin=None) -> list[FlightJob]:
     """One job per scenario and seed, scenario-major; folders out/<label>/seed_NNNN."""
     jobs = []
     for spec, label in scenarios:
@@ -75,7 +76,8 @@ def make_jobs(scenarios, seeds, out: Path, backend="cpu", controller="mppid", re
             jobs.append(FlightJob(index=len(jobs), scenario=spec, label=label, seed=seed,
                                   out=Path(out) / label / f"seed_{seed:04d}", backend=backend, controller=controller,
                                   realtime=realtime, sets=list(sets), plots=plots, timeout=timeout, ideal=ideal,
-                                  latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin))
+                                  latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin,
+                                  px4_bin=px4_bin))
     return jobs
 
 
@@ -83,7 +85,7 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
                  controller: str = "mppid", realtime: bool = False, sets=(), engine: str = "local",
                  address: str | None = None, cpus_per_flight: float = 1.0, ideal: bool = False,
                  latency: float | None = None, realtime_jobs: int = 1, plots: bool = True, autopilot: str = "sim",
-                 ardupilot_bin: str | None = None) -> dict:
+                 ardupilot_bin: str | None = None, px4_bin: str | None = None) -> dict:
     """Flies every scenario (names or YAML files) over the seeds (a count from first_seed, or
     a list) on the engine; writes summary.json, summary.md, summary.png; returns the summary."""
     out = Path(out).resolve()
@@ -99,7 +101,8 @@ def run_campaign(scenarios, seeds, out: Path, jobs: int | None = None, backend: 
         # lengthen it. With --ideal, a fixed --latency or the stand-in, two at a time.
         jobs = 2 if (ideal or latency is not None or controller == "standin") else 1
     flights = make_jobs(resolved, seed_list, out, backend=backend, controller=controller, realtime=realtime, sets=sets,
-                        plots=plots, ideal=ideal, latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin)
+                        plots=plots, ideal=ideal, latency=latency, autopilot=autopilot, ardupilot_bin=ardupilot_bin,
+                        px4_bin=px4_bin)
     eng = make_engine(engine, jobs=jobs, address=address, cpus_per_flight=cpus_per_flight,
                       pin=realtime and jobs > 1)
     try:

@@ -11,6 +11,10 @@ from pathlib import Path
 
 from . import paths
 
+# --controller: mppid, its DDP baseline, the hover stand-in, and the autopilots' own (guided:
+# ArduCopter's GUIDED; px4: PX4's offboard position control).
+CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4"]
+
 
 class UsageError(Exception):
     """Arguments that cannot be flown: printed as `sitl: <message>`, exit 2."""
@@ -60,10 +64,10 @@ def _add_run_parser(sub):
                      help="lock-step without charging the controller's latency (algorithm studies only)")
     lat.add_argument("--latency", type=float, default=None, metavar="SECONDS",
                      help="lock-step: charge this fixed latency instead of the measured one (repeatable runs)")
-    r.add_argument("--controller", choices=["mppid", "ddp", "standin", "guided"], default="mppid",
+    r.add_argument("--controller", choices=CONTROLLERS, default="mppid",
                    help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the "
                         "simulator without the daemon); guided: ArduCopter's own position controller (--autopilot "
-                        "ardupilot)")
+                        "ardupilot); px4: PX4's own offboard position control (--autopilot px4)")
     _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
@@ -72,6 +76,11 @@ def _add_run_parser(sub):
                    help="a parameter update sent in flight, T seconds (state time) after the first state, e.g. "
                         "2:mppi.rollouts=512; the answers go to score.json (param_results)")
     r.add_argument("--timeout", type=float, default=0.0, help="wall-clock limit [s] (default from the scenario)")
+    r.add_argument("--fault", action="append", default=[], metavar="ACTION@T",
+                   help="--autopilot px4: a failsafe flight; ACTION (kill_mppid, stop_bridge, gcs_hold, gcs_position, "
+                        "link_cut:SECONDS) T seconds after the first path leg starts (docs/px4.md)")
+    r.add_argument("--autopilot-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="--autopilot px4: a PX4 parameter over config/px4's files (e.g. COM_OBL_RC_ACT=0)")
     r.add_argument("--kill-controller-after", type=float, default=0.0, help=argparse.SUPPRESS)
     r.add_argument("--lcm-port", type=int, default=0, help=argparse.SUPPRESS)   # campaigns: one bus per flight
     r.add_argument("--parent-pid", type=int, default=0, help=argparse.SUPPRESS)  # stop when this process dies
@@ -107,9 +116,10 @@ def _add_campaign_parser(sub):
                         "(default 1: one at a time)")
     c.add_argument("--cpus-per-flight", type=float, default=1.0, help="ray: CPUs a flight task asks for")
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
-    c.add_argument("--controller", choices=["mppid", "ddp", "standin", "guided"], default="mppid",
-                   help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, or guided "
-                        "(ArduCopter's position controller, --autopilot ardupilot)")
+    c.add_argument("--controller", choices=CONTROLLERS, default="mppid",
+                   help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, guided "
+                        "(ArduCopter's position controller, --autopilot ardupilot) or px4 (PX4's offboard position "
+                        "control, --autopilot px4)")
     _autopilot_args(c)
     c.add_argument("--realtime", action="store_true")
     clat = c.add_mutually_exclusive_group()
@@ -141,7 +151,7 @@ def _add_report_parsers(sub):
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
-    apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter SITL side by side (markdown)")
+    apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter or PX4 SITL side by side (markdown)")
     apt.set_defaults(func=cmd_autopilot_table)
     apt.add_argument("folders", type=Path, nargs="+")
     apt.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
@@ -166,23 +176,27 @@ def _autopilot_args(p):
     from .flights import PLANTS
 
     p.add_argument("--autopilot", choices=list(PLANTS), default="sim",
-                   help="sim: mppid-sim (scenarios); ardupilot: ArduCopter SITL through the MAVLink bridge, flying "
-                        "missions (config/missions) in real time")
+                   help="sim: mppid-sim (scenarios); ardupilot: ArduCopter SITL, px4: PX4 SITL with SIH, through "
+                        "the MAVLink bridge, flying missions (config/missions) in real time")
     p.add_argument("--ardupilot-bin", default=None, metavar="PATH",
                    help="the ArduCopter SITL binary (<ardupilot>/build/sitl/bin/arducopter; default "
                         "$MPPID_ARDUPILOT_BIN)")
+    p.add_argument("--px4-bin", default=None, metavar="PATH",
+                   help="PX4 SITL with SIH (<PX4>/build/px4_sitl_sih/bin/px4; default $MPPID_PX4_BIN)")
 
 
 # ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
-    if a.controller == "guided" and a.autopilot != "ardupilot":
-        return "--controller guided is ArduCopter's own controller: it needs --autopilot ardupilot"
-    if a.autopilot == "ardupilot":
-        if a.controller not in ("mppid", "guided"):
-            return "--autopilot ardupilot flies --controller mppid or guided"
+    own = {"ardupilot": "guided", "px4": "px4"}  # each autopilot's own position controller
+    for autopilot, ctrl in own.items():
+        if a.controller == ctrl and a.autopilot != autopilot:
+            return f"--controller {ctrl} is {autopilot}'s own controller: it needs --autopilot {autopilot}"
+    if a.autopilot in own:
+        if a.controller not in ("mppid", own[a.autopilot]):
+            return f"--autopilot {a.autopilot} flies --controller mppid or {own[a.autopilot]}"
         if not a.realtime:
-            return "--autopilot ardupilot flies in real time (ArduPilot's SITL runs on the wall clock): add --realtime"
+            return f"--autopilot {a.autopilot} flies in real time (its SITL runs on the wall clock): add --realtime"
     return ""
 
 
@@ -234,15 +248,32 @@ def _run_spec(a):
     spec = FlightSpec(scenario=a.scenario, seed=a.seed, out=out, backend=a.backend, realtime=a.realtime,
                       ideal=a.ideal, latency=a.latency, controller=a.controller, wall_timeout=a.timeout, sets=a.set,
                       kill_controller_after=a.kill_controller_after, lcm_url=url, plots=not a.no_plots,
-                      params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, view=a.view,
-                      view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd)
+                      params=a.param, autopilot=a.autopilot, ardupilot_bin=a.ardupilot_bin, px4_bin=a.px4_bin, view=a.view,
+                      view_hold=a.view_hold, view_wait=a.view_wait, view_port=a.view_port, rrd=a.rrd,
+                      faults=a.fault, autopilot_params=a.autopilot_param)
     try:
+        _fault_check(a)
         for u in a.param:
             parse_update(u)
         paths.scenario_label(a.scenario)
     except (ValueError, FileNotFoundError) as e:
         raise UsageError(str(e)) from None
     return spec
+
+
+def _fault_check(a) -> None:
+    """--fault and --autopilot-param: PX4 flights only, well-formed (ValueError otherwise)."""
+    from .px4_faults import parse_fault
+
+    if (a.fault or a.autopilot_param) and a.autopilot != "px4":
+        raise ValueError("--fault and --autopilot-param are for --autopilot px4")
+    if a.fault and a.controller != "mppid":
+        raise ValueError("--fault: failsafe flights fly mppid")
+    for f in a.fault:
+        parse_fault(f)
+    for kv in a.autopilot_param:
+        if "=" not in kv:
+            raise ValueError(f"--autopilot-param {kv!r}: expected NAME=VALUE")
 
 
 def _set_niceness(niceness: int) -> None:
@@ -300,7 +331,7 @@ def cmd_campaign(a) -> int:
                      realtime=a.realtime, sets=a.set, engine=a.engine, address=a.address,
                      cpus_per_flight=a.cpus_per_flight, ideal=a.ideal, latency=a.latency,
                      realtime_jobs=a.realtime_jobs, plots=not a.no_plots, autopilot=a.autopilot,
-                     ardupilot_bin=a.ardupilot_bin)
+                     ardupilot_bin=a.ardupilot_bin, px4_bin=a.px4_bin)
     except KeyboardInterrupt:
         print("\nsitl: campaign interrupted", file=sys.stderr)
         return 130

@@ -49,6 +49,7 @@ class FlightJob:
     timeout: float = 0.0
     autopilot: str = "sim"
     ardupilot_bin: str | None = None
+    px4_bin: str | None = None
 
     @property
     def lcm_port(self) -> int:
@@ -68,6 +69,7 @@ class FlightJob:
             a.append("--no-plots")
         if self.autopilot != "sim":
             a += ["--autopilot", self.autopilot] + (["--ardupilot-bin", self.ardupilot_bin] if self.ardupilot_bin else [])
+            a += ["--px4-bin", self.px4_bin] if self.px4_bin else []
         if self.timeout:
             a += ["--timeout", str(self.timeout)]
         for kv in self.sets:

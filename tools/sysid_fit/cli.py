@@ -3,6 +3,7 @@
     tools/sysid fit LOG [--vehicle IN.yaml] [--out OUT.yaml] [--report FIT.json]
                         [--holdout 0.3] [--lockstep-latency S] [--truth SCENARIO.yaml]
     tools/sysid fit FLIGHT.BIN --dataflash --vehicle IN.yaml ...      (ArduPilot dataflash)
+    tools/sysid fit FLIGHT.ulg --vehicle IN.yaml ...                  (PX4 ULog: by its suffix, or --ulog)
 
 Fits per body axis gain, time constant and delay, the one delay the daemon's latency
 compensation takes (daemon.latency.actuation_delay_ms), the mass a newton of command flies
@@ -81,6 +82,8 @@ def fit_command(a) -> int:
         return 1
     if a.dataflash:
         data = logs.read_dataflash(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
+    elif a.ulog or Path(a.log).suffix == ".ulg":
+        data = logs.read_ulog(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
     else:
         data = logs.read_lcm(a.log, a.lockstep_latency)
     split = data.split_time(1.0 - a.holdout)
@@ -191,6 +194,7 @@ def main(argv=None) -> int:
     f.add_argument("--keep-prior", type=lambda s: s.split(","), default=[], metavar="AXES",
                    help="body axes (x,y,z) that keep the prior's gain and tau whatever the flight shows")
     f.add_argument("--dataflash", action="store_true", help="LOG is an ArduPilot dataflash log (.BIN)")
+    f.add_argument("--ulog", action="store_true", help="LOG is a PX4 ULog (the default for *.ulg; needs pyulog)")
     f.add_argument("--truth", type=Path, help="a mppid-sim scenario: compare the fit with its plant")
     f.add_argument("--structure", action="store_true",
                    help="also fit a second-order rate response per axis: does the first-order model express it?")

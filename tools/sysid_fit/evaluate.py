@@ -15,8 +15,11 @@ def prediction_errors(m: RateModel, data: FlightData, horizon: float = 0.5, stri
     period = float(np.median(np.diff(t)))
     steps = int(round(horizon / period))
     k0 = np.arange(0, len(t) - steps, stride)
-    k1 = k0 + steps
-    k0, k1 = k0[np.abs(t[k1] - t[k0] - horizon) < 0.5 * period], k1[np.abs(t[k1] - t[k0] - horizon) < 0.5 * period]
+    # The state nearest `horizon` later (uneven streams: a PX4's states come at two rates).
+    hi = np.clip(np.searchsorted(t, t[k0] + horizon), 1, len(t) - 1)
+    k1 = np.where(np.abs(t[hi] - t[k0] - horizon) <= np.abs(t[hi - 1] - t[k0] - horizon), hi, hi - 1)
+    ok = np.abs(t[k1] - t[k0] - horizon) < 0.5 * period
+    k0, k1 = k0[ok], k1[ok]
     if len(k0) < 5:
         raise ValueError(f"held-out part too short for {horizon} s predictions ({len(k0)} starting points)")
     xp = predict(m, data.x[k0], t[k0], horizon, data.tc, data.u)

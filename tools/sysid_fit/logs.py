@@ -10,7 +10,8 @@
   The bridge's hover thrust in use (mavlink_link_t on MPPI_MAVLINK_LINK), when logged.
   When the log holds the bridge's link messages with `engaged`, only the engaged intervals
   count (mppid's setpoints reached the autopilot; before `offboard`, during ArduPilot's own
-  takeoff and after land or hold they did not): states and commands outside are dropped.
+  takeoff and after land or hold they did not; on PX4 only in OFFBOARD: its pre-stream reaches
+  the autopilot but is not flown): states and commands outside are dropped.
 * An ArduPilot dataflash log (.BIN, pymavlink's DFReader): RATE (desired and achieved body
   rates), CTUN (throttle out), ATT and the EKF's position and velocity (XKF1, NKF1), turned
   into the same arrays (NED/FRD -> ENU/FLU; throttle -> newtons through the vehicle's mass and
@@ -109,7 +110,8 @@ def _lcm_messages(path) -> dict:
                 out["ticks"].setdefault(m.seq, (m.sim_utime, m.utime))
             elif ev.channel == LINK_CHANNEL and link_t is not None:
                 m = link_t.decode(ev.data)
-                out["link"].append((m.utime, bool(m.engaged)))
+                # PX4 takes setpoints only in OFFBOARD: its pre-stream (`engaged` too) is not flown.
+                out["link"].append((m.utime, bool(m.engaged) and (m.dialect != "px4" or m.mode == "OFFBOARD")))
                 if m.hover_thrust > 0 and math.isfinite(m.hover_thrust):
                     out["hover"].append(m.hover_thrust)
         except ValueError:
@@ -271,3 +273,88 @@ def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle
                      "input shaping (the fit leaves the shaping out)")
     t0 = min(t[0], tc[0])
     return FlightData(t - t0, x, tc - t0, u, str(path), "dataflash", hover_throttle, notes)
+
+
+# ---- PX4 ULog ------------------------------------------------------------------------------
+
+ULOG_TOPICS = ("vehicle_rates_setpoint", "vehicle_angular_velocity", "vehicle_attitude", "vehicle_local_position",
+               "vehicle_status", "hover_thrust_estimate")
+NAV_STATE_OFFBOARD = 14   # vehicle_status.nav_state
+ULOG_PERIOD_US = 10_000   # the states' grid: vehicle_angular_velocity's logged rate
+
+
+def _ulog_topics(path) -> tuple[dict, dict]:
+    """The topics the fit reads (the first instance of each) and the log's parameters."""
+    from pyulog import ULog
+
+    log = ULog(str(path), list(ULOG_TOPICS))
+    topics = {}
+    for d in log.data_list:
+        if d.multi_id == 0:
+            topics[d.name] = {k: np.asarray(v, dtype=np.float64) for k, v in d.data.items()}
+    return topics, dict(log.initial_parameters)
+
+
+def _offboard_spans(status: dict | None) -> list[tuple[float, float]] | None:
+    """[start, end) of each run of OFFBOARD in vehicle_status [us]."""
+    if status is None:
+        return None
+    t, nav = status["timestamp"], status["nav_state"]
+    spans, start = [], None
+    for ti, n in zip(t, nav):
+        if n == NAV_STATE_OFFBOARD and start is None:
+            start = ti
+        elif n != NAV_STATE_OFFBOARD and start is not None:
+            spans.append((start, ti))
+            start = None
+    if start is not None:
+        spans.append((start, t[-1]))
+    return spans
+
+
+def _ulog_hover(topics: dict, params: dict, hover_throttle: float | None) -> float:
+    """The hover throttle: the vehicle file's, else PX4's estimate while it was valid, else MPC_THR_HOVER."""
+    if hover_throttle is not None:
+        return hover_throttle
+    est = topics.get("hover_thrust_estimate")
+    if est is not None and (est["valid"] > 0).sum() >= 10:
+        return float(np.median(est["hover_thrust"][est["valid"] > 0]))
+    return float(params.get("MPC_THR_HOVER", 0.5))
+
+
+def read_ulog(path: str | Path, mass: float, gravity: float, hover_throttle: float | None) -> FlightData:
+    """PX4's log (pyulog). The input is what reached PX4's rate controller: vehicle_rates_setpoint
+    (body rates FRD; thrust_body z, normalised and negative up), which in OFFBOARD with body-rate
+    setpoints is mppid's SET_ATTITUDE_TARGET as PX4 took it. The output: vehicle_angular_velocity,
+    vehicle_attitude, vehicle_local_position (NED/FRD -> ENU/FLU). Thrust in newtons through the
+    vehicle's mass and hover throttle (the file's, else hover_thrust_estimate, else MPC_THR_HOVER).
+    Only the OFFBOARD intervals (vehicle_status.nav_state) are fitted: outside them PX4's own
+    controllers set the rates."""
+    from mppi_mavlink import frames
+
+    topics, params = _ulog_topics(path)
+    need = ULOG_TOPICS[:4]
+    counts = {k: len(topics[k]["timestamp"]) if k in topics else 0 for k in need}
+    if min(counts.values()) < 50:
+        raise LogError(f"{path}: {counts}: too few to fit")
+    rates, w_log, att, lpos = (topics[k] for k in need)
+    hover = _ulog_hover(topics, params, hover_throttle)
+    newtons = mass * gravity / hover
+    # One uniform 100 Hz grid (the logger's samples jitter; the held-out check steps evenly).
+    t = np.arange(w_log["timestamp"][0], w_log["timestamp"][-1], ULOG_PERIOD_US)
+    interp = lambda src, key: np.interp(t, src["timestamp"], src[key])  # noqa: E731
+    q_ned = np.stack([interp(att, f"q[{i}]") for i in range(4)], axis=1)
+    q = np.array([frames.q_ned_frd_to_enu_flu(tuple(r / np.linalg.norm(r))) for r in q_ned])
+    p = np.stack([interp(lpos, "y"), interp(lpos, "x"), -interp(lpos, "z")], axis=1)
+    v = np.stack([interp(lpos, "vy"), interp(lpos, "vx"), -interp(lpos, "vz")], axis=1)
+    w = np.stack([interp(w_log, "xyz[0]"), -interp(w_log, "xyz[1]"), -interp(w_log, "xyz[2]")], axis=1)
+    x = np.concatenate([p, v, q, w], axis=1)
+    tc = rates["timestamp"]
+    u = np.stack([-rates["thrust_body[2]"] * newtons, rates["roll"], -rates["pitch"], -rates["yaw"]], axis=1)
+    t0 = min(t[0], tc[0])
+    data = FlightData((t - t0) * 1e-6, x, (tc - t0) * 1e-6, u, str(path), "ulog", hover,
+                      ["ulog: vehicle_rates_setpoint as the input (in OFFBOARD: the offboard rate setpoints)"])
+    spans = _offboard_spans(topics.get("vehicle_status"))
+    if spans:
+        data = engaged_only(data, [((a - t0) * 1e-6, (b - t0) * 1e-6) for a, b in spans])
+    return data

@@ -15,6 +15,10 @@ and the vehicle is out of its offboard mode, from the start and after any diseng
 the operator's own switch into OFFBOARD (RC or ground station) engages, seen as the mode
 changing into OFFBOARD; a vehicle found in OFFBOARD without that change (the bridge started,
 or disengaged, while it was there) gets nothing until it leaves OFFBOARD or `offboard` is sent.
+But after the bridge's own failsafe (mppid's stream stopped, mppid restarted, the link lost:
+`disengage(latch=True)`) on an autopilot whose offboard-loss failsafe is a fallback that ends
+when setpoints return (PX4: OFFBOARD stays the intended mode), the pre-stream stays off until
+`offboard` is sent: it would take the vehicle back into OFFBOARD by itself.
 """
 from __future__ import annotations
 
@@ -53,6 +57,7 @@ class Engagement:
         self._mode = None
         self._why = "" if prestream else "waiting for `offboard`"
         self._takeoff = False
+        self._latched = False           # no pre-stream until `offboard` (the module doc)
         self.transitions = deque(maxlen=64)   # (monotonic s, from, to, why): the log's record
         log.info("engagement: %s (%s)", self._state, self._why or "pre-streamed until `offboard`")
 
@@ -84,6 +89,7 @@ class Engagement:
         with self.lock:
             if self._state == ENGAGED:
                 return False
+            self._latched = False
             changed = self._to(PRESTREAM, None, why)
         self.on_change(why, changed)
         return changed
@@ -96,12 +102,16 @@ class Engagement:
         self.on_change(why, changed)
         return changed
 
-    def disengage(self, why: str) -> bool:
-        """Ends any engagement (and a take-off wait); True when something was forwarded until now."""
+    def disengage(self, why: str, latch: bool = False) -> bool:
+        """Ends any engagement (and a take-off wait); True when something was forwarded until
+        now. `latch`: no pre-stream until `offboard` (the module doc)."""
         with self.lock:
             changed = self._to(DISENGAGED, None, why)
             self._why = why
             self._takeoff = False
+            self._latched = latch
+            if latch:
+                log.warning("no pre-stream until `offboard`: the autopilot would resume OFFBOARD on it by itself")
         self.on_change(why, changed)
         return changed
 
@@ -111,7 +121,7 @@ class Engagement:
         the engagement (the operator, a failsafe or the RC took over). Pre-streamed autopilots:
         the rule in the module doc (`was_in_offboard` None: the first HEARTBEAT)."""
         with self.lock:
-            state, mode = self._state, self._mode
+            state, mode, latched = self._state, self._mode, self._latched
         if state == ENGAGED:
             if custom_mode != mode:
                 return self.disengage(f"mode changed to {mode_name} by someone else")
@@ -124,7 +134,7 @@ class Engagement:
             if was_in_offboard is False:
                 return self.engage(custom_mode, mode_name, "the operator switched it (RC or ground station)")
             return self.disengage(f"the vehicle is in {mode_name}, not switched there while the bridge watched")
-        if state == DISENGAGED and not in_offboard:
+        if state == DISENGAGED and not in_offboard and not latched:
             return self.prestream(f"the vehicle is in {mode_name}: pre-streamed for the next switch")
         return False
 

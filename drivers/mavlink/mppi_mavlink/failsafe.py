@@ -34,7 +34,8 @@ class Failsafe:
         self.next_try = 0.0
 
     def stream_lost(self, why: str) -> None:
-        if self.engagement.snapshot().state == ENGAGED and self.engagement.disengage(why):
+        latch = self.profile.offboard_loss_resumes  # PX4: no pre-stream until `offboard` (engagement.py)
+        if self.engagement.snapshot().state == ENGAGED and self.engagement.disengage(why, latch=latch):
             self.handback_pending = True
 
     def fence_breach(self) -> str:

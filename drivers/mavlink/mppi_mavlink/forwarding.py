@@ -1,7 +1,13 @@
 """mppid's commands -> the wire: each command_t through the gate (gate.py), converted (thrust
 map, FLU -> FRD) and sent as one SET_ATTITUDE_TARGET at once, while engaged; mppid's status;
 the counters by reason; whether the setpoint stream runs; the stream check `offboard` makes;
-the trace of every forwarded setpoint. Nothing is ever re-sent or made up."""
+the trace of every forwarded setpoint. Nothing is ever re-sent or made up, but for one
+setpoint: where the autopilot flies the last rate setpoint on (PX4, until COM_OF_LOSS_T), a
+stream that stops while engaged ends with zero body rates at the last thrust, so that a pause
+(mppid holding on a stale state, a stall) stops the vehicle turning instead of letting it fly
+mppid's last rates for up to COM_OF_LOSS_T. The last thrust, not the hover thrust: tilted in a
+fast turn, hover thrust would sink the vehicle (PX4 SITL, circle_5ms at 47 degrees: 0.27 s of
+it cost 1 m/s of sink)."""
 from __future__ import annotations
 
 import json
@@ -13,13 +19,15 @@ import time
 
 from . import frames
 from .autopilots.base import mavlink
+from .engagement import ENGAGED, PRESTREAM
 from .gate import GateContext, gate, seq_restarted
 from .state import mono_us
 
 log = logging.getLogger("mppi_mavlink")
 ATTITUDE_IGNORE = mavlink.ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
 COUNTERS = ("setpoints_sent", "dropped_not_advanced", "dropped_unhealthy", "dropped_nonfinite", "dropped_stale",
-            "dropped_refused", "dropped_disengaged", "dropped_undecodable", "states_published", "states_rejected")
+            "dropped_refused", "dropped_disengaged", "dropped_undecodable", "states_published", "states_rejected",
+            "stop_setpoints_sent")
 
 
 class Forwarder:
@@ -39,6 +47,7 @@ class Forwarder:
         self.last_status_mono = None
         self.last_status_healthy = False
         self.last_forward_mono = None
+        self.last_thrust = None        # normalised, of the latest forwarded setpoint
         self.ready_since = None
         self.last_ready_mono = None
         self.ready_times = []  # monotonic us of recent commands that passed the gate (offboard's stream check)
@@ -118,7 +127,7 @@ class Forwarder:
             return
         sent = mono_us()
         self.counters["setpoints_sent"] += 1
-        self.last_forward_mono = sent
+        self.last_forward_mono, self.last_thrust = sent, thrust
         if not self.streaming:
             self.set_streaming(True, "")
         if self.trace is not None:
@@ -136,7 +145,21 @@ class Forwarder:
             log.info("setpoint stream started")
         else:
             log.warning("setpoint stream stopped (%s)", reason or "no fresh command")
+            self._stop_turning()
         self.on_stream_change(on, reason)
+
+    def _stop_turning(self):
+        """The stream stopped while engaged, on an autopilot that flies the last setpoint on:
+        one setpoint of zero body rates at the last thrust (the module docstring)."""
+        engaged = self.engagement.snapshot().state == ENGAGED   # not a pre-stream: the autopilot flies it
+        if not (self.ap.profile.flies_last_setpoint and engaged and self.checks.thrust is not None):
+            return
+        thrust = self.last_thrust if self.last_thrust is not None else self.checks.thrust.hover
+        boot_ms = int(time.monotonic() * 1000) & 0xFFFFFFFF
+        target = self.ap.target_system
+        if self.link.send(lambda mv: mv.set_attitude_target_send(
+                boot_ms, target, self.target_component, ATTITUDE_IGNORE, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, thrust)):
+            self.counters["stop_setpoints_sent"] += 1
 
     # ---- housekeeping and `offboard` ----------------------------------------------------
     def check_stream(self):
@@ -151,8 +174,12 @@ class Forwarder:
         now = mono_us()
         if self.ready_since is None or self.last_ready_mono is None or now - self.last_ready_mono > 500_000:
             return False, "no command stream (is mppid running, healthy and getting states?)"
-        if now - self.ready_since < o["prestream_s"] * 1e6:
-            return False, f"stream only {(now - self.ready_since) / 1e6:.2f} s old"
+        since = self.ready_since
+        snap = self.engagement.snapshot()
+        if snap.state == PRESTREAM:   # on the wire only since the pre-stream began (after a latch: now)
+            since = max(since, int(self.engagement.since * 1e6))
+        if now - since < o["prestream_s"] * 1e6:
+            return False, f"stream only {(now - since) / 1e6:.2f} s old"
         window = [t for t in self.ready_times if now - t <= o["prestream_s"] * 1e6]
         rate = len(window) / o["prestream_s"]
         if rate < o["min_rate_hz"]:

@@ -32,6 +32,8 @@ PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "OFFBOARD": (6, 0), "AUTO.TAKEO
              "AUTO.LOITER": (4, 3), "AUTO.LAND": (4, 6)}
 # PX4's COM_OBL_RC_ACT values this stand-in has (others: land).
 OFFBOARD_LOSS_ACTIONS = {0: "POSCTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
+# PX4's NAV_DLL_ACT (data link lost) values this stand-in has (0: disabled; others: land).
+DATALINK_LOSS_ACTIONS = {1: "AUTO.LOITER", 3: "AUTO.LAND"}
 # ArduPilot Copter custom modes.
 APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9, "BRAKE": 17}
 
@@ -41,9 +43,9 @@ def wall_us():
 
 
 class Vehicle:
-    # A rate setpoint is flown for at most this long; later, the vehicle holds level until the
-    # next one or the offboard-loss failsafe (COM_OF_LOSS_T). A tumbling plant would make the
-    # failsafe test about the plant instead of the link.
+    # ArduPilot flies a rate setpoint for at most this long; later, the vehicle holds level until
+    # the next one. PX4 flies the last one until COM_OF_LOSS_T runs out, as the real one does
+    # (PX4 SIH, docs/px4.md: 3 rad/s of roll flown on through a 0.5 s pause turned it over).
     SETPOINT_HOLD_S = 0.1
 
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
@@ -61,11 +63,14 @@ class Vehicle:
         # BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
         # capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
         # ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
-        # without a ground station's HEARTBEAT, once one was heard, armed).
+        # without a ground station's HEARTBEAT, once one was heard, armed); PX4's data-link-loss
+        # failsafe (NAV_DLL_ACT 1 Hold, 3 Land after COM_DL_LOSS_T s, the same way; 0, PX4's
+        # default, off).
         self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
                        "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
                        "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
                        "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
+                       "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
                        "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
         self.battery = 90.0                # % remaining
         self.last_gcs_t = None
@@ -89,6 +94,10 @@ class Vehicle:
         self.takeoff_alt = None
         self.hold_sp = None                # position setpoint of the vehicle's own controller
         self.stale_hold = None
+        # PX4: in its offboard-loss fallback (COM_OBL_RC_ACT) with OFFBOARD still the user's
+        # intended mode: setpoints arriving again take it back into OFFBOARD by itself, as the
+        # real one does (PX4 SITL, docs/px4.md: the link cut for 3 s, PX4 went Hold and back).
+        self.offboard_fallback = False
         self.landed_since = None
         self.counters = {"setpoints": 0, "setpoints_rejected": 0, "nonfinite_rejected": 0, "failsafes": 0,
                          "overruns": 0, "heartbeats_from_companion": 0, "states_sent": 0}
@@ -114,6 +123,8 @@ class Vehicle:
         self.conn.mav.statustext_send(severity, text.encode()[:50])
 
     def set_mode(self, mode, why=""):
+        # PX4: any mode change but its own offboard-loss fallback moves the user's intended mode.
+        self.offboard_fallback = self.offboard_fallback and why == "offboard lost"
         if mode != self.mode:
             self.event("mode", mode=mode, previous=self.mode, why=why)
             self.mode = mode
@@ -207,6 +218,10 @@ class Vehicle:
         self.setpoint = (min(max(vals[0], 0.0), 1.0), vals[1], vals[2], vals[3])
         self.setpoint_t = self.t
         self.counters["setpoints"] += 1
+        if self.ap == "px4" and self.offboard_fallback and self.armed:
+            self.set_mode("OFFBOARD", "offboard lost")   # the fallback ends: back to the intended mode
+            self.offboard_fallback = False
+            self.event("offboard_resumed", reason="setpoints back, OFFBOARD still the intended mode")
         if self.ap == "ardupilot" and self.mode == "GUIDED" and self.taking_off:
             self.taking_off = False
             self.event("takeoff_taken_over", z=round(self.plant.x[2], 3))
@@ -363,7 +378,8 @@ class Vehicle:
             return [0.0, 0.0, 0.0, 0.0]
         x = self.plant.x
         hover = self.params["MOT_THST_HOVER" if self.ap == "ardupilot" else "MPC_THR_HOVER"]
-        if self.offboard_mode() and self.fresh_setpoint(self.SETPOINT_HOLD_S):
+        hold_s = self.params["COM_OF_LOSS_T"] if self.ap == "px4" else self.SETPOINT_HOLD_S
+        if self.offboard_mode() and self.fresh_setpoint(hold_s):
             self.stale_hold = None
             th, p, q, r = self.setpoint
             if self.ap == "ardupilot" and not int(self.params["GUID_OPTIONS"]) & 8:
@@ -410,13 +426,20 @@ class Vehicle:
             low = int(self.params["COM_LOW_BAT_ACT"]) in (2, 3) and self.battery <= 100 * self.params["BAT_CRIT_THR"]
         else:
             low = int(self.params["BATT_FS_LOW_ACT"]) == 1 and self.battery <= self.params["BATT_LOW_PCT"]
-        gcs = (self.ap == "ardupilot" and int(self.params["FS_GCS_ENABLE"]) == 5 and self.last_gcs_t is not None
-               and self.t - self.last_gcs_t > self.params["FS_GCS_TIMEOUT"])
+        silent = self.last_gcs_t is not None and self.t - self.last_gcs_t > \
+            self.params["FS_GCS_TIMEOUT" if self.ap == "ardupilot" else "COM_DL_LOSS_T"]
+        dll = int(self.params["NAV_DLL_ACT"])
+        gcs = silent and (int(self.params["FS_GCS_ENABLE"]) == 5 if self.ap == "ardupilot" else dll != 0)
+        action = "LAND" if self.ap == "ardupilot" else "AUTO.LAND"
+        if gcs and self.ap == "px4" and not low:
+            action = DATALINK_LOSS_ACTIONS.get(dll, "AUTO.LAND")
+            if self.mode == action:
+                return
         if self.armed and not landing and (low or gcs):
             reason = "battery low" if low else "ground station lost"
             self.counters["failsafes"] += 1
             self.hold_sp = list(self.plant.x[0:3])
-            self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", reason)
+            self.set_mode(action, reason)
             self.event("failsafe", reason=reason, action=self.mode)
             self.statustext(f"Failsafe: {reason}, landing", mavlink.MAV_SEVERITY_CRITICAL)
 
@@ -428,6 +451,7 @@ class Vehicle:
             self.hold_sp = list(self.plant.x[0:3])
             action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
             self.set_mode(action, "offboard lost")
+            self.offboard_fallback = True
             self.event("failsafe", reason="offboard setpoints lost", action=action,
                        last_setpoint_age_s=round(self.t - self.setpoint_t, 4))
             self.statustext(f"Failsafe: offboard lost, {action}", mavlink.MAV_SEVERITY_CRITICAL)

@@ -9,6 +9,7 @@ import importlib
 PLANTS = {
     "sim": "sitl_harness.flights.sim:SimFlight",             # mppid-sim (config/scenarios)
     "ardupilot": "sitl_harness.flights.ardupilot:ArduPilotFlight",  # ArduCopter SITL (config/missions)
+    "px4": "sitl_harness.flights.px4:Px4Flight",             # PX4 SITL with SIH (config/missions)
 }
 
 

@@ -83,19 +83,21 @@ def mission_command(spec: FlightSpec, mission_path: Path, out: Path) -> list[str
             str(out), "--lcm-url", spec.lcm_url]
 
 
-def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool) -> tuple[list, list, Path]:
-    """mppid and the bridge for the mission; the bridge's control socket."""
+def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bridge_config: Path = BRIDGE_CONFIG,
+                     vehicle: Path = VEHICLE, overlay: Path = OVERLAY) -> tuple[list, list, Path]:
+    """mppid and the bridge for the mission (the plant's bridge configuration, airframe and
+    settings overlay; ArduCopter's by default); the bridge's control socket."""
     task = mission.get("task", "quadrotor_rate_track")
     cfg = paths.TASKS / f"{task}.yaml"
     sets = [str(kv) for kv in spec.sets if not str(kv).startswith("vehicle=")]
     vehicles = [Path(str(kv)[len("vehicle="):]) for kv in spec.sets if str(kv).startswith("vehicle=")]
-    vehicle = (vehicles[-1].expanduser().resolve() if vehicles else VEHICLE)
+    vehicle = (vehicles[-1].expanduser().resolve() if vehicles else vehicle)
     ctrl = [str(mppid_binary()), "--config", str(cfg), "--vehicle", str(vehicle), "--lcm-url", spec.lcm_url,
             "--backend", spec.backend, "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
-    for kv in load_sets(OVERLAY) + list((mission.get("mppid") or {}).get("set", [])) + sets:
+    for kv in load_sets(overlay) + list((mission.get("mppid") or {}).get("set", [])) + sets:
         ctrl += ["--set", str(kv)]
     sock = out / "bridge.sock"
-    bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(BRIDGE_CONFIG), "--lcm-url", spec.lcm_url,
+    bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(bridge_config), "--lcm-url", spec.lcm_url,
               "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}"]
     if fifo:
         bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge

@@ -38,15 +38,18 @@ class FlightSpec:
     realtime: bool = False
     ideal: bool = False              # lock-step without charging the controller's latency
     latency: float | None = None     # lock-step: charge this fixed latency [s] (and tell mppid)
-    controller: str = "mppid"        # mppid | ddp (mppid --controller ddp: the MPC-DDP baseline) | standin
+    controller: str = "mppid"        # mppid | ddp (the MPC-DDP baseline) | standin | guided | px4 (autopilots' own)
     wall_timeout: float = 0.0        # 0: from the scenario's duration
     sets: list[str] = field(default_factory=list)  # extra --set key=value for mppid
     kill_controller_after: float = 0.0  # tests: SIGKILL the controller after this many seconds
     lcm_url: str = LCM_URL           # the flight's bus (inside its own network namespace)
     plots: bool = True               # path.png, traces.png, timing.png (tuning skips them)
     params: list[str] = field(default_factory=list)  # "T:KEY=VALUE": parameter updates in flight (inject.py)
-    autopilot: str = "sim"           # the plant: a name of flights.PLANTS (sim: mppid-sim; ardupilot: ArduCopter SITL)
+    autopilot: str = "sim"           # the plant: a name of flights.PLANTS (sim, ardupilot, px4)
     ardupilot_bin: str | None = None  # the SITL binary (else $MPPID_ARDUPILOT_BIN)
+    px4_bin: str | None = None       # PX4 SITL's bin/px4 (px4_sitl_sih; else $MPPID_PX4_BIN)
+    faults: list[str] = field(default_factory=list)  # PX4: ACTION@T after the first path leg (px4_faults.py)
+    autopilot_params: list[str] = field(default_factory=list)  # PX4: NAME=VALUE over config/px4's files
     view: bool = False               # the live 3D view (tools/view) of the flight, rollouts on; flight.rrd
     view_hold: float = 0.0           # ... kept serving this long after the flight [s]
     view_wait: float = 0.0           # ... up this long before the flight starts (open the page) [s]

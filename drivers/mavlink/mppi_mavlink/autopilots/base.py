@@ -25,6 +25,14 @@ class AutopilotProfile:
     hover_param = ""          # the hover thrust fraction (0..1) parameter
     prestream = False         # mppid's setpoints go to the wire before the first `offboard`
     state_messages = ()       # message ids the states are built from (telemetry.py asks for them)
+    # The autopilot flies the last rate setpoint on when the stream stops, until its own
+    # offboard-loss timeout (PX4: COM_OF_LOSS_T): a paused stream then ends with one setpoint
+    # of zero body rates at the last thrust (forwarding.py).
+    flies_last_setpoint = False
+    # The autopilot's offboard-loss failsafe is a fallback that ends by itself when setpoints
+    # arrive again (PX4: OFFBOARD stays the intended mode): after the bridge's own failsafe
+    # disengaged it, nothing may be pre-streamed until `offboard` (engagement.py).
+    offboard_loss_resumes = False
 
     def decode_param(self, msg) -> float:
         """PARAM_VALUE's value as a number."""

@@ -26,6 +26,14 @@ class Px4(AutopilotProfile):
     mav_autopilot = mavlink.MAV_AUTOPILOT_PX4
     hover_param = "MPC_THR_HOVER"
     prestream = True
+    # PX4's rate controller flies the last vehicle_rates_setpoint until COM_OF_LOSS_T runs out:
+    # met in SITL (docs/px4.md), 3 rad/s of roll for 0.5 s turned the vehicle over.
+    flies_last_setpoint = True
+    # PX4's offboard loss is a mode fallback (commander/failsafe: checkModeFallback), not a
+    # latched failsafe: OFFBOARD stays the user's intended mode, and setpoints arriving again
+    # take the vehicle back into it. Met in SITL: the link cut for 3 s, PX4 went to Hold, and
+    # the bridge's pre-stream on the link's return took it back into OFFBOARD (docs/px4.md).
+    offboard_loss_resumes = True
     state_messages = (mavlink.MAVLINK_MSG_ID_ODOMETRY, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
                       mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 
