@@ -96,7 +96,8 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool) -> 
         ctrl += ["--set", str(kv)]
     sock = out / "bridge.sock"
     bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(BRIDGE_CONFIG), "--lcm-url", spec.lcm_url,
-              "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}"]
+              "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
+              "--set", f"trace.file={out / 'bridge_trace.jsonl'}"]  # each setpoint's path, stage by stage
     if fifo:
         bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge
     return ctrl, bridge, sock
