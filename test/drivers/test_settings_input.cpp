@@ -75,6 +75,23 @@ TEST(SettingsInput, TheTriggerIsClockOrStateAndItsFractionsAreBounded) {
   EXPECT_DOUBLE_EQ(d.loop.state_trigger_grace, 1.0);
 }
 
+// daemon.latency.estimate_lag_ms (the vehicle file's estimate_lag): bounded, 0 by default, and
+// only for the quadrotor models, whose position and velocity come first in the state.
+TEST(SettingsInput, TheEstimateLagIsBoundedAndOnlyForQuadrotors) {
+  const auto none = daemon::parse_daemon_settings(YAML::Load("rate_hz: 50"), "quadrotor_rate_track", 4);
+  EXPECT_EQ(none.loop.latency.estimate_lag_ns, 0);
+  const auto lag = daemon::parse_daemon_settings(YAML::Load("latency: {estimate_lag_ms: 25}"), "quadrotor_rate_track", 4);
+  EXPECT_EQ(lag.loop.latency.estimate_lag_ns, 25'000'000);
+  EXPECT_THROW(daemon::parse_daemon_settings(YAML::Load("latency: {estimate_lag_ms: 600}"), "quadrotor_rate_track", 4),
+               app::ConfigError);
+  try {
+    daemon::parse_daemon_settings(YAML::Load("latency: {estimate_lag_ms: 5}"), "cartpole_swingup", 1);
+    FAIL() << "a lag for the cart-pole";
+  } catch (const app::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("only for the quadrotor models"), std::string::npos) << e.what();
+  }
+}
+
 // daemon.spin (the loop and receive threads poll instead of sleeping): a boolean, off by default.
 TEST(SettingsInput, SpinIsABooleanOffByDefault) {
   const auto off = daemon::parse_daemon_settings(YAML::Load("rate_hz: 50"), "cartpole_swingup", 1);

@@ -38,6 +38,7 @@ mass: 1.3
 drag: 0.1
 limits: {max_thrust: 30.0, max_body_rate: [8, 8, 4]}
 rate_response: {tau: [0.06, 0.07, 0.1], gain: [0.9, 1.1, 0.8], delay: 0.012}
+estimate_lag: 0.025
 )";
 
 // The error a config load throws, or "" when it loads.
@@ -78,6 +79,8 @@ TEST(VehicleFile, AnotherVehicleSetsTheModelTheHoverAndTheActuationDelay) {
   EXPECT_DOUBLE_EQ(value("model.rate_tau_y"), 0.07);
   EXPECT_DOUBLE_EQ(value("model.rate_gain_z"), 0.8);
   EXPECT_DOUBLE_EQ(daemon_delay_ms(c), 12.0);
+  // How far the autopilot's estimate trails the vehicle: the act-time prediction's.
+  EXPECT_DOUBLE_EQ(c.root["daemon"]["latency"]["estimate_lag_ms"].as<double>(), 25.0);
   // The controller built from it flies that mass.
   EXPECT_FLOAT_EQ(mppi::app::make_controller(load_config(kRateTask, {"vehicle=" + v, "mppi.rollouts=16"}))->mass(), 1.3f);
 }

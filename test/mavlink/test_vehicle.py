@@ -41,10 +41,11 @@ def test_a_different_value_in_the_bridge_settings_is_refused_naming_both(tmp_pat
 
 
 def test_written_vehicle_files_read_back(tmp_path):
-    v = vehicle.parse(GOOD)
+    v = vehicle.parse({**GOOD, "estimate_lag": 0.025})
     vehicle.dump(v, tmp_path / "out.yaml", header="written by a test")
     back = vehicle.load(tmp_path / "out.yaml")
     assert back["rate_response"] == v["rate_response"] and back["mass"] == 1.4
+    assert back["estimate_lag"] == 0.025 and vehicle.parse(GOOD)["estimate_lag"] == 0.0
     assert (tmp_path / "out.yaml").read_text().startswith("# written by a test")
 
 
@@ -55,6 +56,7 @@ BAD = [
     ({**GOOD, "hover_thrust": 1.5}, "hover_thrust"),
     ({**GOOD, "model": "hexacopter"}, "model"),
     ({**GOOD, "params": {"mass": 2}}, "params.mass"),
+    ({**GOOD, "estimate_lag": 0.8}, "estimate_lag"),
 ]
 
 

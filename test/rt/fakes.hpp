@@ -205,7 +205,8 @@ class FakeController final : public Controller {
   }
   // A model the tests can follow by hand: x[0] moves at the speed u[0] (u in units/s).
   void propagate(float* x, const float* u, float seconds) const override {
-    x[0] += u[0] * seconds;
+    x[0] += u[0] * seconds;   // a position
+    x[10] += u[0] * seconds;  // a body rate (past position and velocity)
     ++propagations;
   }
   // Live updates: takes over another fake's inputs and iteration count.

@@ -199,6 +199,30 @@ TEST(LatencyCompensation, AMovingReferenceIsTakenAtTheActuationTime) {
   EXPECT_EQ(r.tx.commands.back().lead_us, 18000);
 }
 
+// The autopilot's position and velocity trail the vehicle by estimate_lag (its EKF); its
+// attitude and rates do not. Each row: the state's age, the lag; the position is predicted
+// over lag + age + latency + actuation, a rate over age + latency + actuation, and the lead
+// (sample -> act, which replay and the timing read) and the age stay without the lag.
+TEST(LatencyCompensation, TheEstimatesLagIsPredictedOverForPositionAndVelocityOnly) {
+  struct Row {
+    std::int64_t age_ms, lag_ms;
+  };
+  for (const Row row : {Row{3, 0}, Row{3, 25}, Row{0, 10}, Row{8, 40}}) {
+    daemon::LoopSettings s = fixed_latency(5 * kMs, 10 * kMs);
+    s.latency.estimate_lag_ns = row.lag_ms * kMs;
+    LoopRig r(s);
+    r.ctl.compute_ns = [](int) { return 5 * kMs; };
+    r.state(row.age_ms * kMs);
+    ASSERT_TRUE(r.loop.step_realtime(r.run));
+    const float lead_s = static_cast<float>(row.age_ms + 5 + 10) * 1e-3f;
+    const float lag_s = static_cast<float>(row.lag_ms) * 1e-3f;
+    EXPECT_NEAR(r.ctl.last_x0[0], 3000.0f * (lead_s + lag_s), 1e-3f) << row.age_ms << " " << row.lag_ms;
+    EXPECT_NEAR(r.ctl.last_x0[10], 3000.0f * lead_s, 1e-3f) << row.age_ms << " " << row.lag_ms;
+    EXPECT_EQ(r.tx.commands.back().lead_us, (row.age_ms + 15) * 1000);
+    EXPECT_EQ(r.tx.commands.back().age_us, row.age_ms * 1000);
+  }
+}
+
 TEST(LatencyCompensation, OffMeansTheMeasuredStateAsIs) {
   daemon::LoopSettings s = fixed_latency(5 * kMs, 10 * kMs);
   s.latency.compensate = false;

@@ -153,7 +153,8 @@ def test_ardupilot_mppid_flight_commands(mppid_binary, tmp_path):
     bridge = cmds["bridge"][cmds["bridge"].index("-m"):]
     sock = flight.out / "bridge.sock"
     assert bridge == ["-m", "mppi_mavlink", "run", "--config", str(paths.ROOT / "config/bridge/ardupilot_sitl.yaml"),
-                      "--lcm-url", spec.lcm_url, "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}"]
+                      "--lcm-url", spec.lcm_url, "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
+                      "--set", f"trace.file={sock.parent / 'bridge_trace.jsonl'}"]  # the stage times (docs/latency.md)
     assert cmds["mission"][-2:] == ["--bridge", str(sock)]
     default = ArduPilotFlight.create(FlightSpec(scenario="hover", out=tmp_path / "o3", realtime=True,
                                                 autopilot="ardupilot", ardupilot_bin=str(binary)))

@@ -6,8 +6,13 @@ and altitude; NED velocity; attitude quaternion), which the bridge never sees. E
     {"boot_us", "wall_us", "x": [e, n, u] true position in the local ENU frame of the EKF's
      origin, "v": true ENU velocity, "tilt_deg", "est": the autopilot's estimate
      (LOCAL_POSITION_NED, ENU), "mode", "armed"}
-boot_us is the autopilot's clock (the newest LOCAL_POSITION_NED's, sent in the same loop);
-wall_us this host's, at receipt. Events: {"event": "mode"|"armed"|"disarmed"|"statustext"|
+boot_us is the autopilot's clock: the LOCAL_POSITION_NED sent in the same burst as the SIM_STATE
+(ArduPilot sends a stream bucket's messages in ap_message order, SIM_STATE before
+LOCAL_POSITION_NED), so "x" and "est" are of the same time; a record is written when that
+position comes ("paired": true; a SIM_STATE with no position after it is written with the one
+before, "paired": false, boot_us then the estimate's time). Before 2026-11-26 each record held the previous
+burst's estimate, 20 ms older than the truth beside it. wall_us this host's, at the SIM_STATE's
+receipt. Events: {"event": "mode"|"armed"|"disarmed"|"statustext"|
 "origin", ...}. The local frame's origin is GPS_GLOBAL_ORIGIN once the EKF has one (asked
 for), else the --home given to the SITL.
 
@@ -67,9 +72,23 @@ class Recorder:
         self.f = open(out / "truth.jsonl", "w", buffering=1)
         self.boot_us = 0
         self.est = None
+        self.truth = None  # (SIM_STATE, wall us at receipt), awaiting the position of its burst
         self.mode, self.armed = "", False
         self.have_origin = False
         self.next_origin_ask = 0.0
+
+    def _write_truth(self, paired: bool):
+        if self.truth is None:
+            return
+        m, wall = self.truth
+        self.truth = None
+        q = (m.q1, m.q2, m.q3, m.q4)
+        self.f.write(json.dumps({
+            "boot_us": self.boot_us, "paired": paired, "wall_us": wall,
+            "x": [round(c, 4) for c in to_local(m.lat_int, m.lon_int, m.alt, self.origin)],
+            "v": [round(m.ve, 4), round(m.vn, 4), round(-m.vd, 4)], "tilt_deg": round(tilt_deg(q), 2),
+            "est": None if self.est is None else [round(c, 4) for c in self.est],
+            "mode": self.mode, "armed": self.armed}) + "\n")
 
     def event(self, what, **kw):
         self.f.write(json.dumps({"event": what, "wall_us": time.time_ns() // 1000, "boot_us": self.boot_us,
@@ -99,14 +118,10 @@ class Recorder:
         if t == "LOCAL_POSITION_NED":
             self.boot_us = m.time_boot_ms * 1000
             self.est = [m.y, m.x, -m.z]
+            self._write_truth(True)
         elif t == "SIM_STATE":
-            q = (m.q1, m.q2, m.q3, m.q4)
-            self.f.write(json.dumps({
-                "boot_us": self.boot_us, "wall_us": time.time_ns() // 1000,
-                "x": [round(c, 4) for c in to_local(m.lat_int, m.lon_int, m.alt, self.origin)],
-                "v": [round(m.ve, 4), round(m.vn, 4), round(-m.vd, 4)], "tilt_deg": round(tilt_deg(q), 2),
-                "est": None if self.est is None else [round(c, 4) for c in self.est],
-                "mode": self.mode, "armed": self.armed}) + "\n")
+            self._write_truth(False)  # one never followed by a position: with the one before
+            self.truth = (m, time.time_ns() // 1000)
         elif t == "HEARTBEAT" and m.get_srcComponent() == 1 and m.type != mavlink.MAV_TYPE_GCS:
             mode = mavutil.mode_string_v10(m)
             armed = bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from . import lag as lag_fit
 from . import logs
 from .evaluate import prediction_errors
 from .fit import MIN_EXCITATION, Grid, excited_axes, fit_common_delay, fit_rate_axis, fit_thrust, fixed_axis
@@ -175,6 +176,32 @@ def print_report(r: dict):
         print(f"  truth {k}: {v['truth']:.4f}  fitted {v['fitted']:.4f}{err}")
 
 
+def lag_command(a) -> int:
+    """`tools/sysid estimate-lag FLIGHT`: the estimate's lag against the truth; with --out, the
+    vehicle file (--vehicle) with that estimate_lag written."""
+    r = lag_fit.estimate_lag(a.flight, a.min_speed)
+    for key, what in (("mppid_state", "the states mppid flew on (bridge)"), ("estimator", "the estimator alone")):
+        v = r.get(key)
+        if v is None:
+            continue
+        bound = "  (at the search's bound: check the clocks)" if v["at_bound"] else ""
+        print(f"{what}: lag {1e3 * v['lag_s']:.1f} ms over {v['samples']} samples at {v['speed_m_s']:.1f} m/s; "
+              f"along-track {v['along_at_0_m']:+.3f} m -> {v['along_at_lag_m']:+.3f} m, RMS {v['rms_at_0_m']:.3f} -> "
+              f"{v['rms_at_lag_m']:.3f} m{bound}")
+    if a.report:
+        a.report.write_text(json.dumps(r, indent=2) + "\n")
+    if a.out:
+        from mppi_mavlink import vehicle as vehicle_file
+        best = r.get("mppid_state") or r["estimator"]
+        v = vehicle_file.load(a.vehicle)
+        v["estimate_lag"] = round(max(0.0, best["lag_s"]), 4)
+        note = (f"estimate_lag {1e3 * v['estimate_lag']:.1f} ms: tools/sysid estimate-lag {a.flight} "
+                f"({datetime.date.today().isoformat()})")
+        vehicle_file.dump(v, a.out, header=note)
+        print(f"wrote {a.out} (estimate_lag {v['estimate_lag']} s)")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="tools/sysid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -198,7 +225,20 @@ def main(argv=None) -> int:
     f.add_argument("--truth", type=Path, help="a mppid-sim scenario: compare the fit with its plant")
     f.add_argument("--structure", action="store_true",
                    help="also fit a second-order rate response per axis: does the first-order model express it?")
+    g = sub.add_parser("estimate-lag", help="how far the autopilot's position estimate trails the truth "
+                                            "(the vehicle file's estimate_lag)")
+    g.add_argument("flight", type=Path, help="a flight folder (truth.jsonl, flight.lcmlog) or a truth log")
+    g.add_argument("--vehicle", type=Path, default=DEFAULT_VEHICLE, help="the vehicle file to write it into (--out)")
+    g.add_argument("--out", type=Path, help="write the vehicle file with estimate_lag here")
+    g.add_argument("--report", type=Path, help="write the result as JSON")
+    g.add_argument("--min-speed", type=float, default=1.0, help="only samples moving faster (m/s)")
     a = ap.parse_args(argv)
+    if a.cmd == "estimate-lag":
+        try:
+            return lag_command(a)
+        except (lag_fit.LagError, logs.LogError, OSError) as e:
+            print(f"sysid: {e}", file=sys.stderr)
+            return 1
     if not 0.05 <= a.holdout <= 0.8:
         ap.error("--holdout must be in [0.05, 0.8]")
     if not set(a.keep_prior) <= set(AXES):

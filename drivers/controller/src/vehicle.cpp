@@ -150,7 +150,7 @@ VehicleFile load_vehicle(const std::string& path) {
   }
   const VehicleReader r(path);
   r.known(doc, "", {"description", "name", "model", "mass", "gravity", "hover_thrust", "drag", "limits",
-                    "rate_response", "params"});
+                    "rate_response", "estimate_lag", "params"});
   VehicleFile v;
   v.path = path;
   v.name = r.text(doc["name"], "name");
@@ -158,6 +158,10 @@ VehicleFile load_vehicle(const std::string& path) {
   v.settings.emplace_back("model.mass", r.number(doc["mass"], "mass", 1e-3, 100.0));
   if (doc["gravity"]) v.settings.emplace_back("model.gravity", r.number(doc["gravity"], "gravity", 0.0, 20.0));
   if (doc["drag"]) v.settings.emplace_back("model.drag", r.number(doc["drag"], "drag", 0.0, 100.0));
+  // How far the autopilot's position and velocity estimate trails the vehicle (s): the act-time
+  // prediction starts them that much earlier (docs/latency.md).
+  if (doc["estimate_lag"])
+    v.settings.emplace_back("daemon.latency.estimate_lag_ms", 1e3 * r.number(doc["estimate_lag"], "estimate_lag", 0.0, 0.5));
   // The bridge's: the autopilot's throttle (0..1) that holds the mass up, or null (read it).
   if (const YAML::Node h = doc["hover_thrust"]; h && !h.IsNull()) r.number(h, "hover_thrust", 0.01, 0.99);
   if (v.model == "quadrotor_rate") {

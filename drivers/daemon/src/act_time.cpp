@@ -55,6 +55,7 @@ const float* ControlLoop::predict_to_act(const CycleState& s) {
   }
   counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
   std::copy_n(s.x->x, x_pred_.size(), x_pred_.data());
+  catch_up_estimate(s.t_state_ns);
   history_.predict(*c_, x_pred_.data(), s.t_state_ns, s.t_act_ns);
   monitor_.record_lead(s.lead_ns);
   // A moving reference is compared with the predicted state at the predicted state's time:
@@ -65,6 +66,19 @@ const float* ControlLoop::predict_to_act(const CycleState& s) {
     c_->set_inputs(inputs_);
   }
   return x_pred_.data();
+}
+
+// The autopilot's position and velocity describe the vehicle estimate_lag before the sample
+// time (its EKF fuses GPS late), its attitude and rates the sample time: the state is rolled
+// forward over the lag through the commands that acted then, and only its position and
+// velocity are taken (the first six states of the quadrotor models; settings refuse the lag
+// for others).
+void ControlLoop::catch_up_estimate(std::int64_t t_state_ns) {
+  const std::int64_t lag = s_.latency.estimate_lag_ns;
+  if (lag <= 0 || x_pred_.size() < 6) return;
+  std::copy(x_pred_.begin(), x_pred_.end(), x_lag_.begin());
+  history_.predict(*c_, x_lag_.data(), t_state_ns - lag, t_state_ns);
+  std::copy_n(x_lag_.begin(), 6, x_pred_.begin());
 }
 
 }  // namespace mppi::daemon

@@ -75,6 +75,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       latency_(s_.latency.estimator),
       history_(nu_, controller->settings().u_init),
       x_pred_(static_cast<std::size_t>(controller->nx())),
+      x_lag_(static_cast<std::size_t>(controller->nx())),
       observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
       delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {

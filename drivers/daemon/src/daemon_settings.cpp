@@ -176,6 +176,7 @@ void parse_latency(const YAML::Node& n, double rate_hz, LatencySettings* lat) {
   lat->transport_ns = std::llround(number(n, "transport_ms", 0.2, 0.0, 1000.0, p) * 1e6);
   lat->actuation_delay_ns = std::llround(number(n, "actuation_delay_ms", 0.0, 0.0, 1000.0, p) * 1e6);
   lat->future_tolerance_ns = std::llround(number(n, "future_tolerance_ms", 2.0, 0.0, 60000.0, p) * 1e6);
+  lat->estimate_lag_ns = std::llround(number(n, "estimate_lag_ms", 0.0, 0.0, 500.0, p) * 1e6);
   const std::string st = text(n, "state_time", "sample", p);
   if (st != "sample" && st != "receive") fail("latency.state_time", "must be sample or receive");
   lat->use_sample_time = st == "sample";
@@ -288,8 +289,11 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.loop.latency.estimator.ceiling_ns = std::llround(1e9 / d.loop.rate_hz);
   if (const YAML::Node n = subsection(section, "latency", {"compensate", "quantile", "window", "floor_ms", "ceiling_ms",
                                                            "transport_ms", "actuation_delay_ms", "state_time",
-                                                           "future_tolerance_ms", "delay_estimate"}))
+                                                           "future_tolerance_ms", "delay_estimate", "estimate_lag_ms"}))
     parse_latency(n, d.loop.rate_hz, &d.loop.latency);
+  // Position and velocity first: the quadrotor models' states (daemon.latency.estimate_lag_ms).
+  if (d.loop.latency.estimate_lag_ns > 0 && d.expect_model != 1 && d.expect_model != 2)
+    fail("latency.estimate_lag_ms", "only for the quadrotor models (position and velocity first), not " + task);
   if (const YAML::Node n = subsection(section, "disturbance", {"estimate", "time_constant_s", "limit", "mass"}))
     parse_disturbance(n, &d.loop.disturbance);
   if (const YAML::Node n = subsection(section, "identification", {"rate_amplitude", "yaw_amplitude", "thrust_step",

@@ -42,17 +42,20 @@ bool ControlLoop::step_state_triggered(const std::atomic<bool>& stop) {
   const std::int64_t period = schedule_.period_ns(), next = schedule_.next_release_ns();
   const auto part = [&](double f) { return static_cast<std::int64_t>(f * static_cast<double>(period)); };
   // next is a period after the last cycle's start (or the end of a late cycle, or the start).
-  // A new state starts a cycle if it came min_gap periods after the last start, or at once
-  // after a cycle the grace started (states slower than the rate: each one is awaited). With
-  // none, the grace runs out: after a state's cycle `grace` past the grid time, after the
-  // grace's own cycle on the grid (no state: the stale path at rate_hz).
+  // A new state starts a cycle at once if it came min_gap periods after the last start, or
+  // after a cycle the grace started (states slower than the rate: each one is awaited); one
+  // that came sooner starts it min_gap after the last start (the rate's bound, never the
+  // grace: the state waits no longer than the bound needs). With none, the grace runs out:
+  // after a state's cycle `grace` past the grid time, after the grace's own cycle on the grid
+  // (no state: the stale path at rate_hz).
   const std::int64_t earliest = grace_started_ ? INT64_MIN : next - period + part(s_.state_trigger_min_gap);
   const std::int64_t latest = grace_started_ ? next : next + part(s_.state_trigger_grace);
   std::int64_t now = clock_->now_ns();
   for (;;) {
     if (stop.load(std::memory_order_relaxed)) return false;
     const std::int64_t got = in_->last_state_recv_ns();
-    if (got >= earliest && got > trigger_recv_ns_) {
+    const bool fresh = got > trigger_recv_ns_;
+    if (fresh && (got >= earliest || now >= earliest)) {
       counters_.state_triggered.fetch_add(1, std::memory_order_relaxed);
       trigger_recv_ns_ = got;
       grace_started_ = false;
@@ -64,7 +67,7 @@ bool ControlLoop::step_state_triggered(const std::atomic<bool>& stop) {
       grace_started_ = true;
       break;
     }
-    clock_->sleep_until_or(in_->state_wake, latest);  // each state (and a signal) re-checks
+    clock_->sleep_until_or(in_->state_wake, fresh ? earliest : latest);  // each state (and a signal) re-checks
     now = clock_->now_ns();
   }
   if (!grace_started_) monitor_.record_wake(std::max<std::int64_t>(0, now - trigger_recv_ns_));

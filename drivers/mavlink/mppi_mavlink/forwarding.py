@@ -94,7 +94,7 @@ class Forwarder:
             if self.streaming and (self.last_forward_mono is None or now - self.last_forward_mono > 100_000):
                 self.set_streaming(False, reason)
             return
-        self._forward(cmd)
+        self._forward(cmd, now)
 
     def _seq_advanced(self, seq: int, ctx: GateContext):
         if seq_restarted(seq, ctx):
@@ -113,7 +113,7 @@ class Forwarder:
         if len(self.ready_times) > 512:
             del self.ready_times[:256]
 
-    def _forward(self, cmd):
+    def _forward(self, cmd, received: int):
         thrust = self.checks.thrust.to_normalized(float(cmd.u[0]))
         rates = frames.flu_to_frd((float(cmd.u[1]), float(cmd.u[2]), float(cmd.u[3])))
         if not all(math.isfinite(c) for c in (thrust,) + tuple(rates)):  # the last gate before the encoder
@@ -131,10 +131,18 @@ class Forwarder:
         if not self.streaming:
             self.set_streaming(True, "")
         if self.trace is not None:
-            st = self.states.published(cmd.state_seq) or (0, 0)
-            self.trace.write(json.dumps({"mono_us": sent, "cmd_seq": cmd.seq, "state_seq": cmd.state_seq,
-                                         "state_time_usec": st[1], "state_pub_mono_us": st[0],
-                                         "thrust": thrust, "rates_frd": rates}) + "\n")
+            self._trace(cmd, received, sent, thrust, rates)
+
+    def _trace(self, cmd, received: int, sent: int, thrust, rates):
+        """One line per forwarded setpoint: its state's path through the bridge, stage by stage
+        (monotonic us: the sample's arrival, the state's LCM publish begun and returned, the
+        command's arrival, the setpoint sent) and mppid's own times (command_t age, compute)."""
+        st = self.states.published(cmd.state_seq) or (0, 0, 0, 0)
+        self.trace.write(json.dumps({"mono_us": sent, "cmd_seq": cmd.seq, "state_seq": cmd.state_seq,
+                                     "state_time_usec": st[1], "state_pub_mono_us": st[0],
+                                     "state_rx_mono_us": st[2], "state_pubdone_mono_us": st[3] if len(st) > 3 else 0,
+                                     "cmd_rx_mono_us": received, "age_us": cmd.age_us,
+                                     "compute_us": cmd.compute_us, "thrust": thrust, "rates_frd": rates}) + "\n")
 
     def set_streaming(self, on: bool, reason: str):
         with self.stream_lock:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import yaml
 
-TOP = {"description", "name", "model", "mass", "gravity", "hover_thrust", "drag", "limits", "rate_response", "params"}
+TOP = {"description", "name", "model", "mass", "gravity", "hover_thrust", "drag", "limits", "rate_response",
+       "estimate_lag", "params"}
 OWN_FIELDS = {"mass", "gravity", "drag"}
 
 
@@ -56,6 +57,8 @@ def parse(doc, where: str = "vehicle file") -> dict:
     v["mass"] = _num(where, "mass", doc.get("mass"), 1e-3, 100.0)
     v["gravity"] = _num(where, "gravity", doc.get("gravity", 9.81), 0.0, 20.0)
     v["drag"] = _num(where, "drag", doc.get("drag", 0.0), 0.0, 100.0)
+    # s: how far the autopilot's position/velocity estimate trails the vehicle (mppid's act-time prediction)
+    v["estimate_lag"] = _num(where, "estimate_lag", doc.get("estimate_lag", 0.0), 0.0, 0.5)
     h = doc.get("hover_thrust")
     v["hover_thrust"] = None if h is None else _num(where, "hover_thrust", h, 0.01, 0.99)
     lim = doc.get("limits")
@@ -110,6 +113,8 @@ def dump(v: dict, path: str | Path, header: str = ""):
            "limits": v["limits"]}
     if v["model"] == "quadrotor_rate":
         doc["rate_response"] = v["rate_response"]
+    if v.get("estimate_lag"):
+        doc["estimate_lag"] = v["estimate_lag"]
     if v.get("params"):
         doc["params"] = v["params"]
     parse(doc, str(path))  # what is written must read back

@@ -98,7 +98,8 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bri
         ctrl += ["--set", str(kv)]
     sock = out / "bridge.sock"
     bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(bridge_config), "--lcm-url", spec.lcm_url,
-              "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}"]
+              "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
+              "--set", f"trace.file={out / 'bridge_trace.jsonl'}"]  # each setpoint's path, stage by stage
     if fifo:
         bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge
     return ctrl, bridge, sock

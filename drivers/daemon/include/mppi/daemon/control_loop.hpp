@@ -47,6 +47,11 @@ struct LatencySettings {
   rt::LatencyEstimatorSettings estimator;   // expected cycle start -> command sent
   std::int64_t transport_ns = 200'000;      // command sent -> the plant has it
   std::int64_t actuation_delay_ns = 0;      // the plant has it -> it acts (ESCs, autopilot)
+  // How far the autopilot's position and velocity estimate trails the vehicle (its EKF's
+  // delay; the vehicle file's estimate_lag): they are predicted from that much before the
+  // sample time, the attitude and rates (the gyro's, current) from the sample time. Quadrotor
+  // states only (position, velocity first).
+  std::int64_t estimate_lag_ns = 0;
   // The state's age from its sample_utime, stamped on this host's wall clock (the
   // simulator and the MAVLink bridge do); false: from its receipt (a publisher whose clock
   // is not ours; the transport delay is then not seen).
@@ -223,6 +228,7 @@ class ControlLoop {
   // future than the tolerance.
   std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
   const float* predict_to_act(const CycleState& s);
+  void catch_up_estimate(std::int64_t t_state_ns);
 
   // The adaptation (adaptation.cpp): what a new state teaches the loop (the external
   // acceleration and the mass through the disturbance observer, the actuation delay).
@@ -308,6 +314,7 @@ class ControlLoop {
   rt::LatencyEstimator latency_;
   CommandHistory history_;
   std::vector<float> x_pred_;
+  std::vector<float> x_lag_;  // the estimate's position and velocity caught up (estimate_lag_ns)
   DisturbanceObserver observer_;
   DelayEstimator delays_;
   std::int64_t configured_delay_ns_ = 0;  // the settings' actuation delay (restart_estimates)
