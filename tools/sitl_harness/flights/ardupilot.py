@@ -19,7 +19,6 @@ each other's learnt hover thrust.
 """
 from __future__ import annotations
 
-import os
 import sys
 import time
 from pathlib import Path
@@ -29,7 +28,7 @@ import yaml
 from .. import paths
 from ..overlay import load_sets
 from ..sandbox import fifo_allowed
-from .base import SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, logger_command, mppid_binary
+from .base import SIM_FIFO_PRIORITY, Flight, FlightError, autopilot_binary, FlightSpec, Plan, logger_command, mppid_binary
 
 # ArduPilot's SITL home (Canberra Model Aircraft Club, the autotest default): lat, lon, alt AMSL, heading.
 HOME = "-35.363261,149.165230,584,353"
@@ -51,13 +50,7 @@ BUILD_HINT = ("build ArduCopter SITL from an ArduPilot checkout, outside this re
 
 
 def ardupilot_binary(explicit: str | None = None) -> Path:
-    b = explicit or os.environ.get("MPPID_ARDUPILOT_BIN")
-    if not b:
-        raise FlightError(f"no ArduCopter SITL binary: {BUILD_HINT}")
-    p = Path(b).expanduser().resolve()
-    if not (p.is_file() and os.access(p, os.X_OK)):
-        raise FlightError(f"ArduCopter SITL binary {p} does not exist or is not executable: {BUILD_HINT}")
-    return p
+    return autopilot_binary(explicit, "MPPID_ARDUPILOT_BIN", "ArduCopter SITL", BUILD_HINT)
 
 
 def ardupilot_defaults(binary: Path) -> Path:

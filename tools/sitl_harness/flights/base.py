@@ -108,6 +108,18 @@ def logger_command(spec: FlightSpec, out: Path, exclude: tuple[str, ...] = ()) -
     return cmd + [str(out / "flight.lcmlog")]
 
 
+def autopilot_binary(explicit: str | None, env: str, what: str, hint: str) -> Path:
+    """An autopilot's SITL binary, built outside this repository: `explicit` (the command
+    line's), else $env; a FlightError with `hint` (how to build it) when missing."""
+    b = explicit or os.environ.get(env)
+    if not b:
+        raise FlightError(f"no {what} binary: {hint}")
+    p = Path(b).expanduser().resolve()
+    if not (p.is_file() and os.access(p, os.X_OK)):
+        raise FlightError(f"{what} binary {p} does not exist or is not executable: {hint}")
+    return p
+
+
 def mppid_binary() -> Path:
     mppid = paths.find_binary("mppid")
     if mppid is None:

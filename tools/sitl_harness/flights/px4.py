@@ -36,7 +36,7 @@ import yaml
 from .. import paths, px4_faults
 from ..sandbox import fifo_allowed
 from .ardupilot import IO_FIFO_PRIORITY, mission_command, mppid_and_bridge
-from .base import Flight, FlightError, FlightSpec, Plan, logger_command
+from .base import Flight, FlightError, autopilot_binary, FlightSpec, Plan, logger_command
 
 PARAMS = paths.ROOT / "config" / "px4" / "px4_mppid.params"
 # The offboard baseline's position-controller tuning (argued in the file): loaded for every
@@ -58,12 +58,7 @@ BUILD_HINT = ("build PX4 SITL with SIH (`make px4_sitl_sih`) from a PX4 checkout
 
 
 def px4_binary(explicit: str | None = None) -> Path:
-    b = explicit or os.environ.get("MPPID_PX4_BIN")
-    if not b:
-        raise FlightError(f"no PX4 SITL binary: {BUILD_HINT}")
-    p = Path(b).expanduser().resolve()
-    if not (p.is_file() and os.access(p, os.X_OK)):
-        raise FlightError(f"PX4 binary {p} does not exist or is not executable: {BUILD_HINT}")
+    p = autopilot_binary(explicit, "MPPID_PX4_BIN", "PX4 SITL", BUILD_HINT)
     if not (p.parents[1] / "etc" / "init.d-posix" / "rcS").is_file():
         raise FlightError(f"{p.parents[1]}/etc/init.d-posix/rcS not found: the binary should be "
                           f"<PX4 checkout>/build/px4_sitl_sih/bin/px4")
