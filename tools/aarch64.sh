@@ -15,7 +15,8 @@
 #   simd_kernels_share_no_symbols   the NEON kernel objects
 # Not here: the benchmarks (bench: x86-64 timing tools), the closed-loop flights, the MPC-DDP baseline (ddp_tests: 3 min of cold compile),
 # the allocation counts of core_alloc_tests (the NEON path's are the same code as SSE4's;
-# ~3 min under emulation), the simulator, the fuzz corpora, systemd and the end-to-end tests:
+# ~3 min under emulation), the simulator and mppid-mapper's tests (they link the simulator's
+# sensors; the mapper is not in the package yet), the fuzz corpora, systemd and the end-to-end tests:
 # their code is the x86-64 stage's, not the ISA's.
 #
 #   tools/aarch64.sh [--no-build]
@@ -39,7 +40,7 @@ stamp() { date +%s; }
 TARGETS=(core_tests core_simd_tests plan_reference rt_tests rt_alloc_tests driver_tests lcm_types_roundtrip
          daemon_binary_tests mppid)
 # Defined in build-aarch64 but not built here (the list above says why).
-EXCLUDE_LABELS='closed_loop|fuzz|sim|e2e|systemd|bench'
+EXCLUDE_LABELS='closed_loop|fuzz|sim|mapper|e2e|systemd|bench'
 EXCLUDE='^(NoAlloc\.|(closed_loop_tests|ddp_closed_loop_tests|ddp_tests|core_alloc_tests)_NOT_BUILT$|lcm_types_(python|java)$|DaemonBinary\.WarnsWhenItsLcmUrlWouldLeaveTheHost$)'
 
 [[ -x build/bin/plan_reference ]] || { echo "aarch64.sh: build/bin/plan_reference missing (tools/setup.sh builds it)" >&2; exit 1; }
