@@ -63,8 +63,8 @@ def _bridge(sock: str, *args) -> dict:
 def _leg_started(mission_log: Path, leg: int) -> bool:
     if not mission_log.exists():
         return False
-    return any(json.loads(line).get("event") == "step" and json.loads(line).get("leg") == leg
-               for line in mission_log.read_text().splitlines() if line.strip())
+    recs = (json.loads(line) for line in mission_log.read_text().splitlines() if line.strip())
+    return any(r.get("event") == "step" and r.get("leg") == leg for r in recs)
 
 
 def _truth_after(out: Path, t_wall: float) -> tuple[list, list]:

@@ -5,7 +5,6 @@ frame and the sensor's position), the world's trees (world.json) and the true pa
 the closest approach; the mapper's and the sensors' timings beside."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -16,15 +15,8 @@ PASSED_WITHIN_M = 3.0  # a tree the vehicle came this close to (surface) is one 
 
 
 def read_sensed(path: Path) -> list[dict]:
-    if not path.is_file():
-        return []
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue  # a line cut by the mapper's end
-    return out
+    """The mapper's sensed.jsonl (a line cut by the mapper's end skipped)."""
+    return logs.read_jsonl(path)
 
 
 def first_sightings(trees: list, records: list[dict], resolution: float) -> list[dict | None]:

@@ -23,12 +23,12 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 
 from .. import paths
 from ..overlay import load_sets
 from ..sandbox import fifo_allowed
-from .base import SIM_FIFO_PRIORITY, Flight, FlightError, autopilot_binary, FlightSpec, Plan, logger_command, mppid_binary
+from .base import (SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, autopilot_binary, autopilot_plan,
+                   load_mission, logger_command, mppid_binary)
 
 # ArduPilot's SITL home (Canberra Model Aircraft Club, the autotest default): lat, lon, alt AMSL, heading.
 HOME = "-35.363261,149.165230,584,353"
@@ -109,18 +109,10 @@ class ArduPilotFlight(Flight):
 
     def plan(self) -> Plan:
         spec = self.spec
-        mission_path = paths.scenario_path(spec.scenario)
-        mission = yaml.safe_load(mission_path.read_text())
-        if "legs" not in mission:
-            raise FlightError(f"{mission_path} is not a mission (config/missions/*.yaml): --autopilot ardupilot "
-                              f"flies missions")
+        mission_path, mission = load_mission(spec, "ardupilot")
         cmds = self._commands(mission_path, mission)
-        record = {"autopilot": "ardupilot", "ardupilot_bin": str(self.binary), "commands": cmds,
-                  "mission": str(mission_path), "spec": {"scenario": spec.scenario, "seed": spec.seed,
-                                                         "controller": spec.controller, "realtime": True,
-                                                         "lcm_url": spec.lcm_url}}
-        return Plan(commands=cmds, wall_timeout=spec.wall_timeout or float(mission.get("wall_timeout", 240.0)),
-                    record=record)
+        return autopilot_plan(spec, mission, cmds, {"autopilot": "ardupilot", "ardupilot_bin": str(self.binary),
+                                                    "mission": str(mission_path)})
 
     def _commands(self, mission_path: Path, mission: dict) -> dict:
         spec = self.spec

@@ -120,6 +120,25 @@ def autopilot_binary(explicit: str | None, env: str, what: str, hint: str) -> Pa
     return p
 
 
+def load_mission(spec: FlightSpec, autopilot: str) -> tuple[Path, dict]:
+    """The mission file a flight through an autopilot flies (config/missions/*.yaml), and its
+    contents; a scenario that is not a mission is a FlightError."""
+    import yaml
+    path = paths.scenario_path(spec.scenario)
+    mission = yaml.safe_load(path.read_text())
+    if "legs" not in mission:
+        raise FlightError(f"{path} is not a mission (config/missions/*.yaml): --autopilot {autopilot} flies missions")
+    return path, mission
+
+
+def autopilot_plan(spec: FlightSpec, mission: dict, cmds: dict, record: dict) -> Plan:
+    """An autopilot flight's plan: the mission's wall-clock limit and the record's common part."""
+    record.update(commands=cmds, spec={"scenario": spec.scenario, "seed": spec.seed, "controller": spec.controller,
+                                       "realtime": True, "lcm_url": spec.lcm_url})
+    return Plan(commands=cmds, wall_timeout=spec.wall_timeout or float(mission.get("wall_timeout", 240.0)),
+                record=record)
+
+
 def mppid_binary() -> Path:
     mppid = paths.find_binary("mppid")
     if mppid is None:

@@ -31,12 +31,11 @@ import sys
 import time
 from pathlib import Path
 
-import yaml
 
 from .. import paths, px4_faults
 from ..sandbox import fifo_allowed
 from .ardupilot import IO_FIFO_PRIORITY, mission_command, mppid_and_bridge
-from .base import Flight, FlightError, autopilot_binary, FlightSpec, Plan, logger_command
+from .base import Flight, FlightError, FlightSpec, Plan, autopilot_binary, autopilot_plan, load_mission, logger_command
 
 PARAMS = paths.ROOT / "config" / "px4" / "px4_mppid.params"
 # The offboard baseline's position-controller tuning (argued in the file): loaded for every
@@ -93,18 +92,12 @@ class Px4Flight(Flight):
 
     def plan(self) -> Plan:
         spec = self.spec
-        mission_path = paths.scenario_path(spec.scenario)
-        mission = yaml.safe_load(mission_path.read_text())
-        if "legs" not in mission:
-            raise FlightError(f"{mission_path} is not a mission (config/missions/*.yaml): --autopilot px4 flies missions")
+        mission_path, mission = load_mission(spec, "px4")
         cmds = self._commands(mission_path, mission)
-        record = {"autopilot": "px4", "px4_bin": str(self.binary), "commands": cmds, "mission": str(mission_path),
-                  "faults": self.faults_done, "autopilot_params": spec.autopilot_params,
-                  "load_avg_start": [round(x, 2) for x in os.getloadavg()],  # the machine is shared: SIH lags under load
-                  "spec": {"scenario": spec.scenario, "seed": spec.seed, "controller": spec.controller,
-                           "realtime": True, "lcm_url": spec.lcm_url}}
-        return Plan(commands=cmds, wall_timeout=spec.wall_timeout or float(mission.get("wall_timeout", 240.0)),
-                    record=record)
+        return autopilot_plan(spec, mission, cmds, {
+            "autopilot": "px4", "px4_bin": str(self.binary), "mission": str(mission_path),
+            "faults": self.faults_done, "autopilot_params": spec.autopilot_params,
+            "load_avg_start": [round(x, 2) for x in os.getloadavg()]})  # the machine is shared: SIH lags under load
 
     def _commands(self, mission_path: Path, mission: dict) -> dict:
         spec = self.spec
