@@ -284,6 +284,7 @@ TEST(SimdStep, EveryModelAndCostBitIdenticalWithLibmAndCloseWithHighway) {
       field_around(s, field.get());
       auto sensed = culled;
       sensed.cost.field = field->view(1);
+      sensed.cost.max_speed = 0.2f;  // and the speed limit (off by default), low enough to bite
       for_each_simd_target([&](auto target) {
         check_step<T>(named.name, target.value, *testing::simd_probe<T, target.value>(), s, culled);
         check_step<T>(named.name, target.value, *testing::simd_probe<T, target.value>(), s, sensed);

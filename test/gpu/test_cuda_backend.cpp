@@ -262,6 +262,26 @@ TEST(CudaParity, ObstacleGridEveryKernel) {
   for (int lanes : {1, 2}) check_parity_with_grid<QuadrotorForest>("quadrotor_forest+grid, lane kernel", lanes_of(lanes));
 }
 
+// The speed limit (ForestCost max_speed, off by default) on every kernel: a limit low enough
+// that most rollouts pay it (sampled from a hover, they drift faster than 0.2 m/s).
+template <class T>
+void check_parity_with_speed_limit(const char* name, const CudaSettings& cuda = {}) {
+  check_parity<T>(name, Weighting::kCostToGo, [cuda](gpu_test::Scenario<T>& sc) {
+    sc.cuda = cuda;
+    sc.params.cost.max_speed = 0.2f;
+    sc.params.cost.w_max_speed = 1000.0f;
+  });
+}
+
+TEST(CudaParity, SpeedLimitEveryKernel) {
+  SKIP_WITHOUT_CUDA();
+  check_parity_with_speed_limit<QuadrotorForest>("quadrotor_forest+speed limit");
+  check_parity_with_speed_limit<RateQuadrotorForest>("quadrotor_rate_forest+speed limit");
+  check_parity_with_speed_limit<Team3Forest>("team3_forest+speed limit");
+  for (int lanes : {1, 4})
+    check_parity_with_speed_limit<QuadrotorForest>("quadrotor_forest+speed limit, lane kernel", lanes_of(lanes));
+}
+
 // The distance field (a sensed map, costs/distance_field.hpp) on every kernel: alone (the
 // cost knows only the field) and beside the cylinders with the obstacle grid; the lane kernel
 // at one and four lanes a rollout, the teams' kernels, the host's grid and no graph.

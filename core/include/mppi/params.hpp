@@ -85,6 +85,8 @@ void visit_fields(typename ForestCost<Vehicle>::Params& p, V&& v) {
   v("floor_z", p.floor_z, -1e3f, 1e3f);
   v("floor_lookahead", p.floor_lookahead, 0.0f, 10.0f);
   v("w_floor", p.w_floor, 0.0f, 1e9f);
+  v("max_speed", p.max_speed, 0.0f, 100.0f);
+  v("w_max_speed", p.w_max_speed, 0.0f, 1e9f);
   v("obstacle_reach", p.obstacle_reach, 0.0f, 1e3f);
   v("obstacle_cell", p.obstacle_cell, 0.05f, 1e3f);
 }

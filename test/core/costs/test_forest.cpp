@@ -74,6 +74,28 @@ TEST(ForestCost, GoalPullTurnsLinearBeyondTheRadius) {
   EXPECT_NEAR(ForestCost<Quadrotor>::terminal(c, 0, x.data()), 3.0 * 25.0 * 16.0, 1e-2);
 }
 
+TEST(ForestCost, SpeedAboveTheLimitPaysTheSquareOfTheExcess) {
+  auto c = forest_cost_params();  // goal (10, 0, 1)
+  std::vector<float> x(16, 0.0f);
+  x[Q::PX] = 10.0f;
+  x[Q::PZ] = 1.0f;
+  x[Q::VX] = 3.0f;
+  x[Q::VY] = 4.0f;  // |v| = 5 m/s
+  bool crash = false;
+  auto cost = [&] { return ForestCost<Quadrotor>::vehicle(c, 0, x.data(), 0.0f, &crash); };
+  // Off by default: only the paper's |v|^2.
+  EXPECT_NEAR(cost(), 25.0, 1e-4);
+  c.max_speed = 4.0f;
+  c.w_max_speed = 100.0f;
+  // 25 + 100 (5 - 4)^2
+  EXPECT_NEAR(cost(), 125.0, 1e-3);
+  c.max_speed = 6.0f;  // below the limit: nothing added
+  EXPECT_NEAR(cost(), 25.0, 1e-4);
+  x[Q::VZ] = std::sqrt(39.0f);  // |v| = 8: 25 + 39 + 100 * 4
+  EXPECT_NEAR(cost(), 464.0, 1e-2);
+  EXPECT_FALSE(crash);
+}
+
 TEST(ForestCost, GroundCrash) {
   const auto c = forest_cost_params();
   std::vector<float> x(16, 0.0f);

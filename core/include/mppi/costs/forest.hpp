@@ -21,6 +21,11 @@
 // team on its own goal near the end without flinging it off the start line 40 m away at
 // top speed. The terminal term uses the same shape.
 //
+// A speed limit (max_speed = v > 0, off by default): w_max_speed max(0, |vel| - v)^2. The
+// paper's |vel|^2 term damps but sets no speed: on forest_4m the vehicle accelerates for the
+// whole 40 m (14.6 m/s at its peak, seed 3, offline) whatever w_speed is; a team or an operator
+// that wants the forest flown at 5 or 10 m/s sets the limit (issue 30's speed curve).
+//
 // The sensed obstacles (issue 30): with a distance field (costs/distance_field.hpp: a mapper's
 // local map) in `field`, d is the nearer of the cylinders' surface and the field's
 // interpolated distance at the vehicle's position (3-D: the field knows the trees' height),
@@ -58,6 +63,8 @@ struct ForestCost {
     float floor_z = 0.0f;           // m, the floor of the predicted altitude
     float floor_lookahead = 0.0f;   // s
     float w_floor = 0.0f;
+    float max_speed = 0.0f;         // m/s; > 0: a speed above it pays w_max_speed per (m/s)^2 over
+    float w_max_speed = 1000.0f;    // chosen offline on seeds 1-3: max 10.1-10.2 m/s at 10 (300: 10.3-10.6)
     // Obstacle culling (ObstacleGrid): the grid covers the plan's path widened by
     // obstacle_reach, in cells of obstacle_cell. It changes no cost (the search is exact);
     // a rollout leaving the grid searches every obstacle. obstacle_reach 0: no grid.
@@ -91,7 +98,13 @@ struct ForestCost {
     const float* g = p.goal[j];
     const V yaw = Vehicle::yaw(x);
     V q = p.w_xy * goal_xy(p, fsq(pos[0] - g[0]) + fsq(pos[1] - g[1])) + p.w_z * fsq(pos[2] - g[2]) +
-          p.w_yaw * yaw * yaw + p.w_speed * (fsq(x[Vehicle::VX]) + fsq(x[Vehicle::VY]) + fsq(x[Vehicle::VZ]));
+          p.w_yaw * yaw * yaw;
+    const V speed2 = fsq(x[Vehicle::VX]) + fsq(x[Vehicle::VY]) + fsq(x[Vehicle::VZ]);
+    q += p.w_speed * speed2;
+    if (p.max_speed > 0.0f) {
+      const V over = fmax_(fsqrt(speed2) - p.max_speed, V(0.0f));
+      q += p.w_max_speed * over * over;
+    }
     if (p.obstacles.count > 0 || field) q += p.w_obstacle * fexp(-(d * d) / p.obstacle_scale);
     if (p.w_floor > 0.0f) {
       const V z_ahead = pos[2] + p.floor_lookahead * fmin_(x[Vehicle::VZ], V(0.0f));
