@@ -299,3 +299,28 @@ def test_table_merges_folders_of_one_name(tmp_path):
     text = table([tmp_path / "a", tmp_path / "b"], ["real time", "real time"])
     assert text.splitlines()[0].count("real time: success") == 1
     assert "| forest_4m | 1/1" in text and "| cartpole_swingup | 1/1" in text
+
+
+def test_speed_curve_groups_campaigns_by_their_speed_limit(tmp_path):
+    from sitl_harness.speed_curve import markdown, rows, speed_limit
+    assert speed_limit(["cost.vehicle_radius=0.3", "cost.max_speed=5", "cost.max_speed=7.5"]) == 7.5
+    assert speed_limit(["cost.w_speed=2"]) is None and speed_limit(["cost.max_speed=0"]) is None
+    run = lambda seed, ok, fs, s2c: {"scenario": "forest_4m_sensed", "seed": seed, "backend": "cpu-avx3",  # noqa: E731
+                                     "success": ok, "forest_speed": fs, "peak_speed": fs + 1, "min_clearance": fs / 100,
+                                     "state_to_command_ms_p99": s2c, "deadline_misses": 1}
+    for name, limit, flights in (("v10", 10, [run(51, True, 8.0, 9.0), run(52, False, 9.0, 30.0)]),
+                                 ("v5", 5, [run(51, True, 4.0, 8.0), run(52, True, 5.0, 10.0)]),
+                                 ("free", None, [run(51, True, 9.5, 7.0)])):
+        (tmp_path / name).mkdir()
+        sets = [f"cost.max_speed={limit}"] if limit else []
+        (tmp_path / name / "summary.json").write_text(json.dumps({"summary": {"sets": sets}, "runs": flights}))
+    table = rows([tmp_path / "free", tmp_path / "v10", tmp_path / "v5"])
+    assert [r["limit"] for r in table] == [5.0, 10.0, None]
+    v10 = table[1]
+    assert (v10["successes"], v10["runs"], v10["forest_speed"], v10["deadline_misses"]) == (1, 2, 8.0, 2)
+    assert v10["state_to_command_p99_worst"] == 30.0 and v10["min_clearance"] == 0.08
+    assert v10["wilson95"][0] < 0.5 < v10["wilson95"][1]
+    text = markdown(table)
+    assert "| 5 | forest_4m_sensed | cpu-avx3 | 2/2 |" in text and "| no limit |" in text
+    out = sitl("speed-curve", tmp_path / "v5", tmp_path / "nothing")
+    assert out.returncode == 2 and "no summary.json" in out.stderr

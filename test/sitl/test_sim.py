@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 import subprocess
 
+import pytest
+
 from sitl_helpers import ROOT, sitl
 from sitl_harness import paths
 
@@ -87,3 +89,19 @@ def test_hover_standin_flight_holds_position(sim_binary, tmp_path):
     assert abs(last["x"][2] - 2.0) < 0.05 and abs(last["x"][0] - 3.0) < 0.05
     for f in ("flight.lcmlog", "path.png", "traces.png", "timing.png", "world.json", "sim_summary.json"):
         assert (out / f).is_file(), f
+
+
+def test_quad_speeds_peak_and_in_the_trees():
+    import numpy as np
+    from sitl_harness.score import _quad_speeds
+    # x from 0 to 30 m; 2 m/s before x = 4, 8 m/s among the trees (x 4-26 with radii), 3 after.
+    px = np.linspace(0.0, 30.0, 301)
+    v = np.where(px < 4.0, 2.0, np.where(px <= 26.0, 8.0, 3.0))
+    v[150] = np.nan  # a missing sample is ignored
+    X = np.zeros((301, 16))
+    X[:, 0], X[:, 3], X[:, 4] = px, 0.6 * v, 0.8 * v
+    world = {"nx": 16, "vehicles": 1, "obstacles": [[4.3, 1.0, 0.3, 0, 0], [25.7, -2.0, 0.3, 0, 0]]}
+    out = _quad_speeds(world, X)
+    assert out["peak_speed"] == pytest.approx(8.0)
+    assert out["forest_speed"] == pytest.approx(8.0)
+    assert _quad_speeds({"nx": 16, "vehicles": 1}, X)["forest_speed"] is None

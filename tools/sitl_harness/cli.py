@@ -151,6 +151,12 @@ def _add_report_parsers(sub):
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
+    sc = sub.add_parser("speed-curve", help="success against speed: campaigns flown at --set cost.max_speed=V (markdown)")
+    sc.set_defaults(func=cmd_speed_curve)
+    sc.add_argument("folders", type=Path, nargs="+")
+    sc.add_argument("--png", type=Path, default=None, help="also draw success against the limit here")
+    sc.add_argument("--json", type=Path, default=None, help="also write the rows here")
+
     apt = sub.add_parser("autopilot-table", help="campaigns through ArduCopter or PX4 SITL side by side (markdown)")
     apt.set_defaults(func=cmd_autopilot_table)
     apt.add_argument("folders", type=Path, nargs="+")
@@ -399,6 +405,16 @@ def cmd_versus(a) -> int:
     print(table, end="")
     if a.json:
         a.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+def cmd_speed_curve(a) -> int:
+    from .speed_curve import main
+
+    try:
+        print(main(a.folders, a.png, a.json), end="")
+    except FileNotFoundError as e:
+        raise UsageError(str(e)) from None
     return 0
 
 

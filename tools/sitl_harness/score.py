@@ -82,6 +82,8 @@ def score_flight(out: Path, spec, info: dict) -> dict:
         t = np.array([tk["t"] for tk in ticks])
         X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
         res["mean_speed"] = _mean_speed(scen["plant"]["model"], world, X)
+        if scen["plant"]["model"] in QUAD_MODELS:
+            res.update(_quad_speeds(world, X))
     if scen["plant"]["model"] in QUAD_MODELS:
         res.update(sensing.sensing_figures(out, world, t if ticks else None, X))
     res["reason"] = _not_the_vehicles_failure(info, summary, res["collisions"])
@@ -167,6 +169,21 @@ def _mean_speed(model: str, world: dict, X: np.ndarray) -> float:
     if model == "cartpole":
         return float(np.nanmean(np.abs(X[:, 1])))
     return float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
+
+
+def _quad_speeds(world: dict, X: np.ndarray) -> dict:
+    """peak_speed: the fastest any vehicle flew; forest_speed: the mean speed while inside the
+    obstacles' x extent (the trees, not the run-up and the stop at the goal), None without."""
+    nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
+    speeds = np.stack([np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)])
+    obstacles = np.asarray(world.get("obstacles") or [], float).reshape(-1, 5)
+    out = {"peak_speed": float(np.nanmax(speeds)) if np.isfinite(speeds).any() else None, "forest_speed": None}
+    if len(obstacles):
+        lo, hi = (obstacles[:, 0] - obstacles[:, 2]).min(), (obstacles[:, 0] + obstacles[:, 2]).max()
+        px = np.stack([X[:, v * nx] for v in range(m)])
+        inside = (px >= lo) & (px <= hi) & np.isfinite(speeds)
+        out["forest_speed"] = float(speeds[inside].mean()) if inside.any() else None
+    return out
 
 
 def _not_the_vehicles_failure(info: dict, summary: dict, collisions: list) -> str | None:

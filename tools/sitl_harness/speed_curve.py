@@ -1,0 +1,119 @@
+"""`tools/sitl speed-curve`: success against speed, from campaigns flown at speed limits.
+
+Each folder is a finished campaign flown with `--set cost.max_speed=V` (ForestCost's speed
+limit; a campaign without one is the row "no limit"). One row per (limit, scenario, backend):
+successes out of runs with the Wilson 95 % interval, the mean speed among the trees
+(score.json's forest_speed) and the peak speed of the successful flights, the closest
+approach of any flight, state -> command p99 (median and worst flight) and deadline misses.
+--png draws success against the limit, one line per scenario and backend, with the intervals.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from .campaign import wilson
+from .results import load_campaign
+
+LIMIT_KEY = "cost.max_speed="
+
+
+def speed_limit(sets: list) -> float | None:
+    """The campaign's cost.max_speed (the last --set of it wins, as in mppid), None without one."""
+    limit = None
+    for s in sets or []:
+        if s.startswith(LIMIT_KEY):
+            limit = float(s[len(LIMIT_KEY):])
+    return limit if limit else None
+
+
+def _values(runs: list, key: str, ok_only: bool = False) -> list[float]:
+    return [float(r[key]) for r in runs if isinstance(r.get(key), (int, float)) and math.isfinite(r[key])
+            and (r.get("success") or not ok_only)]
+
+
+def _mean(v):
+    return sum(v) / len(v) if v else None
+
+
+def _median(v):
+    v = sorted(v)
+    return (v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2])) if v else None
+
+
+def _row(limit, scenario: str, runs: list) -> dict:
+    n, k = len(runs), sum(1 for r in runs if r.get("success"))
+    s2c = _values(runs, "state_to_command_ms_p99")
+    return {"limit": limit, "scenario": scenario, "backend": runs[0].get("backend", "?"), "runs": n, "successes": k,
+            "wilson95": list(wilson(k, n)), "forest_speed": _mean(_values(runs, "forest_speed", ok_only=True)),
+            "peak_speed": _mean(_values(runs, "peak_speed", ok_only=True)),
+            "min_clearance": min(_values(runs, "min_clearance"), default=None),
+            "state_to_command_p99_median": _median(s2c), "state_to_command_p99_worst": max(s2c, default=None),
+            "deadline_misses": int(sum(_values(runs, "deadline_misses"))),
+            "seeds": sorted(r.get("seed") for r in runs)}
+
+
+def rows(folders: list[Path]) -> list[dict]:
+    """One row per (limit, scenario, backend) over the folders, by limit (no limit last)."""
+    groups: dict[tuple, list] = {}
+    for folder in folders:
+        c = load_campaign(folder)
+        limit = speed_limit(c.summary.get("sets"))
+        for scen, runs in c.by_scenario().items():
+            for r in runs:
+                groups.setdefault((limit, scen, r.get("backend", "?")), []).append(r)
+    order = sorted(groups, key=lambda g: (g[0] is None, g[0] or 0.0, g[1], g[2]))
+    return [_row(g[0], g[1], groups[g]) for g in order]
+
+
+def _f(v, fmt="{:.2f}"):
+    return "-" if v is None else fmt.format(v)
+
+
+def markdown(table: list[dict]) -> str:
+    lines = ["| speed limit [m/s] | scenario | backend | success | 95 % CI (Wilson) | speed in the trees [m/s] | "
+             "peak [m/s] | closest [m] | state->command p99 median / worst [ms] | misses |",
+             "|---:|---|---|---:|---|---:|---:|---:|---|---:|"]
+    for r in table:
+        lo, hi = r["wilson95"]
+        lines.append(f"| {_f(r['limit'], '{:g}') if r['limit'] else 'no limit'} | {r['scenario']} | {r['backend']} | "
+                     f"{r['successes']}/{r['runs']} | {100 * lo:.0f}-{100 * hi:.0f} % | {_f(r['forest_speed'])} | "
+                     f"{_f(r['peak_speed'])} | {_f(r['min_clearance'])} | "
+                     f"{_f(r['state_to_command_p99_median'], '{:.1f}')} / {_f(r['state_to_command_p99_worst'], '{:.1f}')} | "
+                     f"{r['deadline_misses']} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(table: list[dict], png: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    lines: dict[tuple, list] = {}
+    for r in table:
+        if r["limit"] is not None:
+            lines.setdefault((r["scenario"], r["backend"]), []).append(r)
+    for (scen, backend), rs in sorted(lines.items()):
+        x = [r["limit"] for r in rs]
+        y = [r["successes"] / r["runs"] for r in rs]
+        err = [[p - r["wilson95"][0] for p, r in zip(y, rs)], [r["wilson95"][1] - p for p, r in zip(y, rs)]]
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"{scen} ({backend})")
+    ax.set_xlabel("speed limit [m/s]")
+    ax.set_ylabel("success rate (95 % Wilson interval)")
+    ax.set_ylim(0, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def main(folders: list[Path], png: Path | None = None, json_out: Path | None = None) -> str:
+    table = rows(folders)
+    if png:
+        plot(table, png)
+    if json_out:
+        json_out.write_text(json.dumps(table, indent=2))
+    return markdown(table)
