@@ -7,7 +7,7 @@
 #
 #   tools/gpu/run-all.sh [--stages setup,build,test,bench,daemon,campaign] [--quick]
 #                        [--forest-seeds 20] [--team-seeds 10] [--first-seed 51]
-#                        [--forest-scenarios LIST] [--team-scenarios LIST] [--campaign-set K=V]... [--realtime-jobs 1] [--daemon-seconds 60]
+#                        [--forest-scenarios LIST] [--team-scenarios LIST] [--campaign-set K=V]... [--speed-limits 5,7,10] [--realtime-jobs 1] [--daemon-seconds 60]
 #                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR]
 #
 #   --stages          which stages (default: all; setup always runs; also: cudatest = the CUDA
@@ -21,6 +21,8 @@
 #   --forest-scenarios the forest campaign's scenarios (default forest_4m; e.g. forest_4m_sensed,
 #                     forest_4m_sensed_lidar: the sensed forests, docs/sensing.md)
 #   --campaign-set K=V  mppid's --set for every campaign flight (repeatable; e.g. cost.w_speed=0.5)
+#   --speed-limits LIST the forest campaign once per speed limit (cost.max_speed, m/s; e.g. 5,7,10),
+#                     then `tools/sitl speed-curve` over them (speed_curve.md, .png)
 #   --team-scenarios  the team campaign's scenarios (default team3_fixed,team3_moving,
 #                     team9_fixed,team9_moving)
 #   --realtime-jobs N real-time flights at once, each pinned to its own 1/N of the cores
@@ -42,6 +44,7 @@ TEAM_SCEN=team3_fixed,team3_moving,team9_fixed,team9_moving
 QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGER=state CAMP_TIMEOUT=7200
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
 CAMP_SETS=()
+SPEED_LIMITS=""
 while (($#)); do
   case "$1" in
     --stages) STAGES="$2"; shift ;;
@@ -51,6 +54,7 @@ while (($#)); do
     --first-seed) FIRST_SEED="$2"; shift ;;
     --forest-scenarios) FOREST_SCEN="$2"; shift ;;
     --campaign-set) CAMP_SETS+=(--set "$2"); shift ;;
+    --speed-limits) SPEED_LIMITS="$2"; shift ;;
     --team-scenarios) TEAM_SCEN="$2"; shift ;;
     --realtime-jobs) RT_JOBS="$2"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
@@ -237,17 +241,30 @@ fi
 
 # ---- real-time SITL campaigns with CUDA ----------------------------------------------------
 if want campaign; then
-  camp() {  # name scenarios seeds
+  camp() {  # name scenarios seeds [more --set pairs]
     (($3 > 0)) || return 0
-    timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$2" \
-      --seeds "$3" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" "${CAMP_SETS[@]}" --out "$RES/$1" >"$RES/$1.log" 2>&1 ||
-      fail "campaign $1 (see $1.log)"
+    local name=$1 scen=$2 seeds=$3
+    shift 3
+    timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$scen" \
+      --seeds "$seeds" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" "${CAMP_SETS[@]}" "$@" --out "$RES/$name" \
+      >"$RES/$name.log" 2>&1 || fail "campaign $name (see $name.log)"
     note ""
-    note "### $1 (seeds $FIRST_SEED..$((FIRST_SEED + $3 - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER${CAMP_SETS[*]:+, ${CAMP_SETS[*]}})"
+    note "### $name (seeds $FIRST_SEED..$((FIRST_SEED + seeds - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER${CAMP_SETS[*]:+, ${CAMP_SETS[*]}}${*:+, $*})"
     note ""
-    cat "$RES/$1/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
+    cat "$RES/$name/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
   }
-  camp campaign_forest "$FOREST_SCEN" "$FOREST_SEEDS"
+  if [[ -n "$SPEED_LIMITS" ]]; then
+    curve=()
+    for v in ${SPEED_LIMITS//,/ }; do
+      camp "campaign_forest_v$v" "$FOREST_SCEN" "$FOREST_SEEDS" --set "cost.max_speed=$v"
+      curve+=("$RES/campaign_forest_v$v")
+    done
+    tools/sitl speed-curve "${curve[@]}" --png "$RES/speed_curve.png" --json "$RES/speed_curve.json" \
+      >"$RES/speed_curve.md" 2>>"$LOG" || fail "speed-curve"
+    note "" && note "### speed curve" && note "" && cat "$RES/speed_curve.md" >>"$SUMMARY"
+  else
+    camp campaign_forest "$FOREST_SCEN" "$FOREST_SEEDS"
+  fi
   camp campaign_teams "$TEAM_SCEN" "$TEAM_SEEDS"
   say "campaigns done"
 fi
