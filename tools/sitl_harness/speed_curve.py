@@ -95,11 +95,13 @@ def plot(table: list[dict], png: Path) -> None:
     for r in table:
         if r["limit"] is not None:
             lines.setdefault((r["scenario"], r["backend"]), []).append(r)
-    for (scen, backend), rs in sorted(lines.items()):
-        x = [r["limit"] for r in rs]
+    for i, ((scen, backend), rs) in enumerate(sorted(lines.items())):
+        x = [r["limit"] + 0.08 * (i - (len(lines) - 1) / 2) for r in rs]  # side by side, not on top
         y = [r["successes"] / r["runs"] for r in rs]
         err = [[p - r["wilson95"][0] for p, r in zip(y, rs)], [r["wilson95"][1] - p for p, r in zip(y, rs)]]
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"{scen} ({backend})")
+    ax.hlines(0.8, 7.0, max((r["limit"] for r in table if r["limit"]), default=10.0), colors="grey",
+              linestyles="dashed", label="AERO-MPPI: > 80 % above 7 m/s (LiDAR; arXiv 2509.17340)")
     ax.set_xlabel("speed limit [m/s]")
     ax.set_ylabel("success rate (95 % Wilson interval)")
     ax.set_ylim(0, 1.05)
