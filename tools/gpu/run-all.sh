@@ -21,6 +21,8 @@
 #   --forest-scenarios the forest campaign's scenarios (default forest_4m; e.g. forest_4m_sensed,
 #                     forest_4m_sensed_lidar: the sensed forests, docs/sensing.md)
 #   --campaign-set K=V  mppid's --set for every campaign flight (repeatable; e.g. cost.w_speed=0.5)
+#   --campaign-backend cuda|cpu  the campaigns' backend (default cuda; cpu with --realtime-jobs 8
+#                     flies each flight on 2 of the host's cores, as on a 2-core machine)
 #   --speed-limits LIST the forest campaign once per speed limit (cost.max_speed, m/s; e.g. 5,7,10),
 #                     then `tools/sitl speed-curve` over them (speed_curve.md, .png)
 #   --team-scenarios  the team campaign's scenarios (default team3_fixed,team3_moving,
@@ -45,6 +47,7 @@ QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGE
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
 CAMP_SETS=()
 SPEED_LIMITS=""
+CAMP_BACKEND=cuda
 while (($#)); do
   case "$1" in
     --stages) STAGES="$2"; shift ;;
@@ -55,6 +58,7 @@ while (($#)); do
     --forest-scenarios) FOREST_SCEN="$2"; shift ;;
     --campaign-set) CAMP_SETS+=(--set "$2"); shift ;;
     --speed-limits) SPEED_LIMITS="$2"; shift ;;
+    --campaign-backend) CAMP_BACKEND="$2"; shift ;;
     --team-scenarios) TEAM_SCEN="$2"; shift ;;
     --realtime-jobs) RT_JOBS="$2"; shift ;;
     --daemon-seconds) DAEMON_S="$2"; shift ;;
@@ -245,11 +249,11 @@ if want campaign; then
     (($3 > 0)) || return 0
     local name=$1 scen=$2 seeds=$3
     shift 3
-    timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend cuda --realtime-jobs "$RT_JOBS" --scenarios "$scen" \
+    timeout -s INT -k 20 "$CAMP_TIMEOUT" tools/sitl campaign --realtime --backend "$CAMP_BACKEND" --realtime-jobs "$RT_JOBS" --scenarios "$scen" \
       --seeds "$seeds" --first-seed "$FIRST_SEED" --set daemon.trigger="$TRIGGER" "${CAMP_SETS[@]}" "$@" --out "$RES/$name" \
       >"$RES/$name.log" 2>&1 || fail "campaign $name (see $name.log)"
     note ""
-    note "### $name (seeds $FIRST_SEED..$((FIRST_SEED + seeds - 1)), real time, CUDA, realtime-jobs $RT_JOBS, trigger $TRIGGER${CAMP_SETS[*]:+, ${CAMP_SETS[*]}}${*:+, $*})"
+    note "### $name (seeds $FIRST_SEED..$((FIRST_SEED + seeds - 1)), real time, $CAMP_BACKEND, realtime-jobs $RT_JOBS, trigger $TRIGGER${CAMP_SETS[*]:+, ${CAMP_SETS[*]}}${*:+, $*})"
     note ""
     cat "$RES/$name/summary.md" >>"$SUMMARY" 2>/dev/null || note "(no summary)"
   }
