@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <future>
 #include <stdexcept>
 
 namespace mppi::transport {
@@ -59,10 +60,15 @@ std::string loopback(lcm::LCM& lcm, const std::string& url) {
 
 }  // namespace
 
+// On a probe instance of the URL, not the states' own: LCM's udpm starts an instance's socket
+// read thread at its first subscription, with the scheduling policy of the thread that makes
+// it, and start() makes the states' one from the receive thread, after its SCHED_FIFO.
 std::string LcmTransport::self_test() {
   if (running_) return "self_test: receive thread already running";
   if (!lcm_.good()) return "lcm: not good";
-  if (std::string why = loopback(lcm_, url_); !why.empty()) return why;
+  lcm::LCM probe(url_);
+  if (!probe.good()) return "lcm: cannot open '" + url_ + "' a second time";
+  if (std::string why = loopback(probe, url_); !why.empty()) return why;
   if (map_lcm_ && !map_lcm_->good()) return "lcm (maps): not good";
   return map_lcm_ ? loopback(*map_lcm_, url_) : std::string();
 }
@@ -81,25 +87,36 @@ void LcmTransport::subscribe_maps() {
   map_lcm().subscribe(ch_.local_map, &LcmTransport::on_local_map, this);
 }
 
-void LcmTransport::start(Inbox* inbox) {
-  if (running_) return;
-  inbox_ = inbox;
+// On the receive thread: the states' instance starts its socket read thread here.
+void LcmTransport::subscribe_states() {
   lcm_.subscribe(ch_.state, &LcmTransport::on_state, this);
   lcm_.subscribe(ch_.reference, &LcmTransport::on_reference, this);
   lcm_.subscribe(ch_.obstacles, &LcmTransport::on_obstacles, this);
   lcm_.subscribe(ch_.params, &LcmTransport::on_param, this);
   lcm_.subscribe(ch_.clock, &LcmTransport::on_clock, this);
-  if (inbox->map) subscribe_maps();
+  if (inbox_->map && map_thread_ == MapThread::kStateThread) subscribe_maps();
+}
+
+void LcmTransport::start(Inbox* inbox) {
+  if (running_) return;
+  inbox_ = inbox;
+  const bool maps_apart = inbox->map && map_thread_ == MapThread::kOwnThread;
+  if (maps_apart) subscribe_maps();  // their socket read thread keeps the caller's policy
   running_ = true;
-  thread_ = std::thread([this] {
+  std::promise<void> subscribed;
+  std::future<void> ready = subscribed.get_future();
+  thread_ = std::thread([this, &subscribed] {
     if (receive_fifo_ > 0) {
       sched_param sp{};
       sp.sched_priority = receive_fifo_;
       receive_fifo_ok_.store(pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0);
     }
+    subscribe_states();
+    subscribed.set_value();
     receive(&lcm_, receive_spin_ ? 0 : timeout_ms_);
   });
-  if (inbox->map && map_lcm_) map_receiver_ = std::thread([this] { receive(map_lcm_.get(), timeout_ms_); });
+  ready.wait();  // subscribed before start() returns: nothing published after it is missed
+  if (maps_apart) map_receiver_ = std::thread([this] { receive(map_lcm_.get(), timeout_ms_); });
 }
 
 void LcmTransport::receive(lcm::LCM* lcm, int timeout_ms) {

@@ -52,10 +52,14 @@ class LcmTransport final : public Transport {
                int receive_timeout_ms = 20);
   ~LcmTransport() override;
 
-  // A loopback on the states' instance, and on the maps' one once it is open.
+  // A loopback on a probe instance of the URL, and on the maps' instance once it is open.
   std::string self_test() override;
-  // Subscribes and starts the receive thread(s). With an inbox that takes maps, the maps'
-  // instance is opened first if it is not yet (std::runtime_error when it cannot be).
+  // Subscribes and starts the receive thread(s); returns once subscribed. With an inbox that
+  // takes maps, the maps' instance is opened first if it is not yet (std::runtime_error when
+  // it cannot be). LCM's udpm reads each instance's socket on a thread of its own, started at
+  // the instance's first subscription with the policy of the thread that subscribes: the
+  // states' instance subscribes from the receive thread, after its SCHED_FIFO, so no state
+  // waits in the socket for a time-shared thread behind the optimizer's workers.
   void start(Inbox* inbox) override;
   // Before start(): run the receive thread SCHED_FIFO at this priority (0: inherit), so
   // states and ticks are taken in as they arrive even while the optimizer fills the cores.
@@ -101,6 +105,7 @@ class LcmTransport final : public Transport {
   template <class Msg>
   bool send(const std::string& channel, const Msg& msg);
   void subscribe_maps();
+  void subscribe_states();
   void receive(lcm::LCM* lcm, int timeout_ms);
 
   lcm::LCM lcm_;
