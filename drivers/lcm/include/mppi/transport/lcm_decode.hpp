@@ -59,7 +59,7 @@ constexpr std::size_t kLocalMapCount = 8 + 8 + 8 + 12 + 4 + 4 + 4 + 4 + 4;  // i
 class LcmDecoder {
  public:
   // MapScratch::kNone: no map scratch (2 MiB reserved, resident under mlockall) for a decoder that
-  // never sees a map: the transport's states' thread when maps have a thread of their own.
+  // never sees a map: LcmTransport's for states and the rest (maps have a decoder of their own).
   enum class MapScratch { kReserve, kNone };
   explicit LcmDecoder(rt::Clock* recv_clock, MapScratch maps = MapScratch::kReserve);
   void state(const void* data, std::size_t size, Inbox* inbox);
