@@ -142,7 +142,7 @@ log "arm64: mppid --self-test under qemu-user"
 "${qemu[@]}" "$A/usr/bin/mppid" --self-test --config "$A/etc/mppid/mppid.yaml" --vehicle "$A/etc/mppid/vehicle.yaml" ||
   { log "FAILED: the arm64 mppid's self-test"; status=1; }
 log "arm64: mppid-mapper with the installed settings under qemu-user (2 s, then SIGTERM)"
-out="$(timeout -s TERM 2 "${qemu[@]}" "$A/usr/bin/mppid-mapper" --config "$A/etc/mppid/mapper.yaml" \
+out="$(timeout --preserve-status -s TERM 2 "${qemu[@]}" "$A/usr/bin/mppid-mapper" --config "$A/etc/mppid/mapper.yaml" \
   --lcm-url memq:// 2>&1)" && rc=0 || rc=$?
 [[ $rc == 0 && "$out" == *"cells of 0.25 m -> MPPI_LOCAL_MAP"* && "$out" == *'"frames":0'* ]] ||
   { log "FAILED: the arm64 mppid-mapper (rc $rc): $out"; status=1; }
