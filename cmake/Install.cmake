@@ -1,12 +1,13 @@
 # What a vehicle's companion computer runs, and nothing else (docs/deploy.md): `cmake --install`
 # and the Debian package (cmake/Packaging.cmake, tools/package.sh) put in place
 #   bin/mppid                               the controller
+#   bin/mppid-mapper                        the local map from a depth camera or LiDAR (docs/sensing.md)
 #   bin/mppid-mavlink-bridge, bin/mppid-mission   Debian's python3 with lib/mppid/python
 #   lib/mppid/python/                       the project's Python packages and the LCM types, with
 #                                           the PyPI wheels Debian 12 lacks (pymavlink, fastcrc,
 #                                           lcm: its lcm-logger is the flight recorder)
 #   lib/systemd/system/mppid*.{target,service}   the units (drivers/systemd/)
-#   /etc/mppid/{mppid,vehicle,mavlink-bridge}.yaml  the live settings (conffiles)
+#   /etc/mppid/{mppid,vehicle,mavlink-bridge,mapper}.yaml  the live settings (conffiles)
 #   share/mppid/                            their templates: the link profiles per autopilot and
 #                                           port, tasks, vehicles, missions, autopilot parameters
 #   share/doc/mppid/                        first-flight.md, deploy.md
@@ -26,6 +27,9 @@ find_program(MPPID_HOST_PYTHON NAMES python3 PATHS ${PROJECT_SOURCE_DIR}/.venv/b
 # ---- programs ------------------------------------------------------------------------
 if(TARGET mppid)
   install(TARGETS mppid RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
+endif()
+if(TARGET mppid-mapper)
+  install(TARGETS mppid-mapper RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 endif()
 # The Python programs: Debian's python3 on the package's own Python directory (no venv: a
 # venv's absolute paths would be the build machine's).
@@ -88,6 +92,7 @@ install(FILES ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid.target
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-mavlink-bridge.service
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-recorder.service
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-lcm-route.service
+              ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-mapper.service
         DESTINATION lib/systemd/system)
 
 # ---- settings: live files in /etc/mppid, templates in share/mppid ---------------------
@@ -101,6 +106,12 @@ install(FILES ${CMAKE_BINARY_DIR}/deploy/etc/mppid.yaml
               ${PROJECT_SOURCE_DIR}/config/deploy/vehicle.yaml
         DESTINATION ${_etc})
 install(FILES ${PROJECT_SOURCE_DIR}/config/bridge/px4_pi5_uart.yaml DESTINATION ${_etc} RENAME mavlink-bridge.yaml)
+# /etc/mppid/mapper.yaml: the mapper's settings with the bus named (mppid's, the units' group)
+# and a receive buffer for the sensors' frames (a depth frame is ~250 kB: docs/sensing.md).
+file(READ ${PROJECT_SOURCE_DIR}/config/mapper/mapper.yaml _mapper)
+string(REGEX REPLACE "\nlcm_url: [^\n]*" "\nlcm_url: \"udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304\"  # mppid's bus: the maps go out, the frames come in (unless sensor_lcm_url)" _mapper "${_mapper}")
+file(WRITE ${CMAKE_BINARY_DIR}/deploy/etc/mapper.yaml "${_mapper}")
+install(FILES ${CMAKE_BINARY_DIR}/deploy/etc/mapper.yaml DESTINATION ${_etc})
 file(GLOB _bridge_profiles ${PROJECT_SOURCE_DIR}/config/bridge/px4_*.yaml ${PROJECT_SOURCE_DIR}/config/bridge/ardupilot_*.yaml)
 # Not the simulators' (this machine's SITL) nor px4_serial.yaml (a vehicle path of the source tree).
 list(FILTER _bridge_profiles EXCLUDE REGEX "(_sitl|px4_serial)\\.yaml$")

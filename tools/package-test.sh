@@ -5,14 +5,16 @@
 #      and the Essential set; cached as a tarball under ~/.cache/mppid, keyed by the Depends,
 #      so a re-run needs no network), the package installed into it with dpkg, and there,
 #      from the installed files alone and in a private network namespace, the units' programs
-#      (LCM route, recorder, mppid, bridge) started from their ExecStart= lines, and the
+#      (LCM route, recorder, mppid, bridge) started from their ExecStart= lines, the mapper
+#      from its unit turning a published depth frame of a wall into a local map, and the
 #      missions hover (a PX4 on UDP) and circle_3ms (an ArduPilot on UDP) flown against the
 #      stand-in autopilot (sim/mavlink_vehicle, copied in as the test's fixture), the link
 #      profile installed as the operator would: test/deploy/package_flight.py.
 #   3. arm64: the package unpacked beside the arm64 libraries of this machine (multiarch) and
 #      its programs started under qemu-user (Cortex-A76): `mppid --self-test` with the
-#      installed /etc/mppid, lcm-logger; every ELF file in it an AArch64 one; the same Depends
-#      as the amd64 package.
+#      installed /etc/mppid, mppid-mapper with the installed /etc/mppid/mapper.yaml (its window
+#      allocated, stopped by SIGTERM), lcm-logger; every ELF file in it an AArch64 one; the
+#      same Depends as the amd64 package.
 #
 #   tools/package-test.sh [--no-build] [--amd64-only] [--ardupilot-bin BIN] [--keep DIR]
 #                         [-- package_flight.py arguments]
@@ -44,7 +46,7 @@ while (($#)); do
     --ardupilot-bin) ardupilot_bin="$(realpath "$2")"; arm64=0; shift ;;
     --keep) keep="$2"; shift ;;
     --) shift; flight_args=("$@"); break ;;
-    -h|--help) sed -n '2,31s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,33s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "package-test.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -87,9 +89,11 @@ tar -C "$R" -xf "$tarball"
 cp "$deb_amd64" "$R/tmp/"
 log "dpkg -i $(basename "$deb_amd64") in the clean root"
 chroot "$R" dpkg -i "/tmp/$(basename "$deb_amd64")"
-if chroot "$R" ldd /usr/bin/mppid | grep 'not found'; then
-  log "FAILED: mppid's libraries are not all in the package's Depends"; exit 1
-fi
+for bin in mppid mppid-mapper; do
+  if chroot "$R" ldd "/usr/bin/$bin" | grep 'not found'; then
+    log "FAILED: $bin's libraries are not all in the package's Depends"; exit 1
+  fi
+done
 # The test's fixtures: the stand-in autopilot and the driver; nothing else of this tree.
 mkdir -p "$R/opt/standin"
 cp -r sim/mavlink_vehicle/mavlink_vehicle "$R/opt/standin/"
@@ -137,6 +141,11 @@ qemu=(qemu-aarch64-static -cpu cortex-a76)
 log "arm64: mppid --self-test under qemu-user"
 "${qemu[@]}" "$A/usr/bin/mppid" --self-test --config "$A/etc/mppid/mppid.yaml" --vehicle "$A/etc/mppid/vehicle.yaml" ||
   { log "FAILED: the arm64 mppid's self-test"; status=1; }
+log "arm64: mppid-mapper with the installed settings under qemu-user (2 s, then SIGTERM)"
+out="$(timeout --preserve-status -s TERM 2 "${qemu[@]}" "$A/usr/bin/mppid-mapper" --config "$A/etc/mppid/mapper.yaml" \
+  --lcm-url memq:// 2>&1)" && rc=0 || rc=$?
+[[ $rc == 0 && "$out" == *"cells of 0.25 m -> MPPI_LOCAL_MAP"* && "$out" == *'"frames":0'* ]] ||
+  { log "FAILED: the arm64 mppid-mapper (rc $rc): $out"; status=1; }
 # (--help exits 1 after its usage: the usage is the proof that it loaded and ran)
 usage="$("${qemu[@]}" "$A/usr/lib/mppid/python/bin/lcm-logger" --help 2>&1 || true)"
 [[ "$usage" == "usage: lcm-logger"* ]] || { log "FAILED: the arm64 lcm-logger does not start: $usage"; status=1; }

@@ -16,7 +16,7 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 OUT="${MPPID_PACKAGE_DIR:-build/packages}"
 jobs="${MPPID_JOBS:-2}"
-TARGETS=(mppid mppi_lcm_python)
+TARGETS=(mppid mppid-mapper mppi_lcm_python)
 log() { printf "[package] %s\n" "$*" >&2; }
 
 arches=("$@")

@@ -15,7 +15,10 @@ and the recorder running on through the bridge's restart. Passes when both missi
 recorder's log holds the flights. Around them, the installed docs/first-flight.md's command
 blocks run as they are: those marked `sh no-vehicle` after the install (they put the Pi 5 task
 in /etc/mppid, so that is what flies), `sh stand-in` with the first stand-in on the link,
-`sh after-flight` at the end. Writes results.json into --out.
+`sh after-flight` at the end. Before the flights, the mapper from its unit's command line and
+/etc/mppid/mapper.yaml (as `systemctl enable --now mppid-mapper.service` starts it): a depth
+frame of a wall published on the bus it names turns into a local_map_t with the wall in it
+(check_mapper). Writes results.json into --out.
 """
 from __future__ import annotations
 
@@ -165,6 +168,58 @@ def bridge_ready(timeout=40.0) -> dict:
                      + (OUT / "bridge.log").read_text(errors="replace")[-3000:])
 
 
+def wall_frame(seq: int, point_cloud_t):
+    """A depth frame from (0, 0, 2) looking along +x (identity orientation) at a wall 3 m ahead:
+    21 x 11 returns over y in [-1, 1], z in [-0.5, 0.5] (sensor frame)."""
+    m = point_cloud_t()
+    m.utime, m.seq, m.sensor = int(time.time() * 1e6), seq, point_cloud_t.SENSOR_DEPTH_CAMERA
+    m.position, m.orientation = [0.0, 0.0, 2.0], [1.0, 0.0, 0.0, 0.0]
+    m.min_range, m.max_range = 0.2, 10.0
+    pts = [(3.0, -1.0 + 0.1 * i, -0.5 + 0.1 * k) for i in range(21) for k in range(11)]
+    m.n = len(pts)
+    m.x, m.y, m.z = ([p[d] for p in pts] for d in range(3))
+    m.hit = [1] * m.n
+    return m
+
+
+def distance_at(m, p) -> float:
+    """The map's distance [m] at the cell holding world point p."""
+    i = [int((p[d] - m.origin[d]) // m.resolution) for d in range(3)]
+    return m.distance_mm[i[0] + m.nx * (i[1] + m.ny * i[2])] / 1000.0
+
+
+def check_mapper(st: Stack) -> dict:
+    """mppid-mapper from its unit and /etc/mppid/mapper.yaml (a small window: --set map.size),
+    a wall's frames on the bus the settings name, and the first map that holds the wall: the
+    distance on the wall under 0.3 m, at the sensor over 2 m."""
+    sys.path.insert(0, "/usr/lib/mppid/python")
+    import lcm  # noqa: PLC0415 (the package's Python, as the bridge's)
+    import yaml  # noqa: PLC0415
+    from mppi_lcm import local_map_t, point_cloud_t  # noqa: PLC0415
+    url = yaml.safe_load(Path("/etc/mppid/mapper.yaml").read_text())["lcm_url"]
+    st.start("mapper", exec_lines("mppid-mapper.service")[0] + ["--set", "map.size=[8,8,4]"])
+    bus, maps = lcm.LCM(url), []
+    bus.subscribe("MPPI_LOCAL_MAP", lambda _ch, data: maps.append(local_map_t.decode(data)))
+    res: dict = {"url": url}
+    deadline = time.monotonic() + 20.0
+    for seq in range(1, 1000):
+        bus.publish("MPPI_DEPTH", wall_frame(seq, point_cloud_t).encode())
+        bus.handle_timeout(100)
+        with_wall = [m for m in maps if distance_at(m, (3.0, 0.0, 2.0)) < 0.3]
+        if with_wall or time.monotonic() > deadline:
+            break
+    res["maps"] = len(maps)
+    if with_wall:
+        m = with_wall[0]
+        res.update(cells=[m.nx, m.ny, m.nz], wall_m=distance_at(m, (3.0, 0.0, 2.0)),
+                   sensor_m=distance_at(m, (0.0, 0.0, 2.0)))
+    res["alive"] = st.alive("mapper")
+    st.stop("mapper")
+    res["ok"] = bool(with_wall) and res["sensor_m"] > 2.0 and res["alive"]
+    print(f"[package-flight] mapper: {res}", flush=True)
+    return res
+
+
 def fly(name: str, key: str) -> dict:
     out = OUT / key
     t0 = time.monotonic()
@@ -290,6 +345,8 @@ def failures_of(results: dict, keys: list[str], doc: bool) -> list[str]:
         if bad:
             failures.append(f"{k}: {r}")
     failures += [f"{n} exited during the flights" for n, ok in results["alive"].items() if not ok]
+    if not results.get("mapper", {}).get("ok"):
+        failures.append(f"mppid-mapper made no map of the wall: {results.get('mapper')}")
     if doc and results["enabled"] != sorted(SERVICES):
         failures.append(f"`systemctl enable mppid.target` enabled {results['enabled']}, not {sorted(SERVICES)}")
     if not results["recorder_files"] or sum(results["recorder_files"].values()) < 100_000:
@@ -320,6 +377,7 @@ def main() -> int:
             results["doc_blocks"]["no-vehicle"] = run_doc("no-vehicle")
             results["enabled"] = sorted(p.name for p in Path("/etc/systemd/system/mppid.target.wants").iterdir())
         start_stack(st, operator_edits(flights, a.set))
+        results["mapper"] = check_mapper(st)
         for i, token in enumerate(flights):
             keys.append(fly_one(st, token, a.doc and i == 0, results, alive))
     finally:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -22,6 +23,7 @@ VEHICLE = ROOT / "config" / "deploy" / "vehicle.yaml"
 LINKS = {"pi5_uart": "/dev/ttyAMA0", "jetson_uart": "/dev/ttyTHS1", "usb": "/dev/ttyACM0", "udp": None}
 PROFILES = [ROOT / "config" / "bridge" / f"{ap}_{link}.yaml" for ap in ("px4", "ardupilot") for link in LINKS]
 SERVICES = ("mppid-lcm-route.service", "mppid-recorder.service", "mppid.service", "mppid-mavlink-bridge.service")
+MAPPER = "mppid-mapper.service"  # part of the target once enabled; not started by it unasked
 
 
 def build_dir() -> Path:
@@ -73,13 +75,13 @@ def test_the_target_starts_and_stops_every_service():
     t = unit("mppid.target")
     assert words(t, "Wants") == set(SERVICES) == words(t, "Also")
     assert words(t, "WantedBy") == {"multi-user.target"}
-    assert {p.name for p in UNITS.glob("*.service")} == set(SERVICES)
-    for s in SERVICES:
+    assert {p.name for p in UNITS.glob("*.service")} == set(SERVICES) | {MAPPER}
+    for s in SERVICES + (MAPPER,):
         u = unit(s)
         assert words(u, "PartOf") == {"mppid.target"}, s
         assert words(u, "WantedBy") == {"mppid.target"}, s
         assert "network-online.target" not in words(u, "After") | words(u, "Wants"), f"{s}: a field has no network"
-    for s in SERVICES[1:]:  # the bus needs the route first
+    for s in SERVICES[1:] + (MAPPER,):  # the bus needs the route first
         u = unit(s)
         assert "mppid-lcm-route.service" in words(u, "Requires") & words(u, "After"), s
     assert {"mppid.service", "mppid-mavlink-bridge.service"} <= words(unit("mppid-recorder.service"), "Before")
@@ -101,7 +103,33 @@ def test_mppid_and_the_bridge_fly_one_vehicle_file_from_etc():
     assert option(b, "--config") == "/etc/mppid/mavlink-bridge.yaml"
     conffiles = (ROOT / "cmake" / "debian" / "conffiles").read_text().split()
     assert sorted(conffiles) == sorted(["/etc/mppid/mppid.yaml", "/etc/mppid/vehicle.yaml",
-                                        "/etc/mppid/mavlink-bridge.yaml"])
+                                        "/etc/mppid/mavlink-bridge.yaml", "/etc/mppid/mapper.yaml"])
+
+
+def test_the_mapper_is_enabled_on_its_own_and_maps_before_mppid_starts():
+    t, u = unit("mppid.target"), unit(MAPPER)
+    assert MAPPER not in words(t, "Wants") | words(t, "Also"), "a vehicle without a sensor runs no mapper"
+    assert "mppid.service" in words(u, "Before") and "mppid-recorder.service" in words(u, "After")
+    assert exec_start(MAPPER) == ["/usr/bin/mppid-mapper", "--config", "/etc/mppid/mapper.yaml"]
+    assert "CPUSchedulingPolicy" not in u, "time-shared: below mppid's and the bridge's SCHED_FIFO"
+
+
+def test_the_installed_mapper_settings_name_the_bus_and_run(tmp_path):
+    """/etc/mppid/mapper.yaml (made by cmake/Install.cmake from config/mapper/mapper.yaml): the
+    bus of the bridge's settings with a receive buffer for the frames, and the built mapper runs
+    with it (memq://) until SIGTERM, then reports no frames."""
+    cfg = build_dir() / "deploy" / "etc" / "mapper.yaml"
+    text = cfg.read_text()
+    url = settings.DEFAULTS["lcm"]["url"]
+    assert f'\nlcm_url: "{url}&recv_buf_size=4194304"' in text
+    assert '\nsensor_lcm_url: ""' in text
+    mapper = build_dir() / "bin" / "mppid-mapper"
+    p = subprocess.Popen([str(mapper), "--config", str(cfg), "--lcm-url", "memq://"], stderr=subprocess.PIPE, text=True)
+    first = p.stderr.readline()  # printed once the settings loaded and the window is allocated
+    p.send_signal(signal.SIGTERM)
+    rest = p.communicate(timeout=30)[1]
+    assert "128 x 128 x 32 cells of 0.25 m -> MPPI_LOCAL_MAP" in first, first + rest
+    assert p.returncode == 0 and '"frames":0' in rest, rest
 
 
 def test_route_and_recorder_use_the_group_of_the_settings_lcm_url():
@@ -120,7 +148,8 @@ def test_units_verify(tmp_path):
     logger = Path(sys.executable).parent / "lcm-logger"
     assert mppid.is_file(), f"{mppid} not built (tools/setup.sh)"
     swap = {"/usr/bin/mppid-mavlink-bridge": str(ROOT / "drivers" / "mavlink" / "mppid-mavlink-bridge"),
-            "/usr/bin/mppid ": f"{mppid} ", "/usr/lib/mppid/python/bin/lcm-logger": str(logger)}
+            "/usr/bin/mppid ": f"{mppid} ", "/usr/lib/mppid/python/bin/lcm-logger": str(logger),
+            "/usr/bin/mppid-mapper": str(build_dir() / "bin" / "mppid-mapper")}
     for f in UNITS.iterdir():
         text = f.read_text()
         for a, b in swap.items():

@@ -1,5 +1,5 @@
-"""mppid end to end over udpm: a state publisher with injected faults, and checks of every
-command and status that came back. Run inside a network namespace by e2e_udpm.sh."""
+"""mppid end to end over udpm: a state publisher with injected faults and three local maps, and
+checks of every command and status that came back. Run inside a network namespace by e2e_udpm.sh."""
 import argparse
 import json
 import math
@@ -21,7 +21,7 @@ def main():
     a = ap.parse_args()
     sys.path.insert(0, a.types)
     import lcm
-    from mppi_lcm import (command_t, controller_status_t, param_update_t, plan_t, sim_clock_t,
+    from mppi_lcm import (command_t, controller_status_t, local_map_t, param_update_t, plan_t, sim_clock_t,
                           vehicle_state_t)
 
     lc = lcm.LCM(URL)
@@ -98,6 +98,20 @@ def main():
         p.value = value
         return p.encode()
 
+    def local_map(s):
+        """A 20 x 10 x 5 map of free space (one datagram), stamped now: taken by the daemon's
+        maps' instance and thread (the forest task takes maps)."""
+        m = local_map_t()
+        m.utime = int(time.time() * 1e6)
+        m.seq = s
+        m.origin = [-2.5, -1.25, 0.0]
+        m.resolution = 0.25
+        m.nx, m.ny, m.nz = 20, 10, 5
+        m.max_distance = 5.0
+        m.n_cells = 1000
+        m.distance_mm = [5000] * 1000
+        return m.encode()
+
     t0 = time.monotonic()
     k = 0
     marks = {}
@@ -126,6 +140,10 @@ def main():
             lc.publish("MPPI_PARAMS", param("mppi.nope", 1.0, 2))   # invalid: unknown
             lc.publish("MPPI_PARAMS", param("cost.w_xy", 3.0, 3))   # valid
             injected.add("param")
+        if t >= 1.2 and "maps" not in injected:
+            for s in (1, 2, 3):
+                lc.publish("MPPI_LOCAL_MAP", local_map(s))
+            injected.add("maps")
         if paused and "pause" not in marks:
             marks["pause"] = time.monotonic() - t_start
         if not paused and "pause" in marks and "resume" not in marks:
@@ -180,6 +198,9 @@ def main():
         check(last.rejected_params == 2, "status counts the 2 rejected parameter updates (%d)" % last.rejected_params)
         check(last.rejected_stale > 0, "status counts stale cycles (%d)" % last.rejected_stale)
         check(last.cycles > 150, "cycles %d" % last.cycles)
+        check(last.maps_accepted == 3 and last.maps_rejected == 0,
+              "status counts the 3 local maps received over udpm (%d, %d rejected)"
+              % (last.maps_accepted, last.maps_rejected))
     check(got["plans"] > 5, "plan messages for display (5 Hz while normal): %d" % got["plans"])
     check("parameter cost.w_xy = 3 applied" in err_text, "valid parameter applied (log)")
     stats = [l for l in out.splitlines() if l.startswith("mppid-stats ")]

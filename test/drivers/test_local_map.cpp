@@ -247,7 +247,8 @@ struct MapRig {
     for (int i = 12; i < 16; ++i) m.x[static_cast<std::size_t>(i)] = 3168.4f;
     tx.lcm().publish("MPPI_STATE", &m);
   }
-  void send_map(const mppi_lcm::local_map_t& m) { tx.lcm().publish("MPPI_LOCAL_MAP", &m); }
+  // Maps have an LCM instance of their own (each memq:// instance is a queue of its own).
+  void send_map(const mppi_lcm::local_map_t& m) { tx.map_lcm().publish("MPPI_LOCAL_MAP", &m); }
   const DistanceField& field() {
     return dynamic_cast<TaskController<QuadrotorForest>&>(*controller).params().cost.field;
   }

@@ -132,6 +132,16 @@ TEST(MapperSettings, OverridesApplyAndUnknownKeysFail) {
   EXPECT_THROW(mapper::load_settings("", {"rate_hz=0"}), std::runtime_error);
 }
 
+TEST(MapperSettings, TheBusesAreSettingsTheDefaultsLcmsAndTheMapsOnes) {
+  const auto d = mapper::load_settings(MPPID_SOURCE_DIR "/config/mapper/mapper.yaml", {});
+  EXPECT_EQ(d.lcm_url, "") << "LCM's default bus";
+  EXPECT_EQ(d.sensor_lcm_url, "") << "the maps' bus";
+  const auto s = mapper::load_settings("", {"lcm_url=udpm://239.255.76.67:7667?ttl=0", "sensor_lcm_url=memq://"});
+  EXPECT_EQ(s.lcm_url, "udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_EQ(s.sensor_lcm_url, "memq://");
+  EXPECT_THROW(mapper::load_settings("", {"lcm_ur=memq://"}), std::runtime_error);
+}
+
 }  // namespace
 
 namespace {

@@ -185,6 +185,11 @@ int open_transport(const DaemonSettings& ds, const mppi::Controller& c, mppi::rt
   try {
     *tx = std::make_unique<mppi::transport::LcmTransport>(ds.lcm_url, ds.channels, clock, max_plan_steps * c.nu(),
                                                           ds.receive_timeout_ms);
+    // Real time: maps on an LCM instance and thread of their own, so no state waits behind a
+    // map's decode. Lock-step: on the states' thread, so the loop takes them in the bus's order
+    // and a flight repeats and replays (tools/replay) as it did.
+    if (ds.loop.lockstep) (*tx)->set_map_thread(mppi::transport::LcmTransport::MapThread::kStateThread);
+    if (ds.local_map) (*tx)->open_map_receiver();
   } catch (const std::exception& e) {
     spdlog::error("invalid settings: daemon.{}", e.what());
     return kExitConfig;

@@ -2,7 +2,9 @@
 // Publishes vehicle_state_t at a fixed rate (absolute-time sleeps), optionally closing
 // the loop through the quadrotor model with the commands it receives; listens to
 // command_t and controller_status_t; measures state-out -> command-in latency by
-// state_seq; injects faults on request; prints one `mppid-peer {json}` line at the end.
+// state_seq; injects faults on request; optionally publishes local maps (local_map_t, the
+// mapper's default size) at a rate of their own from a second thread and LCM instance, as
+// mppid-mapper would; prints one `mppid-peer {json}` line at the end.
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <lcm/lcm-cpp.hpp>
@@ -11,6 +13,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -20,6 +23,7 @@
 #include "mppi/rt/histogram.hpp"
 #include "mppi_lcm/command_t.hpp"
 #include "mppi_lcm/controller_status_t.hpp"
+#include "mppi_lcm/local_map_t.hpp"
 #include "mppi_lcm/obstacles_t.hpp"
 #include "mppi_lcm/reference_t.hpp"
 #include "mppi_lcm/vehicle_state_t.hpp"
@@ -83,6 +87,48 @@ struct Options {
   bool simulate = false;
   int forest = 0;
   float z0 = 1.0f;
+  double maps_hz = 0.0;                 // local_map_t per second (0: none)
+  std::vector<int> map_cells{128, 128, 32};  // mppid-mapper's default: 32 x 32 x 8 m at 0.25 m, 1 MB
+};
+
+// Local maps as mppid-mapper publishes them (free space: every cell at max_distance, the
+// window around the start), on an LCM instance and thread of their own so that encoding and
+// sending ~1 MB never delays a state.
+class MapPublisher {
+ public:
+  explicit MapPublisher(const Options& o) : o_(o), lcm_(o.url) {
+    auto& m = msg_;
+    m.nx = o.map_cells[0], m.ny = o.map_cells[1], m.nz = o.map_cells[2];
+    m.resolution = 0.25f;
+    m.max_distance = 5.0f;
+    m.origin[0] = -0.5f * m.resolution * static_cast<float>(m.nx);
+    m.origin[1] = -0.5f * m.resolution * static_cast<float>(m.ny);
+    m.origin[2] = 0.0f;
+    m.n_cells = m.nx * m.ny * m.nz;
+    m.distance_mm.assign(static_cast<std::size_t>(m.n_cells), static_cast<std::int16_t>(5000));
+    buf_.resize(static_cast<std::size_t>(m.getEncodedSize()) + 64);
+  }
+  bool good() { return lcm_.good(); }
+  void run(const std::atomic<bool>& stop) {
+    const std::int64_t period = std::llround(1e9 / o_.maps_hz);
+    mppi::rt::MonotonicClock clock;
+    for (std::int64_t next = mppi::rt::monotonic_ns(); !stop.load(); next += period) {
+      clock.sleep_until(next);
+      msg_.utime = mppi::rt::wall_utime();
+      msg_.seq = ++published_;
+      const int size = msg_.getEncodedSize();
+      msg_.encode(buf_.data(), 0, size);
+      lcm_.publish("MPPI_LOCAL_MAP", buf_.data(), static_cast<unsigned>(size));
+    }
+  }
+  std::int64_t published() const { return published_; }
+
+ private:
+  const Options& o_;
+  lcm::LCM lcm_;
+  mppi_lcm::local_map_t msg_{};
+  std::vector<std::uint8_t> buf_;
+  std::int64_t published_ = 0;
 };
 
 // The world: a grid of cylinders ahead of the vehicle and a goal beyond it, sent at 1 Hz.
@@ -205,7 +251,7 @@ class Publisher {
   bool nan_done_ = false, garbage_done_ = false;
 };
 
-void print_report(const Listener& l, const Publisher& p) {
+void print_report(const Listener& l, const Publisher& p, std::int64_t maps) {
   const auto lat = l.latency.summary();
   std::printf(
       "mppid-peer {\"states\":%lld,\"commands\":%lld,\"answered\":%lld,\"nonfinite_commands\":%lld,"
@@ -214,7 +260,7 @@ void print_report(const Listener& l, const Publisher& p) {
       "\"max_ms\":%.4f},\"publisher_max_late_ms\":%.4f,\"last_status\":{\"cycles\":%lld,\"misses\":%lld,"
       "\"rejected_nan\":%lld,\"rejected_out_of_order\":%lld,\"rejected_undecodable\":%lld,"
       "\"rejected_params\":%lld,\"healthy\":%lld,\"jitter_ms_p99\":%.4f,\"compute_ms_p99\":%.4f},"
-      "\"final_z\":%.3f}\n",
+      "\"final_z\":%.3f,\"maps\":%lld}\n",
       static_cast<long long>(p.published()), static_cast<long long>(l.commands), static_cast<long long>(l.answered),
       static_cast<long long>(l.nonfinite), static_cast<long long>(l.by_mode[0]), static_cast<long long>(l.by_mode[1]),
       static_cast<long long>(l.by_mode[2]), static_cast<long long>(l.command_seq_gaps),
@@ -224,7 +270,13 @@ void print_report(const Listener& l, const Publisher& p) {
       static_cast<long long>(l.last_rejected_nan), static_cast<long long>(l.last_rejected_ooo),
       static_cast<long long>(l.last_rejected_undecodable), static_cast<long long>(l.last_rejected_params),
       static_cast<long long>(l.last_status_healthy), static_cast<double>(l.last_p99_jitter),
-      static_cast<double>(l.last_compute_p99), static_cast<double>(p.z()));
+      static_cast<double>(l.last_compute_p99), static_cast<double>(p.z()), static_cast<long long>(maps));
+}
+
+// The maps' thread, when asked for (null otherwise); it stops with *stop.
+std::unique_ptr<std::thread> start_maps(MapPublisher* maps, const std::atomic<bool>& stop) {
+  if (maps == nullptr) return nullptr;
+  return std::make_unique<std::thread>([maps, &stop] { maps->run(stop); });
 }
 
 }  // namespace
@@ -245,26 +297,34 @@ int main(int argc, char** argv) {
   app.add_flag("--simulate", o.simulate, "integrate the quadrotor model with the received commands");
   app.add_option("--z0", o.z0, "start height [m]");
   app.add_option("--forest", o.forest, "publish this many cylinders (4 m grid ahead) and a goal at (30, 0, z0), 1 Hz");
+  app.add_option("--maps", o.maps_hz, "publish free-space local_map_t on MPPI_LOCAL_MAP this often [Hz] (0: none)")
+      ->check(CLI::Range(0.0, 100.0));
+  app.add_option("--map-cells", o.map_cells, "the maps' cells along x y z (default: the mapper's 128 128 32)")
+      ->expected(3);
   CLI11_PARSE(app, argc, argv);
 
   lcm::LCM lcm(o.url);
-  if (!lcm.good()) {
+  std::unique_ptr<MapPublisher> maps = o.maps_hz > 0.0 ? std::make_unique<MapPublisher>(o) : nullptr;
+  if (!lcm.good() || (maps && !maps->good())) {
     std::fprintf(stderr, "mppid-peer: cannot open %s\n", o.url.c_str());
     return 1;
   }
   Listener l;
   lcm.subscribe(o.command_ch, &Listener::on_command, &l);
   lcm.subscribe(o.status_ch, &Listener::on_status, &l);
-  std::atomic<bool> stop{false};
+  std::atomic<bool> stop{false}, stop_maps{false};
   std::thread rx([&] {
     while (!stop) lcm.handleTimeout(20);
   });
+  const auto map_thread = start_maps(maps.get(), stop_maps);
   Publisher pub(o, &lcm, &l);
   pub.run();
+  stop_maps = true;
+  if (map_thread) map_thread->join();
   // Let the last commands and a status arrive.
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   stop = true;
   rx.join();
-  print_report(l, pub);
+  print_report(l, pub, maps ? maps->published() : 0);
   return 0;
 }

@@ -226,6 +226,8 @@ class Replay {
         loop_(initial_, &clock_, &tx_, &inbox_, ds.loop) {
     marker_.n = &marks_;
     lcm_in_.lcm().subscribe("MPPID_REPLAY_MARK", &Marker::on, &marker_);
+    // Maps in the log's order among the states: one memq:// FIFO, handled by one thread.
+    lcm_in_.set_map_thread(mppi::transport::LcmTransport::MapThread::kStateThread);
     loop_.set_live_optimizer(&live_);
     tx_.start(&inbox_);
   }

@@ -46,7 +46,8 @@ Reject Inbox::offer_state() {
       return reject(counters.rejected_out_of_order, Reject::kOutOfOrder);
   }
   have_last_ = true;
-  last_sample_utime_ = std::max(last_sample_utime_, s.sample_utime);
+  if (s.sample_utime > last_sample_utime_.load(std::memory_order_relaxed))
+    last_sample_utime_.store(s.sample_utime, std::memory_order_relaxed);
   last_seq_ = s.seq;
   last_recv_ns_ = s.recv_ns;
   state.publish();
@@ -105,7 +106,8 @@ Reject Inbox::offer_map() {
     if (!restart && (m.seq <= last_map_seq_ || m.utime < last_map_utime_))
       return reject(counters.maps_rejected_out_of_order, Reject::kOutOfOrder);
   }
-  if (last_sample_utime_ >= 0 && (last_sample_utime_ - m.utime) * 1000 > expect_.map_timeout_ns)
+  const std::int64_t newest_state = last_sample_utime_.load(std::memory_order_relaxed);
+  if (newest_state >= 0 && (newest_state - m.utime) * 1000 > expect_.map_timeout_ns)
     return reject(counters.maps_rejected_stale, Reject::kTime);
   have_map_ = true;
   last_map_seq_ = m.seq;

@@ -89,10 +89,10 @@ bool decode_message(const void* data, std::size_t size, mppi_lcm::local_map_t* m
 
 namespace mppi::transport {
 
-LcmDecoder::LcmDecoder(rt::Clock* recv_clock) : recv_clock_(recv_clock) {
+LcmDecoder::LcmDecoder(rt::Clock* recv_clock, MapScratch maps) : recv_clock_(recv_clock) {
   state_in_.x.reserve(kMaxStates);
   obstacles_in_.cylinders.reserve(kMaxObstaclesIn);
-  map_in_.distance_mm.reserve(DistanceField::kMaxCells);  // virtual until a map arrives
+  if (maps == MapScratch::kReserve) map_in_.distance_mm.reserve(DistanceField::kMaxCells);  // virtual until a map arrives
   reference_in_.goals.reserve(kMaxVehicles);
 }
 

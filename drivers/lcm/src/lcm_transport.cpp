@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <future>
 #include <stdexcept>
 
 namespace mppi::transport {
@@ -16,8 +17,9 @@ LcmTransport::LcmTransport(const std::string& url, LcmChannels channels, rt::Clo
     : lcm_(url),
       url_(url),
       ch_(std::move(channels)),
+      recv_clock_(recv_clock),
       timeout_ms_(receive_timeout_ms),
-      decoder_(recv_clock) {
+      decoder_(recv_clock, LcmDecoder::MapScratch::kNone) {
   if (!lcm_.good()) throw std::runtime_error("lcm_url: cannot open '" + url + "'");
   command_out_.u.reserve(kMaxControls);
   plan_out_.u.reserve(static_cast<std::size_t>(std::max(0, max_plan_floats)));
@@ -32,10 +34,10 @@ LcmTransport::LcmTransport(const std::string& url, LcmChannels channels, rt::Clo
 
 LcmTransport::~LcmTransport() { stop(); }
 
-std::string LcmTransport::self_test() {
-  if (running_) return "self_test: receive thread already running";
-  if (!lcm_.good()) return "lcm: not good";
-  // Loopback: publish on a private channel and receive it on the same URL.
+namespace {
+
+// Publishes on a private channel and receives it on the same instance: "" or why not.
+std::string loopback(lcm::LCM& lcm, const std::string& url) {
   const std::string channel = "MPPID_SELFTEST_" + std::to_string(::getpid());
   bool got = false;
   struct Probe {
@@ -44,43 +46,88 @@ std::string LcmTransport::self_test() {
       if (rb->data_size == 8 && std::memcmp(rb->data, "mppid-ok", 8) == 0) *got = true;
     }
   } probe{&got};
-  lcm::Subscription* sub = lcm_.subscribe(channel, &Probe::on, &probe);
+  lcm::Subscription* sub = lcm.subscribe(channel, &Probe::on, &probe);
   for (int attempt = 0; attempt < 5 && !got; ++attempt) {
-    if (lcm_.publish(channel, "mppid-ok", 8) != 0) {
-      lcm_.unsubscribe(sub);
-      return "lcm: publish on '" + url_ + "' failed";
+    if (lcm.publish(channel, "mppid-ok", 8) != 0) {
+      lcm.unsubscribe(sub);
+      return "lcm: publish on '" + url + "' failed";
     }
-    for (int i = 0; i < 10 && !got; ++i) lcm_.handleTimeout(20);
+    for (int i = 0; i < 10 && !got; ++i) lcm.handleTimeout(20);
   }
-  lcm_.unsubscribe(sub);
-  return got ? std::string() : "lcm: no loopback message on '" + url_ + "' within 1 s (multicast route? ttl?)";
+  lcm.unsubscribe(sub);
+  return got ? std::string() : "lcm: no loopback message on '" + url + "' within 1 s (multicast route? ttl?)";
 }
 
-void LcmTransport::start(Inbox* inbox) {
-  if (running_) return;
-  inbox_ = inbox;
+}  // namespace
+
+// On a probe instance of the URL, not the states' own: LCM's udpm starts an instance's socket
+// read thread at its first subscription, with the scheduling policy of the thread that makes
+// it, and start() makes the states' one from the receive thread, after its SCHED_FIFO.
+std::string LcmTransport::self_test() {
+  if (running_) return "self_test: receive thread already running";
+  if (!lcm_.good()) return "lcm: not good";
+  lcm::LCM probe(url_);
+  if (!probe.good()) return "lcm: cannot open '" + url_ + "' a second time";
+  if (std::string why = loopback(probe, url_); !why.empty()) return why;
+  if (map_lcm_ && !map_lcm_->good()) return "lcm (maps): not good";
+  return map_lcm_ ? loopback(*map_lcm_, url_) : std::string();
+}
+
+void LcmTransport::open_map_receiver() {
+  if (map_lcm_ || map_thread_ != MapThread::kOwnThread) return;
+  auto lcm = std::make_unique<lcm::LCM>(url_);
+  if (!lcm->good()) throw std::runtime_error("lcm_url: cannot open '" + url_ + "' for local maps");
+  map_lcm_ = std::move(lcm);
+}
+
+// The maps' decoder, and the subscription on the instance that receives them.
+void LcmTransport::subscribe_maps() {
+  open_map_receiver();
+  if (!map_decoder_) map_decoder_ = std::make_unique<LcmDecoder>(recv_clock_);
+  map_lcm().subscribe(ch_.local_map, &LcmTransport::on_local_map, this);
+}
+
+// On the receive thread: the states' instance starts its socket read thread here.
+void LcmTransport::subscribe_states() {
   lcm_.subscribe(ch_.state, &LcmTransport::on_state, this);
   lcm_.subscribe(ch_.reference, &LcmTransport::on_reference, this);
   lcm_.subscribe(ch_.obstacles, &LcmTransport::on_obstacles, this);
   lcm_.subscribe(ch_.params, &LcmTransport::on_param, this);
   lcm_.subscribe(ch_.clock, &LcmTransport::on_clock, this);
-  if (inbox->map) lcm_.subscribe(ch_.local_map, &LcmTransport::on_local_map, this);
+  if (inbox_->map && map_thread_ == MapThread::kStateThread) subscribe_maps();
+}
+
+void LcmTransport::start(Inbox* inbox) {
+  if (running_) return;
+  inbox_ = inbox;
+  const bool maps_apart = inbox->map && map_thread_ == MapThread::kOwnThread;
+  if (maps_apart) subscribe_maps();  // their socket read thread keeps the caller's policy
   running_ = true;
-  thread_ = std::thread([this] {
+  std::promise<void> subscribed;
+  std::future<void> ready = subscribed.get_future();
+  thread_ = std::thread([this, &subscribed] {
     if (receive_fifo_ > 0) {
       sched_param sp{};
       sp.sched_priority = receive_fifo_;
       receive_fifo_ok_.store(pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0);
     }
-    while (running_.load(std::memory_order_relaxed)) {
-      if (lcm_.handleTimeout(receive_spin_ ? 0 : timeout_ms_) < 0) break;
-    }
+    subscribe_states();
+    subscribed.set_value();
+    receive(&lcm_, receive_spin_ ? 0 : timeout_ms_);
   });
+  ready.wait();  // subscribed before start() returns: nothing published after it is missed
+  if (maps_apart) map_receiver_ = std::thread([this] { receive(map_lcm_.get(), timeout_ms_); });
+}
+
+void LcmTransport::receive(lcm::LCM* lcm, int timeout_ms) {
+  while (running_.load(std::memory_order_relaxed))
+    if (lcm->handleTimeout(timeout_ms) < 0) break;
 }
 
 void LcmTransport::stop() {
   running_ = false;
   if (thread_.joinable()) thread_.join();
+  if (map_receiver_.joinable()) map_receiver_.join();
 }
 
 // Decoding and validation live in LcmDecoder (lcm_decode.cpp), reachable without a socket.
@@ -91,7 +138,7 @@ void LcmTransport::on_reference(const lcm::ReceiveBuffer* rb, const std::string&
   decoder_.reference(rb->data, rb->data_size, inbox_);
 }
 void LcmTransport::on_local_map(const lcm::ReceiveBuffer* rb, const std::string&) {
-  decoder_.local_map(rb->data, rb->data_size, inbox_);
+  map_decoder_->local_map(rb->data, rb->data_size, inbox_);
 }
 
 void LcmTransport::on_obstacles(const lcm::ReceiveBuffer* rb, const std::string&) {

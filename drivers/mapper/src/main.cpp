@@ -23,7 +23,9 @@ int usage(const char* why) {
                "usage: mppid-mapper [--config FILE] [--set key=value ...] [--lcm-url URL] [--sensor-lcm-url URL]\n"
                "                    [--channel-prefix P] [--stats FILE] [--sensed FILE]\n"
                "  --config   settings (config/mapper/mapper.yaml: map.resolution, map.size, rate_hz, ...)\n"
-               "  --sensor-lcm-url  the sensors' frames on this bus (default: --lcm-url's, where the maps go)\n"
+               "  --lcm-url  the maps go out on this bus (default: the settings' lcm_url, else LCM's default)\n"
+               "  --sensor-lcm-url  the sensors' frames on this bus (default: the settings' sensor_lcm_url, else\n"
+               "             the maps' bus)\n"
                "  --set      one setting, e.g. map.resolution=0.2, rate_hz=20, inputs=[MPPI_DEPTH]\n"
                "  --stats    on exit, write frames, maps and update timings (JSON) there\n"
                "  --sensed   append each map's newly occupied (x, y) columns there (JSON lines)\n");
@@ -71,12 +73,14 @@ int main(int argc, char** argv) {
     mapper::NodeSettings s = mapper::load_settings(args.config, args.sets);
     for (auto& ch : s.inputs) ch = args.prefix + ch;
     s.output = args.prefix + s.output;
-    lcm::LCM lcm(args.url);
-    if (!lcm.good()) throw std::runtime_error("LCM init failed for url '" + args.url + "'");
+    const std::string url = args.url.empty() ? s.lcm_url : args.url;
+    const std::string sensor_url = args.sensor_url.empty() ? s.sensor_lcm_url : args.sensor_url;
+    lcm::LCM lcm(url);
+    if (!lcm.good()) throw std::runtime_error("LCM init failed for url '" + url + "'");
     std::unique_ptr<lcm::LCM> sensor_bus;
-    if (!args.sensor_url.empty()) {
-      sensor_bus = std::make_unique<lcm::LCM>(args.sensor_url);
-      if (!sensor_bus->good()) throw std::runtime_error("LCM init failed for url '" + args.sensor_url + "'");
+    if (!sensor_url.empty() && sensor_url != url) {
+      sensor_bus = std::make_unique<lcm::LCM>(sensor_url);
+      if (!sensor_bus->good()) throw std::runtime_error("LCM init failed for url '" + sensor_url + "'");
     }
     mapper::MapperNode node(s, &lcm, sensor_bus ? sensor_bus.get() : &lcm);
     std::FILE* sensed = nullptr;

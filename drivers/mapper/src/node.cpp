@@ -123,13 +123,15 @@ NodeSettings load_settings(const std::string& path, const std::vector<std::strin
   } catch (const YAML::Exception& e) {
     fail(path.empty() ? "--set" : path, e.what());
   }
-  check_keys(root, "mapper", {"map", "rate_hz", "inputs", "output", "max_ray"});
+  check_keys(root, "mapper", {"map", "rate_hz", "inputs", "output", "max_ray", "lcm_url", "sensor_lcm_url"});
   NodeSettings s;
   read_map(root["map"], s.map);
   read(root, "rate_hz", "mapper", s.rate_hz);
   read(root, "inputs", "mapper", s.inputs);
   read(root, "output", "mapper", s.output);
   read(root, "max_ray", "mapper", s.max_ray);
+  read(root, "lcm_url", "mapper", s.lcm_url);
+  read(root, "sensor_lcm_url", "mapper", s.sensor_lcm_url);
   if (!(s.rate_hz > 0.0 && s.rate_hz <= 100.0)) fail("rate_hz", "must be in (0, 100]");
   if (s.inputs.empty()) fail("inputs", "at least one point_cloud_t channel");
   if (!(s.max_ray >= 0.0)) fail("max_ray", "must be >= 0");

@@ -24,6 +24,10 @@ struct NodeSettings {
   std::vector<std::string> inputs{"MPPI_DEPTH", "MPPI_LIDAR"};  // point_cloud_t channels
   std::string output = "MPPI_LOCAL_MAP";
   double max_ray = 0.0;  // m: returns beyond are cut to misses at this range (0: the sensor's own)
+  // The bus the maps go out on ("": LCM's default, udpm://239.255.76.67:7667?ttl=0) and the
+  // one the frames come in on ("": the maps' bus); --lcm-url / --sensor-lcm-url override them.
+  std::string lcm_url;
+  std::string sensor_lcm_url;
 };
 
 // `path` (empty: defaults) then each "a.b=value" of `sets` (map.resolution=0.2, rate_hz=20,

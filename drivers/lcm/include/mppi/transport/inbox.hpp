@@ -72,6 +72,9 @@ class Inbox {
       : map(e.local_map ? std::make_unique<rt::LatestValue<LocalMapInput>>() : nullptr), expect_(e) {}
 
   // ---- receive-thread side --------------------------------------------------------
+  // One thread offers states, references, obstacles, parameters and ticks; maps may come
+  // from a second one (LcmTransport's maps' thread): the only state the two share is the
+  // newest state's sample time (an atomic) and the counters (atomics).
   // Fill state_buffer(), then offer_state() validates it and hands it to the loop.
   StateSample& state_buffer() { return state.back(); }
   Reject offer_state();
@@ -109,11 +112,13 @@ class Inbox {
 
  private:
   Expect expect_;
-  std::int64_t last_seq_ = -1;  // receive thread only
+  std::int64_t last_seq_ = -1;  // states' receive thread only
   std::int64_t last_recv_ns_ = 0;
   bool have_last_ = false;
-  std::int64_t last_sample_utime_ = -1;  // the newest accepted state's (receive thread)
-  std::int64_t last_map_seq_ = -1, last_map_utime_ = -1, last_map_recv_ns_ = 0;  // receive thread
+  // The newest accepted state's sample time: written by the states' thread, read by the maps'
+  // (a map's stale check) when maps have a thread of their own.
+  std::atomic<std::int64_t> last_sample_utime_{-1};
+  std::int64_t last_map_seq_ = -1, last_map_utime_ = -1, last_map_recv_ns_ = 0;  // maps' thread
   bool have_map_ = false;
   std::atomic<std::int64_t> last_state_recv_ns_{INT64_MIN};
 };

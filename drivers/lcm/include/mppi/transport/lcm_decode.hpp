@@ -58,13 +58,17 @@ constexpr std::size_t kLocalMapCount = 8 + 8 + 8 + 12 + 4 + 4 + 4 + 4 + 4;  // i
 // scratch messages are reused (their vectors keep the capacity reserved at construction).
 class LcmDecoder {
  public:
-  explicit LcmDecoder(rt::Clock* recv_clock);
+  // MapScratch::kNone: no map scratch (2 MiB reserved, resident under mlockall) for a decoder that
+  // never sees a map: LcmTransport's for states and the rest (maps have a decoder of their own).
+  enum class MapScratch { kReserve, kNone };
+  explicit LcmDecoder(rt::Clock* recv_clock, MapScratch maps = MapScratch::kReserve);
   void state(const void* data, std::size_t size, Inbox* inbox);
   void reference(const void* data, std::size_t size, Inbox* inbox);
   void obstacles(const void* data, std::size_t size, Inbox* inbox);
   void param(const void* data, std::size_t size, Inbox* inbox);
   void clock(const void* data, std::size_t size, Inbox* inbox);
-  // Into inbox->map_buffer() (nothing when the inbox takes no maps).
+  // Into inbox->map_buffer() (nothing when the inbox takes no maps). Allocates on the first
+  // map with MapScratch::kNone.
   void local_map(const void* data, std::size_t size, Inbox* inbox);
 
  private:

@@ -1,12 +1,15 @@
-// Transport over LCM: one receive thread running handleTimeout (so stop() returns on a
-// quiet bus), raw subscriptions decoded by LcmDecoder (so garbage and wrong types are
-// counted, not printed and dropped), encoding into buffers sized once.
+// Transport over LCM: receive threads running handleTimeout (so stop() returns on a quiet
+// bus), raw subscriptions decoded by LcmDecoder (so garbage and wrong types are counted, not
+// printed and dropped), encoding into buffers sized once. Local maps (~1-2 MB, 10 Hz) come in
+// on a second LCM instance on the same URL with a receive thread of its own: a state never
+// waits behind a map's decode and copy on the states' thread (docs/sensing.md).
 #pragma once
 
 #include <lcm/lcm-cpp.hpp>
 
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <thread>
 #include <vector>
@@ -49,7 +52,14 @@ class LcmTransport final : public Transport {
                int receive_timeout_ms = 20);
   ~LcmTransport() override;
 
+  // A loopback on a probe instance of the URL, and on the maps' instance once it is open.
   std::string self_test() override;
+  // Subscribes and starts the receive thread(s); returns once subscribed. With an inbox that
+  // takes maps, the maps' instance is opened first if it is not yet (std::runtime_error when
+  // it cannot be). LCM's udpm reads each instance's socket on a thread of its own, started at
+  // the instance's first subscription with the policy of the thread that subscribes: the
+  // states' instance subscribes from the receive thread, after its SCHED_FIFO, so no state
+  // waits in the socket for a time-shared thread behind the optimizer's workers.
   void start(Inbox* inbox) override;
   // Before start(): run the receive thread SCHED_FIFO at this priority (0: inherit), so
   // states and ticks are taken in as they arrive even while the optimizer fills the cores.
@@ -59,6 +69,20 @@ class LcmTransport final : public Transport {
   // Before start(): the receive thread polls the socket (handleTimeout(0) in a loop) instead of
   // sleeping in it: a busy core, no wake-up between a datagram and its decode.
   void set_receive_spin(bool spin) { receive_spin_ = spin; }
+
+  // Where local maps are received (before start()). kOwnThread (default): on the maps'
+  // instance, by a thread of its own that keeps the policy of the thread calling start() (a
+  // decode at SCHED_FIFO would hold the optimizer off; a map waits for an idle core instead),
+  // and the states' instance never subscribes to them. kStateThread: on the states' instance
+  // and thread, one FIFO in the order published (the replay, which needs that order).
+  enum class MapThread { kOwnThread, kStateThread };
+  void set_map_thread(MapThread m) { map_thread_ = m; }
+  // Opens the maps' instance now (kOwnThread; std::runtime_error when the URL cannot be
+  // opened), so self_test() checks it before the service reports ready.
+  void open_map_receiver();
+  // The instance maps are received on: the maps' once open (kOwnThread), else the states'.
+  // Tests over memq:// publish maps on it (each memq:// instance is a queue of its own).
+  lcm::LCM& map_lcm() { return map_lcm_ ? *map_lcm_ : lcm_; }
   void stop() override;
   bool publish_command(const Command& c) override;
   bool publish_status(const StatusReport& s) override;
@@ -80,10 +104,14 @@ class LcmTransport final : public Transport {
   void on_local_map(const lcm::ReceiveBuffer* rb, const std::string& channel);
   template <class Msg>
   bool send(const std::string& channel, const Msg& msg);
+  void subscribe_maps();
+  void subscribe_states();
+  void receive(lcm::LCM* lcm, int timeout_ms);
 
   lcm::LCM lcm_;
   std::string url_;
   LcmChannels ch_;
+  rt::Clock* recv_clock_;
   int timeout_ms_;
   Inbox* inbox_ = nullptr;
   std::thread thread_;
@@ -92,7 +120,14 @@ class LcmTransport final : public Transport {
   std::atomic<bool> receive_fifo_ok_{false};
   std::atomic<bool> running_{false};
 
-  LcmDecoder decoder_;  // receive thread
+  LcmDecoder decoder_;  // states' thread: states, references, obstacles, parameters, ticks
+
+  // Local maps: their instance and thread (kOwnThread), and their decoder (2 MiB of scratch,
+  // made only when the inbox takes maps), used by whichever thread receives them.
+  MapThread map_thread_ = MapThread::kOwnThread;
+  std::unique_ptr<lcm::LCM> map_lcm_;
+  std::thread map_receiver_;
+  std::unique_ptr<LcmDecoder> map_decoder_;
 
   // Loop-thread scratch.
   mppi_lcm::command_t command_out_;
