@@ -231,4 +231,21 @@ TEST(SensorNode, TakesTheWorldAndTheTruthFromTheBus) {
   EXPECT_EQ(t.lidar.got.size(), 1u);
 }
 
+TEST(SensorNode, ReadsAMissionsSensingBlockAsTheSimulatorReadsAScenarios) {
+  const auto m = sim::load_sensing(std::string(MPPID_SOURCE_DIR) + "/config/missions/rate_forest_sensed.yaml");
+  const auto s = sim::load_scenario(std::string(MPPID_SOURCE_DIR) + "/config/scenarios/forest_4m_sensed.yaml", 1);
+  EXPECT_FALSE(m.publish_obstacles);
+  ASSERT_TRUE(m.depth_camera.enabled);
+  EXPECT_FALSE(m.lidar.enabled);
+  const auto& a = m.depth_camera;
+  const auto& b = s.sensing.depth_camera;  // the sensed forest's camera: the same
+  EXPECT_EQ(a.width, b.width);
+  EXPECT_EQ(a.height, b.height);
+  EXPECT_DOUBLE_EQ(a.hfov_deg, b.hfov_deg);
+  EXPECT_DOUBLE_EQ(a.max_range, b.max_range);
+  EXPECT_DOUBLE_EQ(a.latency, b.latency);
+  EXPECT_DOUBLE_EQ(a.rate_hz, b.rate_hz);
+  EXPECT_DOUBLE_EQ(a.offset[0], b.offset[0]);
+}
+
 }  // namespace
