@@ -83,7 +83,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<lcm::LCM> sensors = a.sensor_url.empty() ? nullptr : std::make_unique<lcm::LCM>(a.sensor_url);
     if (!in.good() || (sensors && !sensors->good())) throw std::runtime_error("LCM init failed");
     sim::SensorNode node(s, a.settings, &in, sensors ? sensors.get() : &in, nullptr);
-    std::printf("{\"event\":\"ready\"}\n");
+    std::printf("{\"event\": \"ready\"}\n");
     std::fflush(stdout);
     node.run(&g_stop);
     if (!a.stats.empty()) {

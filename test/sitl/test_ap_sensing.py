@@ -133,65 +133,71 @@ def test_the_sensed_missions_trees_are_the_known_missions_and_go_to_the_world():
 
 
 # ---- the chain with the real binaries -----------------------------------------------------
-def _truth_msg(t, x, sample_us):
+FEED = """
+import sys, time
+import lcm, mppi_lcm as t
+lc, sensors = lcm.LCM(sys.argv[1]), lcm.LCM(sys.argv[2])  # the world on the flight's bus, the truth on the sensors'
+def truth(sample_us):
     m = t.vehicle_state_t()
     m.utime = m.sample_utime = sample_us
     m.model, m.vehicle_count, m.nx, m.n = m.MODEL_QUADROTOR_RATE, 1, 13, 13
-    m.x = [x, 0.0, 2.0, 0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0]  # facing +x, the forest's way
+    m.x = [0.0, 0.0, 2.0, 0, 0, 0, 1.0, 0, 0, 0, 0, 0, 0]  # facing +x, the forest's way
     return m.encode()
+o = t.obstacles_t()
+c = t.cylinder_t()
+c.x, c.y, c.radius = 6.0, 0.0, 0.4
+o.n, o.cylinders = 1, [c]
+sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000))       # before the world: not cast
+lc.publish("MPPI_WORLD", o.encode())
+time.sleep(0.1)
+sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000 - 2_000_000))  # stale
+for k in range(75):                                                  # 1.5 s at 50 Hz
+    lc.publish("MPPI_WORLD", o.encode())
+    sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000))
+    time.sleep(0.02)
+print('{"event": "done"}', flush=True)
+time.sleep(60)
+"""
 
 
-def _world_msg(t, trees):
-    o = t.obstacles_t()
-    cyl = []
-    for x, y, r in trees:
-        c = t.cylinder_t()
-        c.x, c.y, c.radius = x, y, r
-        cyl.append(c)
-    o.n, o.cylinders = len(cyl), cyl
-    return o.encode()
-
-
-def test_truth_to_sensors_to_mapper_makes_a_map_of_the_trees_ahead(tmp_path):
-    """The processes of a sensed flight on one bus, fed as the referee and the mission tool
-    feed them: mppid-sensors' frames reach mppid-mapper, whose map has the tree ahead (and
-    sensed.jsonl names it), and the stats count the truths taken and the stale one refused."""
-    import lcm
-    import mppi_lcm as t
+def test_truth_to_sensors_to_mapper_makes_a_map_of_the_tree_ahead(tmp_path):
+    """A sensed flight's processes in a private network namespace (the harness's sandbox), fed
+    as the referee and the mission tool feed them: mppid-sensors' frames reach mppid-mapper,
+    whose map holds the tree ahead (sensed.jsonl names it), and the node counts the truths
+    taken and refused."""
+    import json
+    from sitl_harness.sandbox import Sandbox
     sensors_exe, mapper_exe = paths.find_binary("mppid-sensors"), paths.find_binary("mppid-mapper")
     if sensors_exe is None or mapper_exe is None:
         pytest.skip("mppid-sensors / mppid-mapper not built")
-    url = f"udpm://239.255.76.67:{7600 + os.getpid() % 300}?ttl=0"
-    lc = lcm.LCM(url)
-    procs = [subprocess.Popen([str(sensors_exe), "--sensing", str(ROOT / "config/missions/rate_forest_sensed.yaml"),
-                               "--lcm-url", url, "--stats", str(tmp_path / "sensors.json")],
-                              stdout=subprocess.PIPE, stderr=open(tmp_path / "sensors.log", "w")),
-             subprocess.Popen([str(mapper_exe), "--config", str(ROOT / "config/mapper/mapper.yaml"), "--lcm-url", url,
-                               "--stats", str(tmp_path / "mapper.json"), "--sensed", str(tmp_path / "sensed.jsonl")],
-                              stderr=open(tmp_path / "mapper.log", "w"))]
-    maps = []
-    lc.subscribe("MPPI_LOCAL_MAP", lambda ch, data: maps.append(t.local_map_t.decode(data)))
+    url = "udpm://239.255.76.67:7667?ttl=0"
+    bus = sensor_bus(url)
+    sb = Sandbox(tmp_path)
+    sb.start_namespace()
     try:
-        assert procs[0].stdout.readline().strip() == b'{"event":"ready"}'
-        time.sleep(0.3)
-        stale = _truth_msg(t, 0.0, time.time_ns() // 1000 - 2_000_000)
-        lc.publish("MPPI_WORLD", _world_msg(t, [(6.0, 0.0, 0.4)]))
-        lc.publish("SIM_TRUTH", stale)
-        deadline = time.monotonic() + 3.0
-        while time.monotonic() < deadline and not maps:
-            lc.publish("MPPI_WORLD", _world_msg(t, [(6.0, 0.0, 0.4)]))
-            lc.publish("SIM_TRUTH", _truth_msg(t, 0.0, time.time_ns() // 1000))
-            lc.handle_timeout(20)
+        sb.spawn("sensors", [str(sensors_exe), "--sensing", str(ROOT / "config/missions/rate_forest_sensed.yaml"),
+                             "--lcm-url", url, "--sensor-lcm-url", bus, "--stats", str(tmp_path / "sensors.json")])
+        sb.spawn("mapper", [str(mapper_exe), "--config", str(ROOT / "config/mapper/mapper.yaml"), "--lcm-url", url,
+                            "--sensor-lcm-url", bus, "--stats", str(tmp_path / "mapper.json"),
+                            "--sensed", str(tmp_path / "sensed.jsonl")])
+        sb.wait_ready("sensors", 10.0)
+        time.sleep(0.5)  # the mapper subscribed
+        sb.spawn("feed", [sys.executable, "-c", FEED, url, bus])
+        deadline = time.monotonic() + 20.0
+        while '"done"' not in (tmp_path / "feed.log").read_text() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        time.sleep(0.3)  # the last frames' latency, the last map
     finally:
-        for p in procs:
-            p.terminate()
-        for p in procs:
-            p.wait(10)
-    assert maps, (tmp_path / "sensors.log").read_text() + (tmp_path / "mapper.log").read_text()
-    import json
+        sb.stop()
+    logs = "".join((tmp_path / f"{n}.log").read_text() for n in ("sensors", "mapper", "feed"))
     stats = json.loads((tmp_path / "sensors.json").read_text())
-    assert stats["truth"]["taken"] > 0 and stats["truth"]["stale"] == 1 and stats["trees"] == 1
-    assert stats["sensors"]["depth_camera"]["frames"] > 0
+    assert stats["truth"]["before_world"] == 1 and stats["truth"]["stale"] == 1, logs
+    assert stats["truth"]["taken"] >= 70 and stats["trees"] == 1
+    frames = stats["sensors"]["depth_camera"]["frames"]
+    assert 40 <= frames <= 47, stats  # 30 Hz over the 1.5 s of truths
+    mapped = json.loads((tmp_path / "mapper.json").read_text())
+    assert mapped["frames"] == frames and mapped["maps"] > 0, mapped
     sensed = [json.loads(line) for line in (tmp_path / "sensed.jsonl").read_text().splitlines()]
     cols = [c for rec in sensed for c in rec["columns"]]
     assert cols and min(math.hypot(x - 6.0, y) for x, y in cols) < 0.5  # the tree's face, sensed
+    assert all(math.hypot(x - 6.0, y) < 1.0 for x, y in cols)          # and nothing else
