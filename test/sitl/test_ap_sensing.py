@@ -148,6 +148,7 @@ c = t.cylinder_t()
 c.x, c.y, c.radius = 6.0, 0.0, 0.4
 o.n, o.cylinders = 1, [c]
 sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000))       # before the world: not cast
+time.sleep(0.2)
 lc.publish("MPPI_WORLD", o.encode())
 time.sleep(0.1)
 sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000 - 2_000_000))  # stale
