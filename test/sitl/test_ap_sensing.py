@@ -16,6 +16,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from conftest import missing  # noqa: E402
 from sitl_helpers import ROOT  # noqa: E402
 from sitl_harness import ap_truth, paths  # noqa: E402
 from sitl_harness.flights.ardupilot import ArduPilotFlight  # noqa: E402
@@ -101,7 +102,7 @@ def _tail(cmd, exe):
 def test_a_sensed_mission_adds_the_sensors_and_the_mapper_and_keeps_the_trees_from_mppid(
         mppid_binary, tmp_path):
     if paths.find_binary("mppid-sensors") is None or paths.find_binary("mppid-mapper") is None:
-        pytest.skip("mppid-sensors / mppid-mapper not built")
+        missing("mppid-sensors / mppid-mapper not built (cmake --build <build> --target mppid-sensors mppid-mapper)")
     spec, cmds = _plan(tmp_path, "rate_forest_sensed")
     bus = sensor_bus(spec.lcm_url)
     assert {"sensors", "mapper"} <= set(cmds)
@@ -170,7 +171,7 @@ def test_truth_to_sensors_to_mapper_makes_a_map_of_the_tree_ahead(tmp_path):
     from sitl_harness.sandbox import Sandbox
     sensors_exe, mapper_exe = paths.find_binary("mppid-sensors"), paths.find_binary("mppid-mapper")
     if sensors_exe is None or mapper_exe is None:
-        pytest.skip("mppid-sensors / mppid-mapper not built")
+        missing("mppid-sensors / mppid-mapper not built (cmake --build <build> --target mppid-sensors mppid-mapper)")
     url = "udpm://239.255.76.67:7667?ttl=0"
     bus = sensor_bus(url)
     sb = Sandbox(tmp_path)
