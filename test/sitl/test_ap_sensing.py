@@ -115,7 +115,10 @@ def test_a_sensed_mission_adds_the_sensors_and_the_mapper_and_keeps_the_trees_fr
     assert cmds["recorder"][-2:] == ["--lcm-url", bus]  # the truth on the sensors' bus
     ctrl = cmds["controller"]
     assert ctrl[ctrl.index("--lcm-url") + 1].endswith("&recv_buf_size=4194304")  # 1 MB maps
-    assert "cost.vehicle_radius=0.3" in ctrl
+    import yaml
+    own = yaml.safe_load((paths.MISSIONS / "rate_forest_sensed.yaml").read_text())["mppid"]["set"]
+    sets = [ctrl[i + 1] for i, c in enumerate(ctrl) if c == "--set"]
+    assert sets[-len(own):] == own  # the mission's own settings, last
     logger = cmds["logger"]
     assert any("MPPI_DEPTH" in c and "MPPI_LOCAL_MAP" in c for c in logger)
     # The known-tree mission flies as it did: no sensors, no mapper, no truth on a bus.
