@@ -6,6 +6,8 @@
 #include <cmath>
 #include <set>
 #include <stdexcept>
+#include <type_traits>
+#include <variant>
 
 #include "sim/rng.hpp"
 
@@ -72,28 +74,42 @@ Vec3 Scenario::start_of(int v) const {
 }
 
 namespace {
-Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed);
+// A sensor's key and where its value goes: both sensor blocks are read by one parser.
+struct SensorField {
+  const char* key;
+  std::variant<int*, double*, Vec3*> out;
+};
+
+// sensing.<name>: {enabled, fields...}; the section present turns the sensor on (enabled: false
+// keeps it off). Every key not in `fields` is an error.
+void parse_sensor(const Context& c, const YAML::Node& n, const std::string& w, bool& enabled,
+                  std::initializer_list<SensorField> fields) {
+  std::set<std::string> known{"enabled"};
+  for (const auto& f : fields) known.insert(f.key);
+  check_keys(c, n, w, known);
+  if (!n) return;
+  enabled = true;
+  read(c, n, w, "enabled", enabled);
+  for (const auto& f : fields) {
+    std::visit(
+        [&](auto* p) {
+          if constexpr (std::is_same_v<decltype(p), Vec3*>)
+            read_vec3(c, n, w, f.key, *p);
+          else
+            read(c, n, w, f.key, *p);
+        },
+        f.out);
+  }
+}
 
 void parse_depth_camera(const Context& c, const YAML::Node& n, DepthCameraSpec& d) {
   const std::string w = "sensing.depth_camera";
-  check_keys(c, n, w,
-             {"enabled", "hfov_deg", "vfov_deg", "width", "height", "min_range", "max_range", "rate_hz", "noise",
-              "dropout", "latency", "offset", "pitch_deg"});
+  parse_sensor(c, n, w, d.enabled,
+               {{"hfov_deg", &d.hfov_deg}, {"vfov_deg", &d.vfov_deg}, {"width", &d.width}, {"height", &d.height},
+                {"min_range", &d.min_range}, {"max_range", &d.max_range}, {"rate_hz", &d.rate_hz},
+                {"noise", &d.noise}, {"dropout", &d.dropout}, {"latency", &d.latency}, {"offset", &d.offset},
+                {"pitch_deg", &d.pitch_deg}});
   if (!n) return;
-  d.enabled = true;
-  read(c, n, w, "enabled", d.enabled);
-  read(c, n, w, "hfov_deg", d.hfov_deg);
-  read(c, n, w, "vfov_deg", d.vfov_deg);
-  read(c, n, w, "width", d.width);
-  read(c, n, w, "height", d.height);
-  read(c, n, w, "min_range", d.min_range);
-  read(c, n, w, "max_range", d.max_range);
-  read(c, n, w, "rate_hz", d.rate_hz);
-  read(c, n, w, "noise", d.noise);
-  read(c, n, w, "dropout", d.dropout);
-  read(c, n, w, "latency", d.latency);
-  read_vec3(c, n, w, "offset", d.offset);
-  read(c, n, w, "pitch_deg", d.pitch_deg);
   if (!(d.hfov_deg > 0.0 && d.hfov_deg < 170.0 && d.vfov_deg > 0.0 && d.vfov_deg < 170.0))
     c.fail(w, "hfov_deg and vfov_deg must be in (0, 170)");
   if (d.width < 1 || d.height < 1 || d.width * d.height > 1 << 20) c.fail(w, "width x height must be 1..1048576");
@@ -106,22 +122,12 @@ void parse_depth_camera(const Context& c, const YAML::Node& n, DepthCameraSpec& 
 
 void parse_lidar(const Context& c, const YAML::Node& n, LidarSpec& l) {
   const std::string w = "sensing.lidar";
-  check_keys(c, n, w,
-             {"enabled", "beams", "min_elevation_deg", "max_elevation_deg", "azimuth_steps", "min_range", "max_range",
-              "rate_hz", "noise", "latency", "offset"});
+  parse_sensor(c, n, w, l.enabled,
+               {{"beams", &l.beams}, {"min_elevation_deg", &l.min_elevation_deg},
+                {"max_elevation_deg", &l.max_elevation_deg}, {"azimuth_steps", &l.azimuth_steps},
+                {"min_range", &l.min_range}, {"max_range", &l.max_range}, {"rate_hz", &l.rate_hz},
+                {"noise", &l.noise}, {"latency", &l.latency}, {"offset", &l.offset}});
   if (!n) return;
-  l.enabled = true;
-  read(c, n, w, "enabled", l.enabled);
-  read(c, n, w, "beams", l.beams);
-  read(c, n, w, "min_elevation_deg", l.min_elevation_deg);
-  read(c, n, w, "max_elevation_deg", l.max_elevation_deg);
-  read(c, n, w, "azimuth_steps", l.azimuth_steps);
-  read(c, n, w, "min_range", l.min_range);
-  read(c, n, w, "max_range", l.max_range);
-  read(c, n, w, "rate_hz", l.rate_hz);
-  read(c, n, w, "noise", l.noise);
-  read(c, n, w, "latency", l.latency);
-  read_vec3(c, n, w, "offset", l.offset);
   if (l.beams < 1 || l.beams > 256 || l.azimuth_steps < 1 || l.azimuth_steps > 8192)
     c.fail(w, "beams must be 1..256, azimuth_steps 1..8192");
   if (!(l.min_elevation_deg >= -90.0 && l.max_elevation_deg <= 90.0 && l.min_elevation_deg <= l.max_elevation_deg))
@@ -132,8 +138,7 @@ void parse_lidar(const Context& c, const YAML::Node& n, LidarSpec& l) {
   if (!(l.noise >= 0.0 && l.latency >= 0.0 && l.latency < 10.0)) c.fail(w, "noise >= 0, latency in [0, 10) s");
 }
 
-// sensing: {publish_obstacles, depth_camera: {...}, lidar: {...}}; a sensor's section turns
-// it on (enabled: false keeps it off).
+// sensing: {publish_obstacles, depth_camera: {...}, lidar: {...}}.
 void parse_sensing(const Context& c, const YAML::Node& n, SensingSpec& s) {
   check_keys(c, n, "sensing", {"publish_obstacles", "depth_camera", "lidar"});
   if (!n) return;
@@ -141,43 +146,41 @@ void parse_sensing(const Context& c, const YAML::Node& n, SensingSpec& s) {
   parse_depth_camera(c, n["depth_camera"], s.depth_camera);
   parse_lidar(c, n["lidar"], s.lidar);
 }
-}  // namespace
 
-namespace {
-// The YAML document `load` reads, parsed as a scenario; a YAML error names `label`'s file.
+Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed);
+
+// The YAML document `load` reads; a YAML error names `label`'s file.
 template <class Load>
-Scenario load_with(const std::string& label, std::uint64_t seed, Load load) {
-  const Context c{label};
-  YAML::Node root;
+YAML::Node load_yaml(const Context& c, Load load) {
   try {
-    root = load();
+    return load();
   } catch (const YAML::Exception& e) {
     c.fail("file", e.what());
   }
-  return parse_scenario(c, root, seed);
 }
 }  // namespace
 
 Scenario load_scenario(const std::string& path, std::uint64_t seed) {
-  return load_with(path, seed, [&] { return YAML::LoadFile(path); });
+  const Context c{path};
+  return parse_scenario(c, load_yaml(c, [&] { return YAML::LoadFile(path); }), seed);
 }
 
 Scenario load_scenario_text(const std::string& text, const std::string& label, std::uint64_t seed) {
-  return load_with(label, seed, [&] { return YAML::Load(text); });
+  const Context c{label};
+  return parse_scenario(c, load_yaml(c, [&] { return YAML::Load(text); }), seed);
+}
+
+SensingSpec load_sensing(const std::string& path) {
+  const Context c{path};
+  const YAML::Node root = load_yaml(c, [&] { return YAML::LoadFile(path); });
+  if (!root.IsMap()) c.fail("file", "expected a mapping");
+  SensingSpec s;
+  parse_sensing(c, root["sensing"], s);
+  return s;
 }
 
 namespace {
-Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed) {
-  check_keys(c, root, "scenario",
-             {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
-              "success", "mppid", "mission", "sensing", "mapper"});  // mppid, mission, mapper: the harness's
-  Scenario s;
-  s.seed = seed;
-  read(c, root, "scenario", "name", s.name);
-  read(c, root, "scenario", "task", s.task);
-  if (s.task.empty()) c.fail("task", "required (names config/tasks/<task>.yaml)");
-
-  const auto plant = root["plant"];
+void parse_plant(const Context& c, const YAML::Node& plant, Scenario& s) {
   if (!plant) c.fail("plant", "required");
   check_keys(c, plant, "plant",
              {"model", "vehicles", "params", "initial_state", "max_motor_speed", "max_thrust", "max_body_rate",
@@ -209,8 +212,9 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   if (s.vehicles < 1 || s.vehicles > 32) c.fail("plant.vehicles", "must be 1..32");
   if ((s.model == "cartpole" || s.model == "racecar") && s.vehicles != 1)
     c.fail("plant.vehicles", "teams are quadrotors only");
+}
 
-  const auto timing = root["timing"];
+void parse_timing(const Context& c, const YAML::Node& timing, Scenario& s) {
   check_keys(c, timing, "timing",
              {"physics_hz", "state_hz", "actuation_delay", "controller_latency", "duration", "lockstep_timeout",
               "startup_timeout", "obstacles_hz", "command_timeout"});
@@ -240,14 +244,76 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   if (s.actuation_delay < 0.0) c.fail("timing.actuation_delay", "must be >= 0");
   if (!(s.command_timeout >= 0.0) || !std::isfinite(s.command_timeout))
     c.fail("timing.command_timeout", "must be >= 0 (0: off)");
-  {
-    // The physics step must divide the state period, so every state falls on a step.
-    const double ratio = s.physics_hz / s.state_hz;
-    if (std::fabs(ratio - std::round(ratio)) > 1e-9)
-      c.fail("timing.physics_hz", "must be a whole multiple of timing.state_hz");
-  }
+  // The physics step must divide the state period, so every state falls on a step.
+  const double ratio = s.physics_hz / s.state_hz;
+  if (std::fabs(ratio - std::round(ratio)) > 1e-9)
+    c.fail("timing.physics_hz", "must be a whole multiple of timing.state_hz");
+}
 
-  const auto world = root["world"];
+// world.forest.x_range / y_range: [min, max], left as they are when absent.
+void read_range(const Context& c, const YAML::Node& f, const char* key, double& lo, double& hi) {
+  std::vector<double> r;
+  read(c, f, "world.forest", key, r);
+  if (r.empty()) return;
+  if (r.size() != 2 || !(r[1] > r[0])) c.fail(std::string("world.forest.") + key, "expected [min, max]");
+  lo = r[0];
+  hi = r[1];
+}
+
+void parse_forest(const Context& c, const YAML::Node& f, ForestSpec& fs) {
+  check_keys(c, f, "world.forest",
+             {"spacing", "jitter", "radius", "radius_jitter", "x_range", "y_range", "clear_radius", "height"});
+  fs.enabled = true;
+  read(c, f, "world.forest", "spacing", fs.spacing);
+  read(c, f, "world.forest", "jitter", fs.jitter);
+  read(c, f, "world.forest", "radius", fs.radius);
+  read(c, f, "world.forest", "radius_jitter", fs.radius_jitter);
+  read(c, f, "world.forest", "clear_radius", fs.clear_radius);
+  read(c, f, "world.forest", "height", fs.height);
+  positive(c, fs.height, "world.forest.height");
+  read_range(c, f, "x_range", fs.x_min, fs.x_max);
+  read_range(c, f, "y_range", fs.y_min, fs.y_max);
+  positive(c, fs.spacing, "world.forest.spacing");
+  positive(c, fs.radius, "world.forest.radius");
+  for (double v : {fs.jitter, fs.radius_jitter, fs.clear_radius, fs.x_min, fs.x_max, fs.y_min, fs.y_max})
+    if (!std::isfinite(v)) c.fail("world.forest", "every value must be finite");
+  // The generator visits every lattice point and checks each new tree against the others:
+  // bound the work (a corridor of 1 km x 100 m at 3 m spacing is ~13,000 points).
+  const double points =
+      ((fs.x_max - fs.x_min) / fs.spacing + 1.0) * ((fs.y_max - fs.y_min) / (fs.spacing * 0.866) + 1.0);
+  if (!(points <= kMaxForestPoints))
+    c.fail("world.forest", "x_range, y_range and spacing make " + std::to_string(points) + " lattice points; at most " +
+                               std::to_string(static_cast<long>(kMaxForestPoints)));
+}
+
+void parse_moving(const Context& c, const YAML::Node& m, MovingSpec& ms) {
+  check_keys(c, m, "world.moving", {"count", "speed", "radius"});
+  read(c, m, "world.moving", "count", ms.count);
+  read(c, m, "world.moving", "speed", ms.speed);
+  read(c, m, "world.moving", "radius", ms.radius);
+  if (ms.count < 0 || ms.count > 1024) c.fail("world.moving.count", "must be 0..1024");
+  if (!std::isfinite(ms.speed) || !std::isfinite(ms.radius)) c.fail("world.moving", "speed and radius must be finite");
+}
+
+void parse_fixed_obstacles(const Context& c, const YAML::Node& list, std::vector<Obstacle>& out) {
+  for (const auto& o : list) {
+    std::vector<double> v;
+    try {
+      v = o.as<std::vector<double>>();
+    } catch (const YAML::Exception&) {
+      c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
+    }
+    if (v.size() != 3 && v.size() != 5) c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
+    Obstacle ob{v[0], v[1], v[2], 0.0, 0.0};
+    if (v.size() == 5) {
+      ob.vx = v[3];
+      ob.vy = v[4];
+    }
+    out.push_back(ob);
+  }
+}
+
+void parse_world(const Context& c, const YAML::Node& world, Scenario& s) {
   check_keys(c, world, "world",
              {"start", "goal", "team_spacing", "goal_radius", "stop_at_goal", "stop_on_collision", "ground_z",
               "vehicle_radius", "arena_margin", "track_limit", "off_track", "max_published_obstacles", "forest",
@@ -266,101 +332,52 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
   read(c, world, "world", "max_published_obstacles", s.max_published_obstacles);
   if (s.max_published_obstacles < 0 || s.max_published_obstacles > 4096)
     c.fail("world.max_published_obstacles", "must be 0..4096");
-  if (world && world["forest"]) {
-    const auto f = world["forest"];
-    check_keys(c, f, "world.forest",
-               {"spacing", "jitter", "radius", "radius_jitter", "x_range", "y_range", "clear_radius", "height"});
-    s.forest.enabled = true;
-    read(c, f, "world.forest", "spacing", s.forest.spacing);
-    read(c, f, "world.forest", "jitter", s.forest.jitter);
-    read(c, f, "world.forest", "radius", s.forest.radius);
-    read(c, f, "world.forest", "radius_jitter", s.forest.radius_jitter);
-    read(c, f, "world.forest", "clear_radius", s.forest.clear_radius);
-    read(c, f, "world.forest", "height", s.forest.height);
-    positive(c, s.forest.height, "world.forest.height");
-    std::vector<double> r;
-    read(c, f, "world.forest", "x_range", r);
-    if (!r.empty()) {
-      if (r.size() != 2 || !(r[1] > r[0])) c.fail("world.forest.x_range", "expected [min, max]");
-      s.forest.x_min = r[0];
-      s.forest.x_max = r[1];
-    }
-    r.clear();
-    read(c, f, "world.forest", "y_range", r);
-    if (!r.empty()) {
-      if (r.size() != 2 || !(r[1] > r[0])) c.fail("world.forest.y_range", "expected [min, max]");
-      s.forest.y_min = r[0];
-      s.forest.y_max = r[1];
-    }
-    positive(c, s.forest.spacing, "world.forest.spacing");
-    positive(c, s.forest.radius, "world.forest.radius");
-    const ForestSpec& fs = s.forest;
-    for (double v : {fs.jitter, fs.radius_jitter, fs.clear_radius, fs.x_min, fs.x_max, fs.y_min, fs.y_max})
-      if (!std::isfinite(v)) c.fail("world.forest", "every value must be finite");
-    // The generator visits every lattice point and checks each new tree against the others:
-    // bound the work (a corridor of 1 km x 100 m at 3 m spacing is ~13,000 points).
-    const double points =
-        ((fs.x_max - fs.x_min) / fs.spacing + 1.0) * ((fs.y_max - fs.y_min) / (fs.spacing * 0.866) + 1.0);
-    if (!(points <= kMaxForestPoints))
-      c.fail("world.forest", "x_range, y_range and spacing make " + std::to_string(points) + " lattice points; at most " +
-                                 std::to_string(static_cast<long>(kMaxForestPoints)));
-  }
-  if (world && world["moving"]) {
-    const auto m = world["moving"];
-    check_keys(c, m, "world.moving", {"count", "speed", "radius"});
-    read(c, m, "world.moving", "count", s.moving.count);
-    read(c, m, "world.moving", "speed", s.moving.speed);
-    read(c, m, "world.moving", "radius", s.moving.radius);
-    if (s.moving.count < 0 || s.moving.count > 1024) c.fail("world.moving.count", "must be 0..1024");
-    if (!std::isfinite(s.moving.speed) || !std::isfinite(s.moving.radius))
-      c.fail("world.moving", "speed and radius must be finite");
-  }
-  if (world && world["obstacles"]) {
-    for (const auto& o : world["obstacles"]) {
-      std::vector<double> v;
-      try {
-        v = o.as<std::vector<double>>();
-      } catch (const YAML::Exception&) {
-        c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
-      }
-      if (v.size() != 3 && v.size() != 5) c.fail("world.obstacles", "expected [x, y, radius] or [x, y, radius, vx, vy]");
-      Obstacle ob{v[0], v[1], v[2], 0.0, 0.0};
-      if (v.size() == 5) {
-        ob.vx = v[3];
-        ob.vy = v[4];
-      }
-      s.fixed_obstacles.push_back(ob);
-    }
-  }
+  if (!world) return;
+  if (world["forest"]) parse_forest(c, world["forest"], s.forest);
+  if (world["moving"]) parse_moving(c, world["moving"], s.moving);
+  if (world["obstacles"]) parse_fixed_obstacles(c, world["obstacles"], s.fixed_obstacles);
+}
 
-  const auto ref = root["reference"];
+void parse_reference(const Context& c, const YAML::Node& ref, ReferenceSpec& r) {
   check_keys(c, ref, "reference", {"kind", "center", "radius", "speed", "yaw"});
-  read(c, ref, "reference", "kind", s.reference.kind);
-  read_vec3(c, ref, "reference", "center", s.reference.center);
-  read(c, ref, "reference", "radius", s.reference.radius);
-  read(c, ref, "reference", "speed", s.reference.speed);
-  read(c, ref, "reference", "yaw", s.reference.yaw);
-  {
-    const auto& k = s.reference.kind;
-    if (k != "none" && k != "hold" && k != "waypoint" && k != "circle" && k != "figure_eight")
-      c.fail("reference.kind", "one of none, hold, waypoint, circle, figure_eight");
-  }
+  read(c, ref, "reference", "kind", r.kind);
+  read_vec3(c, ref, "reference", "center", r.center);
+  read(c, ref, "reference", "radius", r.radius);
+  read(c, ref, "reference", "speed", r.speed);
+  read(c, ref, "reference", "yaw", r.yaw);
+  const auto& k = r.kind;
+  if (k != "none" && k != "hold" && k != "waypoint" && k != "circle" && k != "figure_eight")
+    c.fail("reference.kind", "one of none, hold, waypoint, circle, figure_eight");
+}
 
-  const auto wind = root["wind"];
+void parse_disturbances(const Context& c, const YAML::Node& wind, const YAML::Node& noise, Scenario& s) {
   check_keys(c, wind, "wind", {"mean", "gust_std", "gust_tau"});
   read_vec3(c, wind, "wind", "mean", s.wind.mean);
   read(c, wind, "wind", "gust_std", s.wind.gust_std);
   read(c, wind, "wind", "gust_tau", s.wind.gust_tau);
   positive(c, s.wind.gust_tau, "wind.gust_tau");
-
-  const auto noise = root["noise"];
   check_keys(c, noise, "noise", {"position", "velocity", "attitude", "rate", "other"});
   read(c, noise, "noise", "position", s.noise.position);
   read(c, noise, "noise", "velocity", s.noise.velocity);
   read(c, noise, "noise", "attitude", s.noise.attitude);
   read(c, noise, "noise", "rate", s.noise.rate);
   read(c, noise, "noise", "other", s.noise.other);
+}
 
+Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t seed) {
+  check_keys(c, root, "scenario",
+             {"name", "description", "task", "plant", "timing", "world", "reference", "wind", "noise",
+              "success", "mppid", "mission", "sensing", "mapper"});  // mppid, mission, mapper: the harness's
+  Scenario s;
+  s.seed = seed;
+  read(c, root, "scenario", "name", s.name);
+  read(c, root, "scenario", "task", s.task);
+  if (s.task.empty()) c.fail("task", "required (names config/tasks/<task>.yaml)");
+  parse_plant(c, root["plant"], s);
+  parse_timing(c, root["timing"], s);
+  parse_world(c, root["world"], s);
+  parse_reference(c, root["reference"], s.reference);
+  parse_disturbances(c, root["wind"], root["noise"], s);
   parse_sensing(c, root["sensing"], s.sensing);
   generate_obstacles(s);
   return s;

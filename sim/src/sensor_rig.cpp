@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 namespace sim {
@@ -28,7 +29,13 @@ SensorRig::SensorRig(const Scenario& s, lcm::LCM* lcm, std::string depth_channel
   if (s.sensing.lidar.enabled) lidar_ = std::make_unique<Lidar>(s.sensing.lidar);
 }
 
-void SensorRig::step(double t, const Pose& body, const std::vector<Obstacle>& obstacles, std::int64_t epoch_us) {
+void SensorRig::advance(double& next, double period, double t) {
+  next += period;
+  if (next + 1e-9 < t) next = t + period;  // fell behind (no pose for a while): no burst of frames
+}
+
+void SensorRig::capture_due(double t, const Pose& body, const std::vector<Obstacle>& obstacles,
+                            std::int64_t epoch_us) {
   if (!any()) return;
   if (world_ == nullptr || obstacles_ != &obstacles) {
     world_ = std::make_unique<RayWorld>(&obstacles, s_.ground_z);
@@ -36,12 +43,15 @@ void SensorRig::step(double t, const Pose& body, const std::vector<Obstacle>& ob
   }
   if (camera_ != nullptr && t + 1e-9 >= next_depth_) {
     capture(t, body, mppi_lcm::point_cloud_t::SENSOR_DEPTH_CAMERA, epoch_us);
-    next_depth_ += 1.0 / camera_->spec().rate_hz;
+    advance(next_depth_, 1.0 / camera_->spec().rate_hz, t);
   }
   if (lidar_ != nullptr && t + 1e-9 >= next_lidar_) {
     capture(t, body, mppi_lcm::point_cloud_t::SENSOR_LIDAR, epoch_us);
-    next_lidar_ += 1.0 / lidar_->spec().rate_hz;
+    advance(next_lidar_, 1.0 / lidar_->spec().rate_hz, t);
   }
+}
+
+void SensorRig::publish_due(double t) {
   // In capture order, but the sensors' latencies differ: any that is due, not only the front.
   for (auto it = pending_.begin(); it != pending_.end();) {
     if (it->publish_t > t + 1e-9) {
@@ -51,6 +61,12 @@ void SensorRig::step(double t, const Pose& body, const std::vector<Obstacle>& ob
     lcm_->publish(*it->channel, &it->msg);
     it = pending_.erase(it);
   }
+}
+
+double SensorRig::next_publish() const {
+  double t = std::numeric_limits<double>::infinity();
+  for (const auto& p : pending_) t = std::min(t, p.publish_t);
+  return t;
 }
 
 void SensorRig::capture(double t, const Pose& body, std::int8_t kind, std::int64_t epoch_us) {

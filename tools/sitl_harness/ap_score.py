@@ -51,6 +51,7 @@ def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> d
     res.update(_legs(mission, t_truth, X, est, settle=float(head.get("settle", 3.0))))
     res.update(_safety(truth, events, X, flying, head))
     res.update(_timing(out) if spec.controller not in AUTOPILOT_CONTROLLERS else {})
+    res.update(_sensing(out, head, t_truth, X))
     done = summary.get("outcome") == "done"
     res["success"] = bool(done and not res["crashes"] and (res.get("min_clearance") is None or res["min_clearance"] > 0))
     res["reason"] = ("mission done" if res["success"] else
@@ -135,6 +136,22 @@ def _safety(truth, events, X, flying, head) -> dict:
         air = X[:, 2] > 0.3
         d = [min(math.hypot(p[0] - x, p[1] - y) - r - vr for x, y, r in trees) for p in X[air]]
         res["min_clearance"] = float(min(d)) if d else None
+    return res
+
+
+def _sensing(out: Path, head: dict, t_truth: np.ndarray, X: np.ndarray) -> dict:
+    """A sensed mission's (flights/sensed.py) "sensing": each tree passed, when it first entered
+    mppid's map and how far off it then was (sensing.py, on the mapper's clock: seconds since
+    its first frame), and the sensor node's truths taken and refused and its frames."""
+    from . import logs, sensing
+    records = logs.read_jsonl(out / "sensed.jsonl") if (out / "sensed.jsonl").is_file() else []
+    if not records:
+        return {}
+    first_us = records[0]["utime"] - 1e6 * records[0]["t"]
+    res = sensing.sensing_figures(out, {"obstacles": head.get("trees") or []}, (t_truth - first_us) * 1e-6, X)
+    node = logs.read_json(out / "sensors_stats.json") or {}
+    if res and node:
+        res["sensing"].update(sensors=node.get("sensors", {}), truth=node.get("truth", {}))
     return res
 
 

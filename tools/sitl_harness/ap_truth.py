@@ -16,7 +16,15 @@ receipt. Events: {"event": "mode"|"armed"|"disarmed"|"statustext"|
 "origin", ...}. The local frame's origin is GPS_GLOBAL_ORIGIN once the EKF has one (asked
 for), else the --home given to the SITL.
 
-    python -m sitl_harness.ap_truth --url tcp:127.0.0.1:5762 --home LAT,LON,ALT --out DIR
+With --lcm-url (a sensed mission: the sensors' bus), each paired truth is also published, once
+the EKF's origin is known, as vehicle_state_t on SIM_TRUTH for mppid-sensors (sim/sensor_node.hpp),
+which ray-casts the world from it: the rate quadrotor's 13 states (position and velocity ENU in
+the frame above, the bridge's, attitude body FLU -> ENU by the bridge's own conversion
+(mppi_mavlink.frames), body rates FLU), sampled at the autopilot's time of its burst mapped onto
+this host's wall clock as the referee's score maps it (boot time + the smallest receipt delay
+seen so far): the clock of mppid's states.
+
+    python -m sitl_harness.ap_truth --url tcp:127.0.0.1:5762 --home LAT,LON,ALT --out DIR [--lcm-url URL]
 """
 from __future__ import annotations
 
@@ -65,9 +73,43 @@ def tilt_deg(q) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
 
 
+class TruthPublisher:
+    """The paired truths as vehicle_state_t on SIM_TRUTH (the module's docstring)."""
+    CHANNEL = "SIM_TRUTH"
+
+    def __init__(self, lcm_url: str):
+        import lcm
+        from mppi_mavlink import lcm_types
+        self.t = lcm_types.import_mppi_lcm()
+        self.lc = lcm.LCM(lcm_url)
+        self.seq = 0
+        self.offset_us = None  # wall - boot: the smallest receipt delay seen
+
+    def clock(self, boot_us: int, wall_us: int) -> int:
+        """A boot time on this host's wall clock (each LOCAL_POSITION_NED's receipt refines it)."""
+        d = wall_us - boot_us
+        self.offset_us = d if self.offset_us is None else min(self.offset_us, d)
+        return boot_us + self.offset_us
+
+    def publish(self, m, x_enu, sample_us: int):
+        from mppi_mavlink import frames
+        st = self.t.vehicle_state_t()
+        self.seq += 1
+        st.utime, st.seq, st.sample_utime = time.time_ns() // 1000, self.seq, int(sample_us)
+        st.model, st.vehicle_count, st.nx, st.n = st.MODEL_QUADROTOR_RATE, 1, 13, 13
+        q = frames.q_ned_frd_to_enu_flu((m.q1, m.q2, m.q3, m.q4))
+        st.x = [*x_enu, m.ve, m.vn, -m.vd, *q, *frames.frd_to_flu((m.xgyro, m.ygyro, m.zgyro))]
+        self.lc.publish(self.CHANNEL, st.encode())
+
+
 class Recorder:
-    def __init__(self, url: str, home, out: Path):
+    truth_out: TruthPublisher | None = None
+    have_origin = False
+    position_wall_us = 0  # this host's wall clock at the newest LOCAL_POSITION_NED's receipt
+
+    def __init__(self, url: str, home, out: Path, lcm_url: str | None = None):
         self.conn = connect(url)
+        self.truth_out = TruthPublisher(lcm_url) if lcm_url else None
         self.origin = (int(home[0] * 1e7), int(home[1] * 1e7), float(home[2]))
         self.f = open(out / "truth.jsonl", "w", buffering=1)
         self.boot_us = 0
@@ -83,9 +125,12 @@ class Recorder:
         m, wall = self.truth
         self.truth = None
         q = (m.q1, m.q2, m.q3, m.q4)
+        x = to_local(m.lat_int, m.lon_int, m.alt, self.origin)
+        if paired and self.truth_out is not None and self.have_origin:
+            self.truth_out.publish(m, x, self.truth_out.clock(self.boot_us, self.position_wall_us))
         self.f.write(json.dumps({
             "boot_us": self.boot_us, "paired": paired, "wall_us": wall,
-            "x": [round(c, 4) for c in to_local(m.lat_int, m.lon_int, m.alt, self.origin)],
+            "x": [round(c, 4) for c in x],
             "v": [round(m.ve, 4), round(m.vn, 4), round(-m.vd, 4)], "tilt_deg": round(tilt_deg(q), 2),
             "est": None if self.est is None else [round(c, 4) for c in self.est],
             "mode": self.mode, "armed": self.armed}) + "\n")
@@ -117,6 +162,7 @@ class Recorder:
         t = m.get_type()
         if t == "LOCAL_POSITION_NED":
             self.boot_us = m.time_boot_ms * 1000
+            self.position_wall_us = time.time_ns() // 1000
             self.est = [m.y, m.x, -m.z]
             self._write_truth(True)
         elif t == "SIM_STATE":
@@ -145,12 +191,13 @@ def main(argv=None) -> int:
     ap.add_argument("--url", default="tcp:127.0.0.1:5762")
     ap.add_argument("--home", required=True, help="LAT,LON,ALT[,HDG] as given to the SITL")
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--lcm-url", help="publish the truth (vehicle_state_t on SIM_TRUTH) on this bus")
     a = ap.parse_args(argv)
     home = [float(c) for c in a.home.split(",")[:3]]
     done = []
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.append(1))
-    rec = Recorder(a.url, home, a.out)
+    rec = Recorder(a.url, home, a.out, a.lcm_url)
     try:
         rec.run(lambda: bool(done))
     finally:

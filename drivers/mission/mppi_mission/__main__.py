@@ -119,7 +119,8 @@ def main(argv=None) -> int:
     from .vehicles import FlightError, GuidedLink, MppidLink
     say = (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
     try:
-        link = GuidedLink(a.guided) if a.guided else MppidLink(a.lcm_url, a.bridge)
+        channels = {"obstacles": mission.trees_channel} if mission.trees_channel else None
+        link = GuidedLink(a.guided) if a.guided else MppidLink(a.lcm_url, a.bridge, channels)
     except (FlightError, OSError) as e:
         print(f"mppid-mission: {e}", file=sys.stderr)
         return 1

@@ -24,6 +24,11 @@ or built from the command line. Validated at load; an error names the field.
       - waypoints: {points: [[10, 0, 2], [10, 10, 2]], speed: 2}
       - circle: {center: [-5, 0, 2], radius: 5, speed: 3, laps: 2}
       - figure_eight: {center: [0, 0, 2], radius: 5, speed: 3, laps: 1}
+    sensing:              # the trees are sensed, not told (the simulator's sensing block, read
+      publish_obstacles: false  # by the harness's sensor node): the trees go on MPPI_WORLD (the
+      depth_camera: {...}       # world's, for the sensors), not MPPI_OBSTACLES; the map mppid
+                                # gets is mppid-mapper's (docs/sensing.md)
+    mapper: {config: config/mapper/mapper.yaml, set: []}   # the harness's mppid-mapper
     score: {settle: 3.0}  # tracking error counts this long after a path reaches full speed
     fence: {shape: cylinder, center: [0, 0], radius: 30, min_z: 0.5, max_z: 10}
                           # or {shape: box, min: [x, y], max: [x, y], ...}: every leg is checked
@@ -59,7 +64,8 @@ LEG_KEYS = {
     "figure_eight": {"center", "radius", "speed", "ramp", "laps", "yaw"},
 }
 TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
-            "score", "fence", "yaw"}
+            "score", "fence", "yaw", "sensing", "mapper"}
+WORLD_CHANNEL = "MPPI_WORLD"  # a sensed mission's trees: the world's, which only the sensors see
 CURVES = ("circle", "figure_eight")
 TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it
 ON_PATH = 0.5        # m: closer than this to a curve's start point needs no transit
@@ -82,6 +88,13 @@ class Mission:
     task: str | None = None
     fence: fence_mod.Fence | None = None
     yaw: str | float = "hold"
+    sensing: dict = field(default_factory=dict)
+
+    @property
+    def trees_channel(self) -> str | None:
+        """Where the trees go: MPPI_OBSTACLES (mppid's, the default) or, when the mission's
+        sensing says publish_obstacles: false, MPPI_WORLD (the sensors')."""
+        return WORLD_CHANNEL if self.sensing.get("publish_obstacles", True) is False else None
 
     def trees(self, origin_xy, seed: int) -> list[tuple[float, float, float]]:
         """The virtual trees in local coordinates (the forest seeded by `seed`)."""
@@ -134,6 +147,9 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     vr = doc.get("vehicle_radius", 0.2)
     if not _num(vr, 0, 5):
         raise PlanError("vehicle_radius: metres in [0, 5]")
+    sensing = doc.get("sensing") or {}
+    if not isinstance(sensing, dict) or not isinstance(sensing.get("publish_obstacles", True), bool):
+        raise PlanError("sensing: a mapping (the simulator's sensing block), publish_obstacles true or false")
     try:
         fence = fence_mod.parse(doc.get("fence"))
     except fence_mod.FenceError as e:
@@ -141,7 +157,8 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     m = Mission(name=str(doc.get("name", default_name)), legs=copy.deepcopy(legs), frame=frame,
                 takeoff=None if takeoff is None else float(takeoff),
                 land=bool(doc.get("land", takeoff is not None)), vehicle_radius=float(vr),
-                obstacles=obstacles, settle=float(settle), task=doc.get("task"), fence=fence, yaw=yaw)
+                obstacles=obstacles, settle=float(settle), task=doc.get("task"), fence=fence, yaw=yaw,
+                sensing=sensing)
     check_fence(m)
     return m
 

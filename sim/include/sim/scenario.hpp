@@ -162,6 +162,10 @@ Scenario load_scenario(const std::string& path, std::uint64_t seed);
 // The same from YAML text (`label` names it in errors): what the fuzz target feeds.
 Scenario load_scenario_text(const std::string& text, const std::string& label, std::uint64_t seed);
 
+// The `sensing:` block of any YAML file (a scenario's, a mission's: config/missions), parsed
+// and validated as a scenario's is; the file's other keys are not read.
+SensingSpec load_sensing(const std::string& path);
+
 // The forest and moving obstacles for this seed (deterministic).
 void generate_obstacles(Scenario& s);
 

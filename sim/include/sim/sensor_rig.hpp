@@ -26,7 +26,18 @@ class SensorRig {
   // captures what is due, publishes what has waited its latency. `epoch_us` + t is the
   // capture's time stamp (0 in lock-step: simulated microseconds; the run's wall-clock
   // start in real time).
-  void step(double t, const Pose& body, const std::vector<Obstacle>& obstacles, std::int64_t epoch_us);
+  void step(double t, const Pose& body, const std::vector<Obstacle>& obstacles, std::int64_t epoch_us) {
+    capture_due(t, body, obstacles, epoch_us);
+    publish_due(t);
+  }
+  // step's halves, for a rig driven by poses that arrive at their own times (the autopilot
+  // flights' sensor node, sim/sensor_node.hpp): the captures due at t (a sensor more than a
+  // period behind, after a gap in the poses, captures once and is due again a period later),
+  // and the frames whose latency has passed by t.
+  void capture_due(double t, const Pose& body, const std::vector<Obstacle>& obstacles, std::int64_t epoch_us);
+  void publish_due(double t);
+  // When the oldest waiting frame is due (s, the rig's time); +inf when none waits.
+  double next_publish() const;
   // "sensors":{...} for sim_summary.json (frames, rays, ray-casting time per frame).
   void write_summary(std::FILE* f) const;
 
@@ -41,6 +52,7 @@ class SensorRig {
     mppi_lcm::point_cloud_t msg;
   };
   void capture(double t, const Pose& body, std::int8_t kind, std::int64_t epoch_us);
+  static void advance(double& next, double period, double t);
 
   const Scenario& s_;
   lcm::LCM* lcm_;

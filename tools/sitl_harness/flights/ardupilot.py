@@ -9,6 +9,11 @@ private network namespace (sandbox.py), one process each:
                        legs (references and virtual trees to mppid), land
     lcm-logger
 
+A sensed mission (`sensing:` with publish_obstacles: false, config/missions/rate_forest_sensed.yaml)
+adds the simulator's sensors and the mapper (sensed.py): the referee also publishes the SITL's
+truth on the sensors' bus, mppid-sensors ray-casts the mission's trees (which the mission tool
+sends to it, not to mppid) from it, and mppid-mapper's map is all mppid knows of them.
+
 `--controller guided` flies the same mission with ArduCopter's own GUIDED position controller
 (the mission tool on serial 0 with --guided; no mppid, no bridge): the baseline.
 
@@ -27,6 +32,7 @@ from pathlib import Path
 from .. import paths
 from ..overlay import load_sets
 from ..sandbox import fifo_allowed
+from . import sensed as sensed_mod
 from .base import (SIM_FIFO_PRIORITY, Flight, FlightError, FlightSpec, Plan, autopilot_binary, autopilot_plan,
                    load_mission, logger_command, mppid_binary)
 
@@ -85,7 +91,8 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bri
     sets = [str(kv) for kv in spec.sets if not str(kv).startswith("vehicle=")]
     vehicles = [Path(str(kv)[len("vehicle="):]) for kv in spec.sets if str(kv).startswith("vehicle=")]
     vehicle = (vehicles[-1].expanduser().resolve() if vehicles else vehicle)
-    ctrl = [str(mppid_binary()), "--config", str(cfg), "--vehicle", str(vehicle), "--lcm-url", spec.lcm_url,
+    ctrl = [str(mppid_binary()), "--config", str(cfg), "--vehicle", str(vehicle),
+            "--lcm-url", sensed_mod.controller_url(spec, mission),
             "--backend", spec.backend, "--set", f"mppi.seed={spec.seed}"] + (["--realtime"] if fifo else [])
     for kv in load_sets(overlay) + list((mission.get("mppid") or {}).get("set", [])) + sets:
         ctrl += ["--set", str(kv)]
@@ -120,7 +127,7 @@ class ArduPilotFlight(Flight):
         ap_dir = self.out / "ardupilot"
         ap_dir.mkdir(exist_ok=True)
         cmds = {
-            "logger": logger_command(spec, self.out),
+            "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
             "sim": sitl_command(self.binary, ap_dir, fifo),
             "recorder": [sys.executable, "-m", "sitl_harness.ap_truth", "--url", "tcp:127.0.0.1:5762",
                          f"--home={HOME}", "--out", str(self.out)],
@@ -131,6 +138,8 @@ class ArduPilotFlight(Flight):
             return cmds
         ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo)
         cmds.update(controller=ctrl, bridge=bridge, mission=mission_cmd + ["--bridge", str(sock)])
+        if sensed_mod.sensed(mission):
+            cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
         return cmds
 
     def start(self, plan: Plan) -> None:
@@ -138,6 +147,9 @@ class ArduPilotFlight(Flight):
         sb.spawn("logger", cmds["logger"])
         sb.spawn("sim", cmds["sim"])
         sb.spawn("recorder", cmds["recorder"])
+        for name in ("sensors", "mapper"):  # a sensed mission's: up before the world's trees come
+            if name in cmds:
+                sb.spawn(name, cmds[name])
         if self.spec.controller != "guided":
             sb.spawn("controller", cmds["controller"])
             sb.spawn("bridge", cmds["bridge"])
@@ -148,7 +160,8 @@ class ArduPilotFlight(Flight):
     def watch(self, plan: Plan, t0: float) -> str | None:
         """Until the mission tool exits (the flight is over: landed, or given up), or
         something it needs dies, or the wall-clock limit."""
-        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger") if n in self.sandbox.procs]
+        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger", "sensors", "mapper")
+                   if n in self.sandbox.procs]
         while True:
             time.sleep(0.1)
             if self.exited("mission"):
