@@ -10,8 +10,9 @@
 #   --no-build   skip configuring and building (build/)
 #   --flight     only what a SITL flight needs (tools/fly.sh): the venv's flight packages
 #                (requirements-flight.txt), the project's flight packages (the LCM types,
-#                the bridge, the mission tool, the harness) and the targets mppid, mppid-sim
-#                and the LCM types; a later run without it adds the rest
+#                the bridge, the mission tool, the harness) and the targets mppid, mppid-sim,
+#                mppid-mapper and mppid-sensors (sensed flights) and the LCM types; a later run
+#                without it adds the rest
 #   --view       with --flight: also the live view (requirements-view.txt, tools/mppid_view)
 #   --progress   one progress line instead of the compiler's output (kept in build/build.log;
 #                its end is shown if the build fails)
@@ -316,7 +317,7 @@ if ((do_build)); then
   fi
   build_args=("$BUILD_DIR" -j"${MPPID_JOBS:-2}")
   # The flight's targets: the daemon, the simulator and the LCM types the harness reads.
-  ((flight)) && build_args+=(--target mppid mppid-sim mppi_lcm_python)
+  ((flight)) && build_args+=(--target mppid mppid-sim mppid-mapper mppid-sensors mppi_lcm_python)
   log "cmake --build ${build_args[*]}"
   if ((progress)); then
     build_with_progress "${build_args[@]}"
