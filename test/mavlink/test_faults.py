@@ -113,27 +113,41 @@ def test_gate_seq_health_staleness(netns, procs, tmp_path, tap):
         _start_link(c)
         wait_for(lambda: ctl.last_state_seq > 10, 10, "states")
 
-        def forwarded_after(action, settle=0.15):
-            n0 = len(tap.setpoints())
+        keys = ("dropped_not_advanced", "dropped_stale", "dropped_unhealthy")
+
+        def counts():
+            st = c.status()
+            return {"wire": len(tap.setpoints()), **{k: st[k] for k in keys}}
+
+        def dealt_with(action, wire=0, **dropped):
+            """Runs action, waits until the bridge has dealt with it (its setpoint on the wire or
+            its drop counted: no fixed sleep, so a busy machine only makes it slower), then
+            nothing else may have changed."""
+            want = counts()
             action()
-            time.sleep(settle)
-            return len(tap.setpoints()) - n0
+            want["wire"] += wire
+            for k, n in dropped.items():
+                want[k] += n
+            wait_for(lambda: all(counts()[k] >= v for k, v in want.items()), 10, f"the bridge to count {want}")
+            assert counts() == want
 
         s = lambda: ctl.last_state_seq  # noqa: E731
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=100)) == 1
-        assert forwarded_after(lambda: [ctl.command(s(), [9.81, 0, 0, 0], seq=100) for _ in range(5)]) == 0
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=99)) == 0      # a replay
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=101)) == 1
-        assert forwarded_after(lambda: ctl.command(s() - 40, [9.81, 0, 0, 0], seq=102)) == 0  # 0.8 s old state
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=103, mode=2)) == 0  # MODE_FAILSAFE
+        first = counts()
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=100), wire=1)
+        dealt_with(lambda: [ctl.command(s(), [9.81, 0, 0, 0], seq=100) for _ in range(5)], dropped_not_advanced=5)
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=99), dropped_not_advanced=1)  # a replay
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=101), wire=1)
+        dealt_with(lambda: ctl.command(s() - 40, [9.81, 0, 0, 0], seq=102), dropped_stale=1)  # 0.8 s old state
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=103, mode=2), dropped_unhealthy=1)  # MODE_FAILSAFE
         ctl.healthy = False
-        time.sleep(0.4)
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=104)) == 0
+        wait_for(lambda: not c.status()["controller_healthy"], 10, "the unhealthy status to reach the bridge")
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=104), dropped_unhealthy=1)
         ctl.healthy = True
-        time.sleep(0.4)
-        assert forwarded_after(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=105)) == 1
-        st = c.status()
-        assert st["dropped_not_advanced"] == 6 and st["dropped_stale"] == 1 and st["dropped_unhealthy"] == 2
+        wait_for(lambda: c.status()["controller_healthy"], 10, "the healthy status to reach the bridge")
+        dealt_with(lambda: ctl.command(s(), [9.81, 0, 0, 0], seq=105), wire=1)
+        last = counts()
+        assert last["wire"] - first["wire"] == 3
+        assert [last[k] - first[k] for k in keys] == [6, 1, 2]
     finally:
         ctl.close()
 
