@@ -86,3 +86,15 @@ def need_module(name: str):
         if os.environ.get("CI"):
             pytest.fail(why)
         pytest.skip(why)
+
+
+def fake_ardupilot(tmp_path: Path) -> Path:
+    """An ArduPilot checkout's layout: the SITL binary and the copter defaults beside it."""
+    ap = tmp_path / "ardupilot"
+    (ap / "Tools" / "autotest" / "default_params").mkdir(parents=True)
+    (ap / "Tools" / "autotest" / "default_params" / "copter.parm").write_text("FRAME_CLASS 1\n")
+    binary = ap / "build" / "sitl" / "bin" / "arducopter"
+    binary.parent.mkdir(parents=True)
+    binary.write_text("#!/bin/sh\nexit 0\n")
+    binary.chmod(0o755)
+    return binary

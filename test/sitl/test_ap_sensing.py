@@ -17,7 +17,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from conftest import missing  # noqa: E402
-from sitl_helpers import ROOT  # noqa: E402
+from sitl_helpers import ROOT, fake_ardupilot  # noqa: E402
 from sitl_harness import ap_truth, paths  # noqa: E402
 from sitl_harness.flights.ardupilot import ArduPilotFlight  # noqa: E402
 from sitl_harness.flights.base import FlightSpec, sensor_bus  # noqa: E402
@@ -76,20 +76,9 @@ def test_the_referee_publishes_the_truth_in_the_bridges_frames_on_the_states_clo
     r.f.close()
 
 
-def _fake_ardupilot(tmp_path) -> Path:
-    ap = tmp_path / "ardupilot"
-    (ap / "Tools" / "autotest" / "default_params").mkdir(parents=True)
-    (ap / "Tools" / "autotest" / "default_params" / "copter.parm").write_text("FRAME_CLASS 1\n")
-    binary = ap / "build" / "sitl" / "bin" / "arducopter"
-    binary.parent.mkdir(parents=True)
-    binary.write_text("#!/bin/sh\nexit 0\n")
-    binary.chmod(0o755)
-    return binary
-
-
 def _plan(tmp_path, scenario):
     spec = FlightSpec(scenario=scenario, seed=51, out=tmp_path / scenario / "out", realtime=True, autopilot="ardupilot",
-                      ardupilot_bin=str(_fake_ardupilot(tmp_path / scenario)))
+                      ardupilot_bin=str(fake_ardupilot(tmp_path / scenario)))
     flight = ArduPilotFlight.create(spec)
     flight.out.mkdir(parents=True)
     return spec, flight.plan().commands

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from sitl_helpers import ROOT, group_members, pid_alive
+from sitl_helpers import ROOT, fake_ardupilot, group_members, pid_alive
 from sitl_harness import cli, paths
 from sitl_harness.flights import PLANTS, flight_class
 from sitl_harness.flights.ardupilot import BASELINE, HOME, OVERLAY, PARAMS, VEHICLE, ArduPilotFlight
@@ -87,18 +87,6 @@ def test_every_plant_has_its_flight_class():
         flight_class("gazebo")
 
 
-def _fake_ardupilot(tmp_path) -> Path:
-    """An ArduPilot checkout's layout: the SITL binary and the copter defaults beside it."""
-    ap = tmp_path / "ardupilot"
-    (ap / "Tools" / "autotest" / "default_params").mkdir(parents=True)
-    (ap / "Tools" / "autotest" / "default_params" / "copter.parm").write_text("FRAME_CLASS 1\n")
-    binary = ap / "build" / "sitl" / "bin" / "arducopter"
-    binary.parent.mkdir(parents=True)
-    binary.write_text("#!/bin/sh\nexit 0\n")
-    binary.chmod(0o755)
-    return binary
-
-
 def test_ardupilot_flight_needs_its_binary(tmp_path, monkeypatch):
     monkeypatch.delenv("MPPID_ARDUPILOT_BIN", raising=False)
     with pytest.raises(FlightError, match="no ArduCopter SITL binary: build ArduCopter SITL"):
@@ -109,7 +97,7 @@ def test_ardupilot_flight_needs_its_binary(tmp_path, monkeypatch):
 
 
 def test_ardupilot_guided_flight_commands(tmp_path):
-    binary = _fake_ardupilot(tmp_path)
+    binary = fake_ardupilot(tmp_path)
     spec = FlightSpec(scenario="circle_1ms", seed=53, out=tmp_path / "out", controller="guided", realtime=True,
                       autopilot="ardupilot", ardupilot_bin=str(binary), lcm_url="udpm://239.255.76.67:7701?ttl=0")
     flight = flight_class("ardupilot").create(spec)
@@ -136,7 +124,7 @@ def test_ardupilot_guided_flight_commands(tmp_path):
 
 
 def test_ardupilot_mppid_flight_commands(mppid_binary, tmp_path):
-    binary = _fake_ardupilot(tmp_path)
+    binary = fake_ardupilot(tmp_path)
     vehicle = tmp_path / "fitted.yaml"
     spec = FlightSpec(scenario="circle_1ms", seed=51, out=tmp_path / "out", realtime=True, autopilot="ardupilot",
                       ardupilot_bin=str(binary), sets=["mppi.lambda=7", f"vehicle={vehicle}"])
