@@ -51,7 +51,12 @@ def lockstep_live(mppid_binary, tmp_path_factory):
             "--set", "mppi.rollouts=512"]
     for u in UPDATES:
         args += ["--param", u]
-    sitl(*args, timeout=300, check=0)
+    # Success is not asked of this flight (its rc is 1 on a crash): the optimizer is rebuilt off
+    # the loop thread, so the cycle a new size starts on follows the wall clock, and a 256-512
+    # rollout forest flight may or may not make it (one ground hit at 6.7 s seen in 2 CI runs).
+    # What the tests below hold is the replay of whatever was flown.
+    p = sitl(*args, timeout=300)
+    assert (out / "score.json").is_file(), p.stdout + p.stderr
     return out
 
 
@@ -92,7 +97,7 @@ def test_rollouts_and_horizon_change_in_a_realtime_flight_without_a_late_cycle(m
 def test_lockstep_flight_with_live_updates_replays_bit_for_bit(lockstep_live):
     score = json.loads((lockstep_live / "score.json").read_text())
     check_answers(score)
-    assert score["success"] is True, score
+    assert score["sim_time"] > 4.5, score  # past the last update (4 s): every swap was flown
     p = replay(lockstep_live / "flight.lcmlog")
     assert p.returncode == 0, p.stdout + p.stderr
     assert "commands identical bit for bit" in p.stdout
