@@ -81,9 +81,10 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     if ticks:
         t = np.array([tk["t"] for tk in ticks])
         X = np.array([[np.nan if v is None else v for v in tk["x"]] for tk in ticks], float)
-        res["mean_speed"] = _mean_speed(scen["plant"]["model"], world, X)
         if scen["plant"]["model"] in QUAD_MODELS:
             res.update(_quad_speeds(world, X))
+        else:
+            res["mean_speed"] = _mean_speed(scen["plant"]["model"], X)
     if scen["plant"]["model"] in QUAD_MODELS:
         res.update(sensing.sensing_figures(out, world, t if ticks else None, X))
     res["reason"] = _not_the_vehicles_failure(info, summary, res["collisions"])
@@ -161,23 +162,23 @@ def _log_figures(spec, ticks, lcm: dict) -> dict:
     return res
 
 
-def _mean_speed(model: str, world: dict, X: np.ndarray) -> float:
-    nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
-    if model in QUAD_MODELS:
-        speeds = [np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)]
-        return float(np.nanmean(speeds))
+def _mean_speed(model: str, X: np.ndarray) -> float:
+    """The cart's or the race car's mean speed (a quadrotor's: _quad_speeds)."""
     if model == "cartpole":
         return float(np.nanmean(np.abs(X[:, 1])))
     return float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
 
 
 def _quad_speeds(world: dict, X: np.ndarray) -> dict:
-    """peak_speed: the fastest any vehicle flew; forest_speed: the mean speed while inside the
-    obstacles' x extent (the trees, not the run-up and the stop at the goal), None without."""
+    """mean_speed over every vehicle's samples; peak_speed: the fastest any vehicle flew;
+    forest_speed: the mean speed while inside the obstacles' x extent (the trees, not the
+    run-up and the stop at the goal), None without. The speeds are computed once for all three."""
     nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
     speeds = np.stack([np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)])
     obstacles = np.asarray(world.get("obstacles") or [], float).reshape(-1, 5)
-    out = {"peak_speed": float(np.nanmax(speeds)) if np.isfinite(speeds).any() else None, "forest_speed": None}
+    finite = np.isfinite(speeds).any()
+    out = {"mean_speed": float(np.nanmean(speeds)) if finite else float("nan"),
+           "peak_speed": float(np.nanmax(speeds)) if finite else None, "forest_speed": None}
     if len(obstacles):
         lo, hi = (obstacles[:, 0] - obstacles[:, 2]).min(), (obstacles[:, 0] + obstacles[:, 2]).max()
         px = np.stack([X[:, v * nx] for v in range(m)])

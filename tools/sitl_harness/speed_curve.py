@@ -15,6 +15,7 @@ from pathlib import Path
 
 from .campaign import wilson
 from .results import load_campaign
+from .sidebyside import _median
 
 LIMIT_KEY = "cost.max_speed="
 
@@ -35,11 +36,6 @@ def _values(runs: list, key: str, ok_only: bool = False) -> list[float]:
 
 def _mean(v):
     return sum(v) / len(v) if v else None
-
-
-def _median(v):
-    v = sorted(v)
-    return (v[len(v) // 2] if len(v) % 2 else 0.5 * (v[len(v) // 2 - 1] + v[len(v) // 2])) if v else None
 
 
 def _row(limit, scenario: str, runs: list) -> dict:
