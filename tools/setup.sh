@@ -77,6 +77,8 @@ APT_PACKAGES=(
   libcap2-bin systemd
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
+  # tools/stress-tests.sh: the timed tests again and again beside busy CPU workers
+  stress-ng
   # the package stage (tools/package-test.sh): a clean Debian 12 root to install the .deb into
   mmdebstrap
   # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's

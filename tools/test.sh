@@ -34,10 +34,15 @@ else
 fi
 
 status=0
+# Each stage's wall time, printed at the end (a stage over its share of CI's time shows here).
+stage_names=() stage_secs=() stage_t0=$SECONDS
+stage_done() { stage_names+=("$1"); stage_secs+=($((SECONDS - stage_t0))); stage_t0=$SECONDS; }
+stage_done setup
 
 echo "[test] ctest --test-dir $BUILD_DIR --output-on-failure -j2 ${CTEST_ARGS:-}"
 # shellcheck disable=SC2086  # CTEST_ARGS is a list of words on purpose
 ctest --test-dir "$BUILD_DIR" --output-on-failure --no-tests=error -j2 ${CTEST_ARGS:-} || status=1
+stage_done ctest
 
 if [[ -d test ]] && [[ -n "$(find test -name 'test_*.py' -print -quit)" ]]; then
   echo "[test] pytest test ${PYTEST_ARGS:-}"
@@ -50,17 +55,29 @@ if [[ -d test ]] && [[ -n "$(find test -name 'test_*.py' -print -quit)" ]]; then
 else
   echo "[test] no Python tests under test/"
 fi
+stage_done pytest
 
 if ((!quick)); then
   echo "[test] tools/soak --minutes ${MPPID_SOAK_MINUTES:-2.5}"
   tools/soak --minutes "${MPPID_SOAK_MINUTES:-2.5}" --out results/soak-test || status=1
+  stage_done soak
   echo "[test] tools/sanitize.sh"
   tools/sanitize.sh || status=1
+  stage_done sanitize
   echo "[test] tools/aarch64.sh"
   tools/aarch64.sh || status=1
+  stage_done aarch64
   echo "[test] tools/package-test.sh (MPPID_PACKAGE_STAGE=0 skips it)"
   tools/package-test.sh || status=1
+  stage_done package
 fi
+
+total=0
+for i in "${!stage_names[@]}"; do
+  printf '[test] stage %-9s %5d s\n' "${stage_names[$i]}" "${stage_secs[$i]}"
+  total=$((total + stage_secs[i]))
+done
+printf '[test] stage %-9s %5d s\n' total "$total"
 
 if ((status == 0)); then echo "[test] all passed"; else echo "[test] FAILED" >&2; fi
 exit "$status"

@@ -142,6 +142,8 @@ void SensorNode::run(const volatile std::sig_atomic_t* stop) {
     }
     publish_due(wall_());
   }
+  // Stopping loses nothing: the frames already captured go out now, before their latency.
+  if (epoch_us_ >= 0) rig_.publish_due(std::numeric_limits<double>::infinity());
 }
 
 void SensorNode::write_stats(std::FILE* f) const {

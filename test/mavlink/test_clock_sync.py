@@ -145,8 +145,8 @@ def test_settings_are_checked():
 def test_flight_with_an_autopilot_clock_two_percent_slow(netns, procs, tmp_path):
     """The stand-in's clock runs 2 % slow (PX4 SIH ran 0.7 % slow: this fails a fixed mapping
     within 5 s, before the take-off ends). mppid flies the whole circle from OFFBOARD on the
-    ground, no offboard-loss failsafe, and 90 % of the states it gets from 3 s on are stamped
-    within 10 ms of their arrival (a fixed mapping makes them look 20 ms older each second:
+    ground, no offboard-loss failsafe, and the states' ages (arrival minus the mapped sample
+    time) show no trend from 3 s on (a fixed mapping makes them look 20 ms older each second:
     0.28 s on average by the end, RMSE 5.8 m after the failsafe)."""
     import threading
 
@@ -180,10 +180,17 @@ def test_flight_with_an_autopilot_clock_two_percent_slow(netns, procs, tmp_path)
     m = s["mission"]
     print(f"drift -2 %: RMSE {m['tracking_rmse']:.3f} m; state age p50 {sorted(ages)[len(ages) // 2]} us, "
           f"max {max(ages)} us over {len(ages)} states")
-    assert len(ages) > 500
-    # From 3 s on (bursts on a busy machine are real ages: the quantiles, not the max).
-    assert sorted(ages[150:])[int(0.9 * len(ages[150:]))] < 10_000
-    assert sorted(ages[-250:])[125] < 5_000     # the last 5 s: no drift left
+    assert len(ages) > 650
+
+    def median(xs):
+        return sorted(xs)[len(xs) // 2]
+    # Followed, the drift leaves no trend: the last 5 s' median age is that of 3-8 s (a fixed
+    # mapping adds 20 ms a second: over 100 ms between the two windows), and the ages are the
+    # bridge's own handling, tens of ms at most on a busy machine, not the 0.28 s of a fixed
+    # mapping. Medians: a busy machine's bursts are real ages, not drift.
+    early, late = median(ages[150:400]), median(ages[-250:])
+    assert late - early < 10_000, (early, late)
+    assert median(ages[150:]) < 40_000
     assert s["counters"]["failsafes"] == 0
     assert [e["mode"] for e in s["events"] if e["event"] == "mode"] == ["OFFBOARD", "AUTO.LAND"]
     assert m["tracking_rmse"] < 0.3

@@ -175,27 +175,31 @@ def test_states_that_stop_never_reengage(netns, procs, tmp_path, tap):
 
 
 def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
-    """PX4 with COM_OF_LOSS_T 2 s: mppid silent for 0.8 s while the vehicle is still in
-    OFFBOARD (PX4's failsafe not yet due): when it answers again nothing goes out while the
+    """PX4 with COM_OF_LOSS_T 5 s: mppid silent until the bridge disengages, then answering
+    again while the vehicle is still in OFFBOARD (PX4's failsafe not yet due: 5 s leaves room
+    for a busy machine's scheduling): when it answers again nothing goes out while the
     vehicle is in OFFBOARD, so PX4's own offboard-loss failsafe acts (COM_OBL_RC_ACT; the
     simulated one lands). Out of OFFBOARD nothing is pre-streamed either: PX4's offboard loss
     is a fallback, and setpoints arriving would take it back into OFFBOARD by itself; the
     vehicle never goes back to OFFBOARD, and `offboard` is what flies again."""
     ctl = StandInController()
-    c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=2.0"])
+    c = _chain(procs, tmp_path, vehicle_params=["COM_OF_LOSS_T=5.0"])
     try:
         assert "OFFBOARD" in _engage(c, tap)
         ctl.answer = False
         wait_for(lambda: c.status().get("engagement") == "disengaged", 3, "the bridge to disengage")
         assert c.status()["mode"] == "OFFBOARD"   # PX4 has not given up yet
-        time.sleep(0.3)
         ctl.answer = True
         t_back = time.monotonic_ns() // 1000
-        time.sleep(0.5)
+        # mppid's commands flow again; the bridge takes them and drops them (disengaged, counted)
+        # while the vehicle is in OFFBOARD.
+        n = c.status()["dropped_disengaged"]
+        wait_for(lambda: c.status()["dropped_disengaged"] > n + 10, 5, "mppid's commands again")
         assert c.status()["mode"] == "OFFBOARD" and c.status()["engagement"] == "disengaged"
         assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "forwarded while still in OFFBOARD"
-        c.wait_event("failsafe", 5)
+        c.wait_event("failsafe", 10)
         t_fs = time.monotonic_ns() // 1000
+        assert _between(tap, t_back, t_fs) == [], "forwarded while still in OFFBOARD"
         time.sleep(1.5)
         assert c.status()["engagement"] == "disengaged", "pre-streamed after PX4's offboard-loss fallback"
         assert _between(tap, t_fs, time.monotonic_ns() // 1000) == []
@@ -209,21 +213,29 @@ def test_px4_pause_in_offboard_never_reengages(netns, procs, tmp_path, tap):
 
 
 def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
-    """PX4, engaged: the link cut for 2 s. PX4's offboard-loss failsafe holds (COM_OBL_RC_ACT
-    5) with OFFBOARD still its intended mode, so any setpoint after the link returns would take
-    it back into OFFBOARD by itself (the real PX4 did: docs/px4.md, the link-cut flight). The
-    bridge, disengaged by the link loss, sends nothing when the link is back, the vehicle stays
-    in Hold, and `offboard` is what flies again."""
+    """PX4, engaged: the link cut until the bridge has declared it lost (its heartbeat timeout,
+    2 s), then restored. PX4's offboard-loss failsafe holds (COM_OBL_RC_ACT 5) with OFFBOARD
+    still its intended mode, so any setpoint after the link returns would take it back into
+    OFFBOARD by itself (the real PX4 did: docs/px4.md). The bridge, disengaged by the loss,
+    sends nothing when the link is back, the vehicle stays in Hold, and `offboard` is what flies
+    again. The loss is waited for, not timed: the link goes down, then up, and both are seen."""
     ctl = StandInController()
     c = _chain(procs, tmp_path, vehicle_params=["COM_OBL_RC_ACT=5"])
     try:
         _engage_armed(c, tap, "px4")
+        losses = c.status()["link_losses"]
         tap.cut = True
         c.wait_event("failsafe", 5)
-        time.sleep(1.0)
+        wait_for(lambda: c.status().get("link_up") is False, 10, "the link declared lost")
+        assert c.status()["link_losses"] == losses + 1
+        assert c.status()["engagement"] == "disengaged"
         tap.cut = False
         t_back = time.monotonic_ns() // 1000
-        wait_for(lambda: c.status().get("link_up"), 5, "the link back")
+        wait_for(lambda: c.status().get("link_up"), 10, "the link back")
+        assert c.status()["link_losses"] == losses + 1
+        log = procs.log("bridge")
+        assert "link lost: autopilot HEARTBEAT overdue" in log, log[-2000:]
+        assert "link up" in log[log.index("link lost"):], log[-2000:]
         time.sleep(2.0)
         assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "setpoints after the link returned"
         modes = [e["mode"] for e in c.events("mode")]

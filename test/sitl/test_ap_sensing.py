@@ -144,14 +144,25 @@ sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000))       # before the w
 time.sleep(0.2)
 lc.publish("MPPI_WORLD", o.encode())
 time.sleep(0.1)
-sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000 - 2_000_000))  # stale
-for k in range(75):                                                  # 1.5 s at 50 Hz
+sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000 - 5_000_000))  # stale
+t0 = time.time_ns() // 1000
+for k in range(75):                    # 1.5 s of samples at 50 Hz, each sent once its time has come
+    sample = t0 + 20_000 * k
+    while time.time_ns() // 1000 < sample:
+        time.sleep(0.002)
     lc.publish("MPPI_WORLD", o.encode())
-    sensors.publish("SIM_TRUTH", truth(time.time_ns() // 1000))
-    time.sleep(0.02)
+    sensors.publish("SIM_TRUTH", truth(sample))
 print('{"event": "done"}', flush=True)
 time.sleep(60)
 """
+
+
+def wait_log(path, text, timeout):
+    """Waits (polling, up to `timeout` s) for `text` in the log at `path`, or fails."""
+    deadline = time.monotonic() + timeout
+    while text not in (path.read_text(errors="replace") if path.exists() else ""):
+        assert time.monotonic() < deadline, f"{text!r} not in {path.name} after {timeout} s"
+        time.sleep(0.05)
 
 
 def test_truth_to_sensors_to_mapper_makes_a_map_of_the_tree_ahead(tmp_path):
@@ -170,25 +181,30 @@ def test_truth_to_sensors_to_mapper_makes_a_map_of_the_tree_ahead(tmp_path):
     sb.start_namespace()
     try:
         sb.spawn("sensors", [str(sensors_exe), "--sensing", str(ROOT / "config/missions/rate_forest_sensed.yaml"),
-                             "--lcm-url", url, "--sensor-lcm-url", bus, "--stats", str(tmp_path / "sensors.json")])
+                             "--lcm-url", url, "--sensor-lcm-url", bus, "--stats", str(tmp_path / "sensors.json"),
+                             "--max-truth-age", "1.0"])  # a busy machine's feeder is late, never 5 s
         sb.spawn("mapper", [str(mapper_exe), "--config", str(ROOT / "config/mapper/mapper.yaml"), "--lcm-url", url,
                             "--sensor-lcm-url", bus, "--stats", str(tmp_path / "mapper.json"),
                             "--sensed", str(tmp_path / "sensed.jsonl")])
-        sb.wait_ready("sensors", 10.0)
-        time.sleep(0.5)  # the mapper subscribed
+        sb.wait_ready("sensors", 30.0)
+        wait_log(tmp_path / "mapper.log", "cells of", 30.0)  # the mapper subscribed
         sb.spawn("feed", [sys.executable, "-c", FEED, url, bus])
-        deadline = time.monotonic() + 20.0
-        while '"done"' not in (tmp_path / "feed.log").read_text() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        time.sleep(0.3)  # the last frames' latency, the last map
+        wait_log(tmp_path / "feed.log", '"done"', 60.0)
+        # Each node, stopped, loses nothing: the sensors send the frames they captured, then
+        # the mapper integrates what is on the bus.
+        sb.terminate("sensors", 10.0)
+        sb.terminate("mapper", 10.0)
     finally:
         sb.stop()
     logs = "".join((tmp_path / f"{n}.log").read_text() for n in ("sensors", "mapper", "feed"))
     stats = json.loads((tmp_path / "sensors.json").read_text())
     assert stats["truth"]["before_world"] == 1 and stats["truth"]["stale"] == 1, logs
-    assert stats["truth"]["taken"] >= 70 and stats["trees"] == 1
+    # Every truth of the 1.48 s of samples is taken (their ages here are the feeder's own
+    # lateness, well inside --max-truth-age), and the camera's 30 Hz runs on the truths' sample
+    # times: frames at 0, 1/30, ... 1.48 s, 45 of them, however busy the machine.
+    assert stats["truth"]["taken"] == 75 and stats["trees"] == 1, stats
     frames = stats["sensors"]["depth_camera"]["frames"]
-    assert 40 <= frames <= 47, stats  # 30 Hz over the 1.5 s of truths
+    assert frames == 45, stats
     mapped = json.loads((tmp_path / "mapper.json").read_text())
     assert mapped["frames"] == frames and mapped["maps"] > 0, mapped
     sensed = [json.loads(line) for line in (tmp_path / "sensed.jsonl").read_text().splitlines()]

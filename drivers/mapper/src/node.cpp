@@ -298,6 +298,11 @@ void MapperNode::run(const volatile std::sig_atomic_t* stop) {
     const auto now = Clock::now();
     if (dirty_ && now >= due && publish()) last = now;
   }
+  // Stopping loses nothing: the frames already on the bus are integrated, and the map they
+  // make goes out.
+  while (wait_and_handle(50) > 0) {
+  }
+  if (dirty_) publish();
 }
 
 // Waits up to timeout_ms for traffic on the sensor bus (and the map bus: drained, so its
