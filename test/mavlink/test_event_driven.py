@@ -86,12 +86,44 @@ def test_a_command_goes_to_the_wire_inside_its_lcm_handler(tmp_path):
     assert len(rows) == 5 and all(r["cmd_rx_mono_us"] <= r["mono_us"] and r["state_rx_mono_us"] for r in rows)
 
 
-def test_the_lcm_thread_blocks_on_the_socket_not_a_timer():
+def test_the_lcm_thread_blocks_on_the_socket_not_a_timer(monkeypatch):
     """The bridge's LCM loop waits in LCM's handle_timeout (a select on its socket: it returns
     as a message arrives); its timeout only lets it see `stop`. A sleep or a poll in that loop
-    would be a wait between a command's arrival and its send."""
-    import inspect
+    would be a wait between a command's arrival and its send. The loop is run on a bus of its
+    own and watched: every message is handled by a blocking wait that was already under way
+    when it was published, nothing sleeps, and no call polls (a zero timeout)."""
+    import threading
+    import time as time_module
+
+    import lcm
 
     from mppi_mavlink import bridge
-    src = inspect.getsource(bridge.Bridge._lcm_loop)
-    assert "handle_timeout(" in src and "sleep" not in src
+    slept = []
+    monkeypatch.setattr(time_module, "sleep", lambda s: slept.append(s))
+    lc = lcm.LCM("memq://")
+    calls, handled, waiting = [], [], threading.Event()
+
+    class Watched:
+        def handle_timeout(self, ms):
+            calls.append(ms)
+            waiting.set()
+            return lc.handle_timeout(ms)
+    loop = SimpleNamespace(stop=threading.Event(), lc=Watched())
+    lc.subscribe("C", lambda ch, data: handled.append((data, len(calls))))
+    th = threading.Thread(target=bridge.Bridge._lcm_loop, args=(loop,), daemon=True)
+    th.start()
+    try:
+        for k in range(20):
+            waiting.clear()
+            assert waiting.wait(10), "the loop never waited on the bus"
+            in_call = len(calls)
+            lc.publish("C", bytes([k]))
+            deadline = time_module.monotonic() + 10
+            while len(handled) <= k and time_module.monotonic() < deadline:
+                threading.Event().wait(0.001)
+            assert len(handled) == k + 1, "a message was not handled"
+            assert handled[k][1] == in_call, "handled by a later call: the wait did not return on arrival"
+    finally:
+        loop.stop.set()
+        th.join(5)
+    assert slept == [] and min(calls) >= 10, (slept, min(calls))

@@ -3,6 +3,7 @@ real ArduCopter SITL (issue 20): arm, the autopilot's own take-off (nothing forw
 it climbs), `offboard` with mppid holding where the take-off ended, a circle ramped up from
 that hover, landing; mppid in real time, as in service."""
 import json
+import math
 import subprocess
 
 import pytest
@@ -10,17 +11,25 @@ import yaml
 
 from mavtest import LCM_URL, PYTHON, ROOT
 from mavchain import Chain
+from mppi_mavlink import lcm_types
+
+QW = 6  # the rate quadrotor's state: p(3), v(3), q(4: w x y z), w(3)
 
 pytestmark = pytest.mark.timeout(150)
 
+# The last leg turns the vehicle to face 60 deg (ENU: counter-clockwise from east).
 MISSION = {"name": "ci_circle", "task": "quadrotor_rate_track", "takeoff": 1.5,
            "legs": [{"hold": {"for": 2}}, {"circle": {"center": [-2.0, 0.0, 1.5], "radius": 2.0, "speed": 1.5}},
-                    {"hold": {"for": 1}}]}
+                    {"hold": {"for": 4, "yaw": 60}}]}
 
 
 def test_mission_tool_flies_the_simulated_ardupilot_through_the_bridge(netns, procs, tmp_path):
     c = Chain(procs, tmp_path, autopilot="ardupilot", task="quadrotor_rate_track",
               vehicle_params=["GUID_OPTIONS=8", "MOT_THST_HOVER=0.4"]).start()
+    refs, yaws = [], []   # the references' yaw on the bus; the vehicle's heading in mppid's states
+    mppi_lcm = lcm_types.import_mppi_lcm()
+    c.lc.subscribe("MPPI_REFERENCE", lambda ch, data: refs.append(mppi_lcm.reference_t.decode(data).yaw))
+    c.lc.subscribe("MPPI_STATE", lambda ch, data: yaws.append(heading(mppi_lcm.vehicle_state_t.decode(data).x)))
     (tmp_path / "m.yaml").write_text(yaml.safe_dump(MISSION))
     env_path = f"{ROOT / 'drivers' / 'mission'}:{ROOT / 'drivers' / 'mavlink'}"
     p = subprocess.run([PYTHON, "-m", "mppi_mission", "fly", str(tmp_path / "m.yaml"), "--bridge", c.sock,
@@ -41,6 +50,17 @@ def test_mission_tool_flies_the_simulated_ardupilot_through_the_bridge(netns, pr
     st = c.status()
     assert st["dropped_disengaged"] > 20 and st["setpoints_sent"] > 300 and not st["engaged"]
     c.stop_vehicle()
+    # The yaw leg: its reference on the bus says 60 deg, and the vehicle turned to it (the
+    # hold: within 5 deg for at least 0.2 s of states).
+    assert refs and math.isclose(refs[-1], math.radians(60), abs_tol=1e-6), refs[-5:]
+    turned = [y for y in yaws if abs(math.remainder(y - math.radians(60), math.tau)) < math.radians(5)]
+    assert len(turned) >= 10, f"the vehicle never held 60 deg: last headings {[round(math.degrees(y)) for y in yaws[-10:]]}"
+
+
+def heading(x):
+    """ENU yaw (rad) of a state's attitude quaternion (w, x, y, z at QW)."""
+    w, qx, qy, qz = x[QW:QW + 4]
+    return math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
 def test_mission_tool_refuses_a_mppid_running_another_task(netns, procs, tmp_path):
