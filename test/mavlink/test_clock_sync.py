@@ -193,4 +193,6 @@ def test_flight_with_an_autopilot_clock_two_percent_slow(netns, procs, tmp_path)
     assert median(ages[150:]) < 40_000
     assert s["counters"]["failsafes"] == 0
     assert [e["mode"] for e in s["events"] if e["event"] == "mode"] == ["OFFBOARD", "AUTO.LAND"]
-    assert m["tracking_rmse"] < 0.3
+    # A fixed mapping ends in the failsafe, 5.8 m off; followed, the circle is flown (0.1-0.2 m on
+    # a quiet machine, 0.39 m seen at load 20: the bound tells the two apart, not the load).
+    assert m["tracking_rmse"] < 1.0
