@@ -34,11 +34,16 @@ VIEW_WAIT_S = 20.0       # the view serves this long before the flight: the page
 VIEW_READY_S = 90.0      # the view's servers up (rerun imports slowly on a loaded machine)
 SCENE_SHOWN_S = 100.0    # the viewer's wasm compiled and the scene drawn (~20 s on an idle 2-core VM)
 # The view's delay, bus -> viewer's server (docs/view.md, "Delay"). The median is the live
-# bound; a draw waits at most one draw period (40 ms) for its flush, so the tail above that is
-# the scheduler's on a loaded 2-core machine (the browser's CPU renderer beside the flight).
+# bound; the state drawn is at most a state period (20 ms) old, so the tail above that is the
+# scheduler's: the view runs at normal priority beside the SCHED_FIFO simulator and daemon and
+# the browser's CPU renderer on a loaded 2-core machine (measured at load 20-23: max 0.14-0.94 s,
+# the longest while the page loaded at the flight's start).
 DELAY_MEDIAN_MS = 200.0
 DELAY_P95_MS = 400.0
-DELAY_MAX_MS = 1500.0
+DELAY_MAX_MS = 2000.0
+# The browser (a viewer's consumer, on a person's machine elsewhere) yields to the flight and the
+# view here: its CPU renderer compiling and drawing would otherwise take the view's time.
+BROWSER_NICENESS = 10
 ENTITIES = ["/world/plan", "/world/rollouts/top", "/world/rollouts/random", "/world/obstacles",
             "/world/vehicles/0", "/world/vehicles/0/trail", "/world/goal", "/timing/compute_ms",
             "/timing/state_to_command_ms", "/timing/misses", "/optimizer/ess"]
@@ -154,7 +159,7 @@ def viewed_flight(mppid_binary, tmp_path_factory):
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=out.parent,
                                   env={**os.environ, "RERUN_ANALYTICS": "0"}, start_new_session=True)
         t_load = time.monotonic()
-        with HeadlessChromium() as browser:
+        with HeadlessChromium(niceness=BROWSER_NICENESS) as browser:
             browser.open(url)  # the flight is flying: the page loads beside it
             # Pictures while it flies (the viewer shows its own latency figure when above 1 s).
             shots = 0
@@ -211,8 +216,8 @@ def test_view_keeps_up_with_the_bus(viewed_flight):
     each drawn state reaches the viewer's server within the bounds."""
     d = view_delay(viewed_flight["view_log"])
     states = len(logs.read_lcm_log(viewed_flight["out"] / "flight.lcmlog", {"MPPI_STATE"})["MPPI_STATE"])
-    # Draws at 25 Hz, the states at 50 Hz: about one draw per two states.
-    assert states // 5 <= d["draws"] <= states, (d, states)
+    # Draws at 10 Hz, the states at 50 Hz: one draw per five states, fewer when held up.
+    assert states // 10 <= d["draws"] <= states, (d, states)
     assert d["median_ms"] < DELAY_MEDIAN_MS, d
     assert d["p95_ms"] < DELAY_P95_MS, d
     assert d["max_ms"] < DELAY_MAX_MS, d
