@@ -1,11 +1,14 @@
-"""The live 3D view (tools/view, docs/view.md) of a lock-step forest flight with the rollout fan
+"""The live 3D view (tools/view, docs/view.md) of a real-time forest flight with the rollout fan
 on: a real headless browser (Debian's chromium, WebGL on SwiftShader) loads rerun's web viewer
 while the flight flies and its screenshot shows the scene (the plan, the rollouts, the
 obstacles, the trail: their colours counted, not just a non-blank page); a client of rerun's
 gRPC protocol (rerun's own CLI) sees every entity and one message of each decodes; the
 flight's LCM log converted to .rrd reads back with the LCM log's counts and values.
 
-One flight serves every test (module fixture); the flight runs K = 1024 so it is short."""
+The view keeps up: its own report of the delay from each drawn state's publish on the bus to
+its flush to the viewer's server is bounded (median, p95, max).
+
+One flight serves every test (module fixture); the flight runs K = 1024 so it is light."""
 from __future__ import annotations
 
 import io
@@ -27,8 +30,20 @@ from sitl_harness import logs, paths
 
 pytestmark = pytest.mark.timeout(240)
 
+VIEW_WAIT_S = 20.0       # the view serves this long before the flight: the page loads (live: real time)
 VIEW_READY_S = 90.0      # the view's servers up (rerun imports slowly on a loaded machine)
 SCENE_SHOWN_S = 100.0    # the viewer's wasm compiled and the scene drawn (~20 s on an idle 2-core VM)
+# The view's delay, bus -> viewer's server (docs/view.md, "Delay"). The median is the live
+# bound; the state drawn is at most a state period (20 ms) old, so the tail above that is the
+# scheduler's: the view runs at normal priority beside the SCHED_FIFO simulator and daemon and
+# the browser's CPU renderer on a loaded 2-core machine (measured at load 20-23: max 0.14-0.94 s,
+# the longest while the page loaded at the flight's start).
+DELAY_MEDIAN_MS = 200.0
+DELAY_P95_MS = 400.0
+DELAY_MAX_MS = 2000.0
+# The browser (a viewer's consumer, on a person's machine elsewhere) yields to the flight and the
+# view here: its CPU renderer compiling and drawing would otherwise take the view's time.
+BROWSER_NICENESS = 10
 ENTITIES = ["/world/plan", "/world/rollouts/top", "/world/rollouts/random", "/world/obstacles",
             "/world/vehicles/0", "/world/vehicles/0/trail", "/world/goal", "/timing/compute_ms",
             "/timing/state_to_command_ms", "/timing/misses", "/optimizer/ess"]
@@ -62,6 +77,14 @@ def _wait_for(path: Path, text: str, timeout: float, proc: subprocess.Popen) -> 
             raise AssertionError(f"harness exited rc={proc.returncode} before '{text}':\n{body[-3000:]}")
         time.sleep(0.2)
     raise AssertionError(f"'{text}' not in {path} after {timeout:g} s")
+
+
+def _seen(path: Path, text: str, proc: subprocess.Popen) -> bool:
+    if path.exists() and text in path.read_text(errors="replace"):
+        return True
+    if proc.poll() is not None:
+        raise AssertionError(f"harness exited rc={proc.returncode} before '{text}'")
+    return False
 
 
 def scene_pixels(png: bytes) -> dict[str, int]:
@@ -123,7 +146,8 @@ def viewed_flight(mppid_binary, tmp_path_factory):
     with open(harness_log, "wb") as hl:
         harness = subprocess.Popen(
             [str(SITL), "run", "--scenario", "forest_4m", "--seed", "3", "--out", str(out), "--view", "--view-port",
-             str(port), "--view-hold", "200", "--no-plots", "--set", "mppi.rollouts=1024"],
+             str(port), "--view-hold", "200", "--no-plots", "--set", "mppi.rollouts=1024", "--realtime",
+             "--view-wait", str(VIEW_WAIT_S)],
             stdout=hl, stderr=subprocess.STDOUT, cwd=ROOT, start_new_session=True)
     client = None
     result = {"out": out, "port": port}
@@ -135,9 +159,16 @@ def viewed_flight(mppid_binary, tmp_path_factory):
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=out.parent,
                                   env={**os.environ, "RERUN_ANALYTICS": "0"}, start_new_session=True)
         t_load = time.monotonic()
-        with HeadlessChromium() as browser:
+        with HeadlessChromium(niceness=BROWSER_NICENESS) as browser:
             browser.open(url)  # the flight is flying: the page loads beside it
-            _wait_for(harness_log, "view: serving", 180, harness)  # the flight is over, the view holds
+            # Pictures while it flies (the viewer shows its own latency figure when above 1 s).
+            shots = 0
+            while not _seen(harness_log, "view: serving", harness):  # until the flight is over
+                if time.monotonic() - t_load > 180:
+                    raise AssertionError("the flight did not end within 180 s")
+                (out.parent / f"in_flight_{shots:02d}.png").write_bytes(browser.screenshot())
+                shots += 1
+                time.sleep(2.0)  # pacing the pictures, not a timing check
             deadline = t_load + SCENE_SHOWN_S
             png, px = b"", {}
             while time.monotonic() < deadline:
@@ -161,7 +192,16 @@ def viewed_flight(mppid_binary, tmp_path_factory):
             os.killpg(harness.pid, signal.SIGKILL)
             harness.wait()
     result["harness"] = harness_log.read_text(errors="replace")
+    result["view_log"] = (out / "view.log").read_text(errors="replace")
     return result
+
+
+def view_delay(view_log: str) -> dict[str, float]:
+    """The view's own report of its delay (tools/mppid_view/delay.py), its last line: from each
+    drawn state's publish on the bus to the end of the flush to the viewer's server."""
+    lines = [ln for ln in view_log.splitlines() if ln.startswith("view: delay bus -> viewer's server: draws=")]
+    assert lines, f"the view reported no delay:\n{view_log[-2000:]}"
+    return {k: float(v) for k, v in (f.split("=") for f in lines[-1].split(": ", 2)[2].split())}
 
 
 def test_headless_browser_shows_the_scene(viewed_flight):
@@ -171,10 +211,24 @@ def test_headless_browser_shows_the_scene(viewed_flight):
     assert px["colours"] > 50, px
 
 
-def test_flight_with_the_view_flies_and_publishes_rollouts(viewed_flight):
+def test_view_keeps_up_with_the_bus(viewed_flight):
+    """docs/view.md, "Delay": a real-time flight with the browser rendering on the CPU beside it;
+    each drawn state reaches the viewer's server within the bounds."""
+    d = view_delay(viewed_flight["view_log"])
+    states = len(logs.read_lcm_log(viewed_flight["out"] / "flight.lcmlog", {"MPPI_STATE"})["MPPI_STATE"])
+    # Draws at 10 Hz, the states at 50 Hz: one draw per five states, fewer when held up.
+    assert states // 10 <= d["draws"] <= states, (d, states)
+    assert d["median_ms"] < DELAY_MEDIAN_MS, d
+    assert d["p95_ms"] < DELAY_P95_MS, d
+    assert d["max_ms"] < DELAY_MAX_MS, d
+
+
+def test_flight_with_the_view_publishes_rollouts(viewed_flight):
+    # A real-time flight on a loaded machine: its success is the flight tests' (lock-step) to
+    # assert; here it flew with the view and was scored.
     out = viewed_flight["out"]
     score = json.loads((out / "score.json").read_text())
-    assert score["success"] is True, score
+    assert score["clock"] == "realtime" and score["sim_time"] > 2.0 and score["commands"] > 100, score
     msgs = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_ROLLOUTS", "MPPI_COMMAND"})
     fans = [m for _, m in msgs["MPPI_ROLLOUTS"]]
     commands = len(msgs["MPPI_COMMAND"])

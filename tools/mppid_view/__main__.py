@@ -55,6 +55,7 @@ def cmd_live(a) -> int:
     view = LiveView(a.lcm_url, a.grpc_port, a.web_port, a.save, a.netns_pid, a.sensor_lcm_url)
     print(f"view: {view.url}", flush=True)
     counts = view.run(a.seconds)
+    print(view.delay.line(), flush=True)
     print("view: drawn " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())), flush=True)
     return 0
 

@@ -23,7 +23,8 @@ def free_port() -> int:
 
 
 class HeadlessChromium:
-    def __init__(self, width: int = 1280, height: int = 800, binary: str = "chromium"):
+    def __init__(self, width: int = 1280, height: int = 800, binary: str = "chromium", niceness: int = 0):
+        """niceness: added to the browser's (a test's browser yields to the flight and the view)."""
         exe = shutil.which(binary)
         if exe is None:
             raise FileNotFoundError(f"{binary} not found (Debian package chromium; tools/setup.sh installs it)")
@@ -34,7 +35,8 @@ class HeadlessChromium:
              "--no-first-run", "--disable-background-networking", "--disable-component-update",
              f"--remote-debugging-port={self.port}", f"--window-size={width},{height}",
              f"--user-data-dir={self.profile.name}", "about:blank"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+            preexec_fn=(lambda: os.nice(niceness)) if niceness else None)
         self.ws = None
         self.next_id = 0
 

@@ -154,13 +154,18 @@ class Scene:
         if h is None:
             return False
         if channel == "MPPI_STATE":
-            if self.t0_us is None:
-                self.t0_us = msg.sample_utime
-            self.now_us = max(self.now_us, msg.sample_utime)
+            self.advance(msg)
         t0 = self.t0_us if self.t0_us is not None else self.now_us
         self.rec.set_time("time", duration=(self.now_us - t0) * 1e-6)
         h(msg)
         return True
+
+    def advance(self, state) -> None:
+        """The flight's clock to a vehicle_state_t's sample time (a state not drawn: the live
+        view draws only the newest of a burst)."""
+        if self.t0_us is None:
+            self.t0_us = state.sample_utime
+        self.now_us = max(self.now_us, state.sample_utime)
 
     def due(self, what: str, every: float) -> bool:
         """At most one `what` drawn per `every` flight seconds."""
