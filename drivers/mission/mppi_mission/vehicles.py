@@ -20,6 +20,7 @@ import time
 
 import numpy as np
 from mppi_mavlink import frames
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import reference
 
@@ -130,13 +131,13 @@ class MppidLink(StateClock):
             m = self.t.vehicle_state_t.decode(data)
         except ValueError:
             return
-        if m.n < 3 or not all(math.isfinite(c) for c in m.x[:3]):
+        if m.n <= Q.PZ or not all(math.isfinite(c) for c in m.x[Q.POS]):
             return
         yaw = None
-        if m.n >= 10 and all(math.isfinite(c) for c in m.x[6:10]):
-            w, x, y, z = m.x[6:10]  # ENU/FLU attitude: the heading of the body x axis
+        if m.n > Q.QZ and all(math.isfinite(c) for c in m.x[Q.QUAT]):
+            w, x, y, z = m.x[Q.QUAT]  # ENU/FLU attitude: the heading of the body x axis
             yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        self._set_state(m.sample_utime, np.array(m.x[:3], float), yaw)
+        self._set_state(m.sample_utime, np.array(m.x[Q.POS], float), yaw)
 
     def _on_status(self, ch, data):
         try:

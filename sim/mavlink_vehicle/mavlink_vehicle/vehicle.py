@@ -23,6 +23,8 @@ import time
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from mppi_mavlink.layout import QuadrotorRate as Q  # noqa: E402
+
 from . import ned, plant as pl  # noqa: E402
 
 mavlink = mavutil.mavlink
@@ -224,7 +226,7 @@ class Vehicle:
             self.event("offboard_resumed", reason="setpoints back, OFFBOARD still the intended mode")
         if self.ap == "ardupilot" and self.mode == "GUIDED" and self.taking_off:
             self.taking_off = False
-            self.event("takeoff_taken_over", z=round(self.plant.x[2], 3))
+            self.event("takeoff_taken_over", z=round(self.plant.x[Q.PZ], 3))
 
     def ack(self, cmd, result, text=None):
         self.conn.mav.command_ack_send(cmd, result)
@@ -254,9 +256,9 @@ class Vehicle:
             if mode == "OFFBOARD" and not self.fresh_setpoint():
                 return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
             if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
-                self.hold_sp = list(self.plant.x[0:3])
+                self.hold_sp = list(self.plant.x[Q.POS])
             if mode == "GUIDED":
-                self.hold_sp = list(self.plant.x[0:3])
+                self.hold_sp = list(self.plant.x[Q.POS])
             self.set_mode(mode, "command")
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         if c == mavlink.MAV_CMD_NAV_TAKEOFF:
@@ -270,7 +272,7 @@ class Vehicle:
                 alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
                 self.set_mode("AUTO.TAKEOFF", "command")
             self.takeoff_alt = float(alt)
-            self.hold_sp = [self.plant.x[0], self.plant.x[1], float(alt)]
+            self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], float(alt)]
             self.taking_off = self.ap == "ardupilot"
             self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
@@ -356,13 +358,13 @@ class Vehicle:
     def position_control(self, p_sp, vz_sp=None, yaw_sp=0.0):
         """Cascaded P position -> P velocity -> thrust direction -> body rates (FLU)."""
         x = self.plant.x
-        vs = [min(max(1.0 * (p_sp[i] - x[i]), -2.0), 2.0) for i in range(2)]
-        vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[2]), -1.0), 1.5))
-        a = [min(max(3.0 * (vs[i] - x[3 + i]), -4.0), 4.0) for i in range(3)]
+        vs = [min(max(1.0 * (p_sp[i] - x[Q.PX + i]), -2.0), 2.0) for i in range(2)]
+        vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[Q.PZ]), -1.0), 1.5))
+        a = [min(max(3.0 * (vs[i] - x[Q.VX + i]), -4.0), 4.0) for i in range(3)]
         f = [self.pp.mass * a[0], self.pp.mass * a[1], self.pp.mass * (a[2] + self.pp.gravity)]
         fn = math.sqrt(sum(c * c for c in f))
         bz_des = [c / fn for c in f]
-        r = ned.quat_to_matrix(x[6:10])
+        r = ned.quat_to_matrix(x[Q.QUAT])
         bz = [r[0][2], r[1][2], r[2][2]]
         e = [bz[1] * bz_des[2] - bz[2] * bz_des[1], bz[2] * bz_des[0] - bz[0] * bz_des[2],
              bz[0] * bz_des[1] - bz[1] * bz_des[0]]
@@ -384,20 +386,20 @@ class Vehicle:
             th, p, q, r = self.setpoint
             if self.ap == "ardupilot" and not int(self.params["GUID_OPTIONS"]) & 8:
                 # ArduPilot without bit 3: thrust is a climb rate, 0.5 = hold altitude.
-                u = self.position_control([x[0], x[1], x[2]], vz_sp=(th - 0.5) * 5.0)
-                return [u[0], p, -q, -r]
+                u = self.position_control(list(x[Q.POS]), vz_sp=(th - 0.5) * 5.0)
+                return [u[Q.THRUST], p, -q, -r]
             return [th / hover * self.pp.mass * self.pp.gravity, p, -q, -r]  # FRD -> FLU
         if self.mode == "OFFBOARD" or (self.mode == "GUIDED" and self.setpoint_t is not None):
             # Setpoints late: hold level where it is until they return or the failsafe engages.
             if self.stale_hold is None:
-                self.stale_hold = list(x[0:3])
+                self.stale_hold = list(x[Q.POS])
             return self.position_control(self.stale_hold)
         if self.mode in ("AUTO.LAND", "LAND"):
             if self.hold_sp is None or len(self.hold_sp) != 3:
-                self.hold_sp = list(x[0:3])
-            return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[2] > 0.6 else -0.4)
+                self.hold_sp = list(x[Q.POS])
+            return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[Q.PZ] > 0.6 else -0.4)
         if self.hold_sp is None:
-            self.hold_sp = list(x[0:3])
+            self.hold_sp = list(x[Q.POS])
         if self.plant.on_ground and self.mode not in ("AUTO.TAKEOFF", "GUIDED"):
             return [0.0, 0.0, 0.0, 0.0]  # armed, idle on the ground
         if self.ap == "ardupilot" and self.mode == "LOITER":
@@ -438,7 +440,7 @@ class Vehicle:
         if self.armed and not landing and (low or gcs):
             reason = "battery low" if low else "ground station lost"
             self.counters["failsafes"] += 1
-            self.hold_sp = list(self.plant.x[0:3])
+            self.hold_sp = list(self.plant.x[Q.POS])
             self.set_mode(action, reason)
             self.event("failsafe", reason=reason, action=self.mode)
             self.statustext(f"Failsafe: {reason}, landing", mavlink.MAV_SEVERITY_CRITICAL)
@@ -448,7 +450,7 @@ class Vehicle:
         self.other_failsafes()
         if self.mode == "OFFBOARD" and self.setpoint_t is not None and not self.fresh_setpoint():
             self.counters["failsafes"] += 1
-            self.hold_sp = list(self.plant.x[0:3])
+            self.hold_sp = list(self.plant.x[Q.POS])
             action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
             self.set_mode(action, "offboard lost")
             self.offboard_fallback = True
@@ -458,12 +460,12 @@ class Vehicle:
         if self.mode == "OFFBOARD" and self.setpoint_t is None and not self.plant.on_ground:
             pass
         if self.mode == "AUTO.TAKEOFF" and self.takeoff_alt is not None and \
-                abs(self.plant.x[2] - self.takeoff_alt) < 0.15:
-            self.hold_sp = [self.plant.x[0], self.plant.x[1], self.takeoff_alt]
+                abs(self.plant.x[Q.PZ] - self.takeoff_alt) < 0.15:
+            self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], self.takeoff_alt]
             self.set_mode("AUTO.LOITER", "takeoff complete")
-        if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[2] - self.takeoff_alt) < 0.15):
+        if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[Q.PZ] - self.takeoff_alt) < 0.15):
             self.taking_off = False  # ArduPilot stays in GUIDED, holding where the take-off ended
-            self.event("takeoff_complete", z=round(self.plant.x[2], 3))
+            self.event("takeoff_complete", z=round(self.plant.x[Q.PZ], 3))
         if self.armed and self.plant.on_ground and self.mode in ("AUTO.LAND", "LAND"):
             self.landed_since = self.landed_since if self.landed_since is not None else self.t
             if self.t - self.landed_since > self.params["COM_DISARM_LAND"]:
