@@ -44,6 +44,36 @@ def wall_us():
     return time.time_ns() // 1000
 
 
+def connect(url, system_id, signing_key=None):
+    """The autopilot's end of the link. With a signing key, as an autopilot with signing on:
+    everything it sends is signed, and it takes only messages signed with the key (pymavlink's
+    own implementation, not the bridge's: the test checks one against the other)."""
+    conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
+    if signing_key is not None:
+        conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
+    return conn
+
+
+def default_params(offboard_loss_s):
+    """The stand-in autopilot's parameters before --param.
+
+    COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
+    4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
+    The battery failsafe (PX4 COM_LOW_BAT_ACT 2 or 3: land at BAT_CRIT_THR; ArduPilot
+    BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
+    capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
+    ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
+    without a ground station's HEARTBEAT, once one was heard, armed); PX4's data-link-loss
+    failsafe (NAV_DLL_ACT 1 Hold, 3 Land after COM_DL_LOSS_T s, the same way; 0, PX4's
+    default, off)."""
+    return {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
+            "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
+            "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
+            "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
+            "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
+            "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
+
+
 class Vehicle:
     # ArduPilot flies a rate setpoint for at most this long; later, the vehicle holds level until
     # the next one. PX4 flies the last one until COM_OF_LOSS_T runs out, as the real one does
@@ -53,27 +83,8 @@ class Vehicle:
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
                  state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0, signing_key=None, clock_drift=0.0):
         self.ap = autopilot
-        self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
-        if signing_key is not None:
-            # As an autopilot with signing on: everything it sends is signed, and it takes
-            # only messages signed with the key (pymavlink's own implementation, not the
-            # bridge's: the test checks one against the other).
-            self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
-        # COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
-        # 4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
-        # The battery failsafe (PX4 COM_LOW_BAT_ACT 2 or 3: land at BAT_CRIT_THR; ArduPilot
-        # BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
-        # capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
-        # ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
-        # without a ground station's HEARTBEAT, once one was heard, armed); PX4's data-link-loss
-        # failsafe (NAV_DLL_ACT 1 Hold, 3 Land after COM_DL_LOSS_T s, the same way; 0, PX4's
-        # default, off).
-        self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
-                       "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
-                       "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
-                       "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
-                       "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
-                       "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
+        self.conn = connect(url, system_id, signing_key)
+        self.params = default_params(offboard_loss_s)
         self.battery = 90.0                # % remaining
         self.last_gcs_t = None
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
