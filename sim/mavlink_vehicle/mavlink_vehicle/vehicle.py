@@ -248,45 +248,11 @@ class Vehicle:
     def on_command(self, m):
         c = m.command
         if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            if m.param1 >= 0.5:
-                why = self.arming_check()
-                if why:
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Arming denied: " + why)
-                self.armed = True
-                self.landed_since = None
-                self.event("armed")
-            else:
-                if not self.plant.on_ground and int(m.param2) != 21196:
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Disarm denied: in air")
-                self.disarm("command")
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_arm_disarm(m)
         if c == mavlink.MAV_CMD_DO_SET_MODE:
-            mode = self.decode_mode(m)
-            if mode is None:
-                return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
-            if mode == "OFFBOARD" and not self.fresh_setpoint():
-                return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
-            if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
-                self.hold_sp = list(self.plant.x[Q.POS])
-            if mode == "GUIDED":
-                self.hold_sp = list(self.plant.x[Q.POS])
-            self.set_mode(mode, "command")
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_set_mode(m)
         if c == mavlink.MAV_CMD_NAV_TAKEOFF:
-            if not self.armed:
-                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: disarmed")
-            if self.ap == "ardupilot":
-                if self.mode != "GUIDED":
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: not in GUIDED")
-                alt = m.param7
-            else:
-                alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
-                self.set_mode("AUTO.TAKEOFF", "command")
-            self.takeoff_alt = float(alt)
-            self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], float(alt)]
-            self.taking_off = self.ap == "ardupilot"
-            self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_takeoff(m)
         if c == mavlink.MAV_CMD_NAV_LAND:
             self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", "command")
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
@@ -296,6 +262,55 @@ class Vehicle:
         if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def on_arm_disarm(self, m):
+        """Arms after the arming check; disarms on the ground, or in the air when forced (21196)."""
+        c = m.command
+        if m.param1 >= 0.5:
+            why = self.arming_check()
+            if why:
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Arming denied: " + why)
+            self.armed = True
+            self.landed_since = None
+            self.event("armed")
+        else:
+            if not self.plant.on_ground and int(m.param2) != 21196:
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Disarm denied: in air")
+            self.disarm("command")
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+
+    def on_set_mode(self, m):
+        """A known mode; OFFBOARD only with fresh setpoints; the holding modes hold where it is."""
+        c = m.command
+        mode = self.decode_mode(m)
+        if mode is None:
+            return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
+        if mode == "OFFBOARD" and not self.fresh_setpoint():
+            return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
+        if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
+            self.hold_sp = list(self.plant.x[Q.POS])
+        if mode == "GUIDED":
+            self.hold_sp = list(self.plant.x[Q.POS])
+        self.set_mode(mode, "command")
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+
+    def on_takeoff(self, m):
+        """Armed only; ArduPilot in GUIDED to param7, PX4 into AUTO.TAKEOFF (MIS_TAKEOFF_ALT without param7)."""
+        c = m.command
+        if not self.armed:
+            return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: disarmed")
+        if self.ap == "ardupilot":
+            if self.mode != "GUIDED":
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: not in GUIDED")
+            alt = m.param7
+        else:
+            alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
+            self.set_mode("AUTO.TAKEOFF", "command")
+        self.takeoff_alt = float(alt)
+        self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], float(alt)]
+        self.taking_off = self.ap == "ardupilot"
+        self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
 
     def set_stream(self, msg_id: int, interval_us: float):
         """ArduPilot's MAV_CMD_SET_MESSAGE_INTERVAL: -1 stops a message, 0 is its default
