@@ -168,14 +168,7 @@ class Vehicle:
             if t == "SET_ATTITUDE_TARGET":
                 self.on_setpoint(msg, now)
             elif t == "HEARTBEAT":
-                if msg.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
-                    self.counters["heartbeats_from_companion"] += 1
-                    if self.companion is None:
-                        self.companion = (msg.get_srcSystem(), msg.get_srcComponent())
-                        self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
-                elif msg.type == mavlink.MAV_TYPE_GCS:
-                    self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
-                    self.last_gcs_t = self.t
+                self.on_heartbeat(msg)
             elif t == "STATUSTEXT":  # a companion's, which an autopilot routes to the ground station
                 self.on_statustext(msg)
             elif t == "COMMAND_LONG":
@@ -183,18 +176,34 @@ class Vehicle:
                             "params": [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                                        msg.param7]})
                 self.on_command(msg)
-            elif t == "PARAM_REQUEST_READ":
-                self._wire({"mono_us": now, "type": t, "id": _pid(msg.param_id)})
-                self.send_param(_pid(msg.param_id))
-            elif t == "PARAM_REQUEST_LIST":
-                for name in sorted(self.params):
-                    self.send_param(name)
-            elif t == "PARAM_SET":
-                name = _pid(msg.param_id)
-                self._wire({"mono_us": now, "type": t, "id": name, "value": msg.param_value})
-                if name in self.params and math.isfinite(msg.param_value):
-                    self.params[name] = float(msg.param_value)
+            elif t.startswith("PARAM_"):
+                self.on_param_message(msg, t, now)
+
+    def on_heartbeat(self, msg):
+        """A companion's (the bridge's: counted, the first one an event) or a ground station's."""
+        if msg.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
+            self.counters["heartbeats_from_companion"] += 1
+            if self.companion is None:
+                self.companion = (msg.get_srcSystem(), msg.get_srcComponent())
+                self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
+        elif msg.type == mavlink.MAV_TYPE_GCS:
+            self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
+            self.last_gcs_t = self.t
+
+    def on_param_message(self, msg, t, now):
+        """PARAM_REQUEST_READ, PARAM_REQUEST_LIST and PARAM_SET (a known name, a finite value)."""
+        if t == "PARAM_REQUEST_READ":
+            self._wire({"mono_us": now, "type": t, "id": _pid(msg.param_id)})
+            self.send_param(_pid(msg.param_id))
+        elif t == "PARAM_REQUEST_LIST":
+            for name in sorted(self.params):
                 self.send_param(name)
+        elif t == "PARAM_SET":
+            name = _pid(msg.param_id)
+            self._wire({"mono_us": now, "type": t, "id": name, "value": msg.param_value})
+            if name in self.params and math.isfinite(msg.param_value):
+                self.params[name] = float(msg.param_value)
+            self.send_param(name)
 
     def on_statustext(self, m):
         """Recorded as a ground station shows it: MAVLink 2 chunks (one id, 50 characters each
@@ -537,25 +546,29 @@ class Vehicle:
             self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, self.landed_state())
 
     # ---- run ----------------------------------------------------------------------------
+    def step_physics(self, next_state):
+        """Physics steps up to the wall clock, stopping at the next telemetry tick (next_state)."""
+        target = time.monotonic() - self.boot
+        steps = 0
+        while self.t + self.dt <= target:
+            self.plant.u = self.plant.saturate(self.control())
+            self.plant.step(self.dt)
+            self.t += self.dt
+            self.supervise()
+            steps += 1
+            if steps >= 50:  # fell > 0.1 s behind: skip, don't catch up
+                self.counters["overruns"] += 1
+                self.t = target
+                break
+            if self.t >= next_state:
+                break  # telemetry at its tick, not after a catch-up burst
+
     def run(self, duration=0.0, stop=None):
         next_state = next_hb = next_slow = next_mission = 0.0
         fd = self.conn.fd if hasattr(self.conn, "fd") and self.conn.fd is not None else None
         while stop is None or not stop.is_set():
             self.receive()
-            target = time.monotonic() - self.boot
-            steps = 0
-            while self.t + self.dt <= target:
-                self.plant.u = self.plant.saturate(self.control())
-                self.plant.step(self.dt)
-                self.t += self.dt
-                self.supervise()
-                steps += 1
-                if steps >= 50:  # fell > 0.1 s behind: skip, don't catch up
-                    self.counters["overruns"] += 1
-                    self.t = target
-                    break
-                if self.t >= next_state:
-                    break  # telemetry at its tick, not after a catch-up burst
+            self.step_physics(next_state)
             if self.t >= next_state:
                 next_state = max(next_state + self.state_period, self.t)
                 self.send_telemetry()
