@@ -2,9 +2,13 @@
 
 Usage: python test_python_types.py <build>/python
 """
+import argparse
 import sys
 
-sys.path.insert(0, sys.argv[1])
+parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+parser.add_argument("python_dir", metavar="PYTHON_DIR",
+                    help="the build's generated Python package folder (<build>/python)")
+sys.path.insert(0, parser.parse_args().python_dir)
 
 import mppi_lcm  # noqa: E402
 

@@ -42,6 +42,7 @@ import threading
 import time
 from pathlib import Path
 
+from mppi_mavlink.layout import QuadrotorRate as Q
 from sitl_harness import paths
 from sitl_harness.sandbox import Sandbox, deathsig_setter, enter_private_network
 
@@ -174,7 +175,7 @@ class Soak:
         if mutate == "nan":
             s.seq += 1
             s.x = list(s.x)
-            s.x[0] = float("nan")
+            s.x[Q.PX] = float("nan")
         data = s.encode()
         for _ in range(copies):
             self.lc.publish("SOAK_STATE", data)

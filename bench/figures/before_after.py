@@ -3,10 +3,10 @@ medians of time to goal, closest obstacle, tracking RMSE and compute p99, deadli
 
     python3 bench/figures/before_after.py OUT
 """
+import argparse
 import glob
 import json
 import statistics
-import sys
 
 
 def median(rows, key):
@@ -28,4 +28,7 @@ def main(out: str):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", metavar="OUT", help="bench/figures/before-after's output folder "
+                        "(OUT/<tree label>/<scenario>/seed_<n>/score.json)")
+    main(parser.parse_args().out)

@@ -8,8 +8,8 @@ alone (the paper's model moves the car sideways by vy, which its tires do not se
 the track residual d = (x/13)^2 + (y/6)^2 - 1 (the scenario ends the flight at 0.6); slip:
 the ground slip atan2(vy, vx), rad.
 """
+import argparse
 import json
-import sys
 
 import numpy as np
 
@@ -28,4 +28,7 @@ def main(folders):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folders", nargs="+", metavar="FOLDER",
+                        help="a SITL result folder holding truth.jsonl and score.json")
+    main(parser.parse_args().folders)

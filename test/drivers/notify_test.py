@@ -2,6 +2,7 @@
 WATCHDOG_USEC set, as systemd does for Type=notify with WatchdogSec. Checks READY=1 (after
 the self-test and warm-up logs), WATCHDOG=1 pings at WatchdogSec/4, a STATUS= line with rate
 and misses, STOPPING=1 and exit 0 on SIGTERM. Usage: notify_test.py MPPID CONFIG"""
+import argparse
 import os
 import signal
 import socket
@@ -12,7 +13,11 @@ import time
 
 
 def main():
-    mppid, config = sys.argv[1], sys.argv[2]
+    parser = argparse.ArgumentParser(description=__doc__.split(". ")[0])
+    parser.add_argument("mppid", help="the mppid binary")
+    parser.add_argument("config", help="the daemon configuration it runs")
+    args = parser.parse_args()
+    mppid, config = args.mppid, args.config
     d = tempfile.mkdtemp()
     path = os.path.join(d, "notify")
     s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)

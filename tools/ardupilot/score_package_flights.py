@@ -7,6 +7,7 @@ markdown table beside the package test's own verdicts (results.json).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -32,8 +33,11 @@ def row(name: str, s: dict) -> str:
             f"{s.get(kind + '_max', nan):.3f} | {est:.3f} | {s.get('max_tilt_deg') or nan:.0f} |")
 
 
-def main() -> int:
-    folder = Path(sys.argv[1])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folder", type=Path, metavar="DIR",
+                        help="the folder given to tools/package-test.sh --keep (results.json and one folder per flight)")
+    folder = parser.parse_args(argv).folder
     results = json.loads((folder / "results.json").read_text())
     print("| flight | mission | success | truth RMSE m | truth max m | estimate RMSE m | max tilt deg |")
     print("|---|---|---|---|---|---|---|")

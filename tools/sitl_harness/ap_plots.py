@@ -11,6 +11,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from mppi_mavlink.layout import QuadrotorRate as Q  # noqa: E402
 
 from . import ap_score, plots  # noqa: E402
 from .logs import read_jsonl  # noqa: E402
@@ -51,13 +52,13 @@ def _path(out, truth, mission):
         top.plot(ref[:, 0], ref[:, 1], "k--", lw=0.8)
         err_t.append(t_truth[sel])
         err.append(np.linalg.norm(X[sel] - ref, axis=1))
-    top.plot(X[:, 0], X[:, 1], lw=1.0, c="tab:blue", label="true path")
+    top.plot(X[:, Q.PX], X[:, Q.PY], lw=1.0, c="tab:blue", label="true path")
     top.set_aspect("equal")
     top.set_xlabel("x east [m]")
     top.set_ylabel("y north [m]")
     top.legend(loc="best", fontsize=8)
     t0 = t_truth[0]
-    side.plot((t_truth - t0) * 1e-6, X[:, 2], c="tab:blue", lw=0.9, label="altitude [m]")
+    side.plot((t_truth - t0) * 1e-6, X[:, Q.PZ], c="tab:blue", lw=0.9, label="altitude [m]")
     if err:
         side.plot((np.concatenate(err_t) - t0) * 1e-6, np.concatenate(err), c="tab:red", lw=0.8,
                   label="distance to the reference [m]")

@@ -17,6 +17,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import paths
 from .logs import read_jsonl
@@ -113,15 +114,15 @@ def _legs(mission, t_truth, X, est, settle) -> dict:
 def _safety(truth, events, X, flying, head) -> dict:
     crashes = []
     tilt = np.array([r.get("tilt_deg", 0.0) for r in truth])
-    airborne = np.flatnonzero(X[:, 2] > 0.5)
+    airborne = np.flatnonzero(X[:, Q.PZ] > 0.5)
     if airborne.size:
         # After the first take-off and before the last landing began (the mode left GUIDED).
         lo = airborne[0]
         land = [i for i, r in enumerate(truth) if i > lo and r.get("mode") == "LAND"]
         hi = land[0] if land else len(truth)
-        low = np.flatnonzero((X[lo:hi, 2] < GROUND_Z) & flying[lo:hi])
+        low = np.flatnonzero((X[lo:hi, Q.PZ] < GROUND_Z) & flying[lo:hi])
         if low.size:
-            crashes.append(f"ground contact while flying, {X[lo + low[0], :2].round(2).tolist()}")
+            crashes.append(f"ground contact while flying, {X[lo + low[0], Q.PX:Q.PY + 1].round(2).tolist()}")
         over = np.flatnonzero(tilt[lo:hi] > CRASH_TILT_DEG)
         if over.size:
             crashes.append(f"tilted past {CRASH_TILT_DEG:g} degrees")
@@ -133,7 +134,7 @@ def _safety(truth, events, X, flying, head) -> dict:
     trees = head.get("trees") or []
     if trees:
         vr = float(head.get("vehicle_radius", 0.2))
-        air = X[:, 2] > 0.3
+        air = X[:, Q.PZ] > 0.3
         d = [min(math.hypot(p[0] - x, p[1] - y) - r - vr for x, y, r in trees) for p in X[air]]
         res["min_clearance"] = float(min(d)) if d else None
     return res

@@ -38,6 +38,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("MAVLINK20", "1")
+from mppi_mavlink import frames  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 mavlink = mavutil.mavlink
@@ -163,7 +164,7 @@ class Recorder:
         if t == "LOCAL_POSITION_NED":
             self.boot_us = m.time_boot_ms * 1000
             self.position_wall_us = time.time_ns() // 1000
-            self.est = [m.y, m.x, -m.z]
+            self.est = list(frames.ned_to_enu((m.x, m.y, m.z)))
             self._write_truth(True)
         elif t == "SIM_STATE":
             self._write_truth(False)  # one never followed by a position: with the one before

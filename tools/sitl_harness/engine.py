@@ -342,6 +342,26 @@ def make_engine(name: str, jobs: int | None = None, address: str | None = None, 
 
 
 # ---- the flights ---------------------------------------------------------------------------
+def _final_score(job, res: dict, why: str | None, attempts: int, notes: list[str]) -> dict:
+    """A job's score after its last attempt: the flight's, or a failure naming why the task
+    failed (`why`); with the attempts, and the retries' notes (in the folder's score.json too)."""
+    score = res.get("score")
+    if why:
+        score = {"scenario": job.label, "seed": job.seed, "success": False,
+                 "reason": f"task failed {attempts} times: {why}",
+                 **({"sim_outcome": score.get("sim_outcome")} if score else {})}
+        score["task_failed"] = True
+    score["attempts"] = attempts
+    if notes:
+        score["retried"] = list(notes)
+        # The folder's score.json says it too.
+        try:
+            (Path(job.out) / "score.json").write_text(json.dumps(score, indent=2))
+        except OSError:
+            pass
+    return score
+
+
 def run_flights(engine, jobs, progress: Progress | None = None, on_result=None, poll: float = 0.5) -> list[dict]:
     """Flies `jobs` on `engine`; returns one score per job, in job order (a job stopped by
     on_result returning True, and the ones not started then, are left out). Retries a
@@ -371,22 +391,9 @@ def run_flights(engine, jobs, progress: Progress | None = None, on_result=None, 
                         progress.retry(f"{job.label}#{job.seed}", why)
                     pending.appendleft(job)
                     continue
-                score = res.get("score")
                 if why:
                     notes[job.index].append(f"attempt {attempts[job.index]}: {why}")
-                    score = {"scenario": job.label, "seed": job.seed, "success": False,
-                             "reason": f"task failed {attempts[job.index]} times: {why}",
-                             **({"sim_outcome": score.get("sim_outcome")} if score else {})}
-                    score["task_failed"] = True
-                score["attempts"] = attempts[job.index]
-                if notes[job.index]:
-                    score["retried"] = list(notes[job.index])
-                    # The folder's score.json says it too.
-                    try:
-                        (Path(job.out) / "score.json").write_text(json.dumps(score, indent=2))
-                    except OSError:
-                        pass
-                results[job.index] = score
+                score = results[job.index] = _final_score(job, res, why, attempts[job.index], notes[job.index])
                 if progress:
                     progress.update(bool(score.get("success")), f"{job.label}#{job.seed}")
                 if on_result is not None and on_result(job, score) and not stop:

@@ -10,6 +10,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from mppi_mavlink.layout import Cartpole, Racecar  # noqa: E402
 
 from . import logs, timing  # noqa: E402
 
@@ -47,12 +48,12 @@ def plot_flight(out: Path) -> list[Path]:
 def _cartpole_path(out, world, t, X):
     fig = plt.figure(figsize=(11, 7.5))
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2)
-    ax1.plot(t, X[:, 2], label="theta (0 = down)")
+    ax1.plot(t, X[:, Cartpole.THETA], label="theta (0 = down)")
     ax1.axhline(np.pi, ls="--", c="k", lw=0.8, label="upright")
     ax1.axhline(-np.pi, ls="--", c="k", lw=0.8)
     ax1.set_ylabel("pole angle [rad]")
     ax1.legend()
-    ax2.plot(t, X[:, 0], label="cart x")
+    ax2.plot(t, X[:, Cartpole.X], label="cart x")
     ax2.set_ylabel("cart position [m]")
     ax2.set_xlabel("t [s]")
     fig.suptitle(f"{world['scenario']} seed {world['seed']}")
@@ -86,8 +87,8 @@ def _path(out, world, t, X, ticks, events, model, nx, m):
     if model == "racecar":
         a = np.linspace(0, 2 * np.pi, 400)
         ax1.plot(13 * np.cos(a), 6 * np.sin(a), "k--", lw=0.8, label="track centre")
-        ax1.plot(X[:, 0], X[:, 1], lw=1.2, label="car")
-        sp = np.hypot(X[:, 4], X[:, 5])
+        ax1.plot(X[:, Racecar.X], X[:, Racecar.Y], lw=1.2, label="car")
+        sp = np.hypot(X[:, Racecar.VX], X[:, Racecar.VY])
         ax2.plot(t, sp, label="speed")
         ax2.axhline(7.0, c="k", ls="--", lw=0.8)
         ax2.set_ylabel("speed [m/s]")

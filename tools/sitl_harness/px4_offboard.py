@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink import frames
 from mppi_mission import plan as plan_mod
 from mppi_mission.vehicles import FlightError, GuidedLink, _wait, arm_when_ready
 
@@ -43,10 +44,10 @@ class Px4OffboardLink(GuidedLink):
                 continue
             t = msg.get_type()
             if t == "LOCAL_POSITION_NED":
-                self._set_state(msg.time_boot_ms * 1000, np.array([msg.y, msg.x, -msg.z]))
+                self._set_state(msg.time_boot_ms * 1000, np.array(frames.ned_to_enu((msg.x, msg.y, msg.z))))
             elif t == "ATTITUDE_QUATERNION":  # the NED heading -> ENU yaw
                 w, x, y, z = msg.q1, msg.q2, msg.q3, msg.q4
-                self.yaw = math.pi / 2 - math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+                self.yaw = frames.yaw_ned_to_enu(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
             elif t == "HEARTBEAT" and msg.get_srcSystem() == self.target and msg.get_srcComponent() == 1:
                 self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
                 self.custom_mode = msg.custom_mode

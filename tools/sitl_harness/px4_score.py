@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import ap_score
 from .logs import read_jsonl
@@ -134,9 +135,9 @@ def fault_report(truth: list[dict], fault: dict, window_s: float = 10.0) -> dict
            "statustexts": [(rel(e), e["text"]) for e in events if e["event"] == "statustext"][:16]}
     if after:
         X = np.array([r["x"] for r in after])
-        rep.update(alt_at_fault=round(float(X[0, 2]), 2), min_alt=round(float(X[:, 2].min()), 2),
+        rep.update(alt_at_fault=round(float(X[0, Q.PZ]), 2), min_alt=round(float(X[:, Q.PZ].min()), 2),
                    max_tilt_deg=max(r["tilt_deg"] for r in after),
-                   drift_m=round(float(np.max(np.linalg.norm(X[:, :2] - X[0, :2], axis=1))), 2))
+                   drift_m=round(float(np.max(np.linalg.norm(X[:, Q.PX:Q.PY + 1] - X[0, Q.PX:Q.PY + 1], axis=1))), 2))
     return rep
 
 

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("MAVLINK20", "1")
+from mppi_mavlink import frames  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 mavlink = mavutil.mavlink
@@ -67,7 +68,7 @@ class Recorder:
                 print(json.dumps({"event": "ready"}), flush=True)
                 said = True
             self.write({"truth": 1, "boot_us": m.time_usec, "lat": m.lat, "lon": m.lon, "alt": m.alt,
-                        "v": [m.vy / 100.0, m.vx / 100.0, -m.vz / 100.0],
+                        "v": [c / 100.0 for c in frames.ned_to_enu((m.vx, m.vy, m.vz))],
                         "q": [round(c, 6) for c in m.attitude_quaternion]})
 
     def run_gcs(self, stop):
@@ -84,7 +85,7 @@ class Recorder:
     def handle(self, m):
         t = m.get_type()
         if t == "LOCAL_POSITION_NED":
-            self.write({"est": [round(m.y, 4), round(m.x, 4), round(-m.z, 4)], "boot_us": m.time_boot_ms * 1000})
+            self.write({"est": [round(c, 4) for c in frames.ned_to_enu((m.x, m.y, m.z))], "boot_us": m.time_boot_ms * 1000})
         elif t == "HEARTBEAT" and m.get_srcComponent() == 1 and m.autopilot == mavlink.MAV_AUTOPILOT_PX4:
             mode, armed = px4_mode(m.custom_mode), bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             if mode != self.mode:

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from mppi_mavlink.layout import Cartpole, QuadrotorRate as Q, Racecar
 
 from . import logs, paths, sensing, timing
 
@@ -165,16 +166,17 @@ def _log_figures(spec, ticks, lcm: dict) -> dict:
 def _mean_speed(model: str, X: np.ndarray) -> float:
     """The cart's or the race car's mean speed (a quadrotor's: _quad_speeds)."""
     if model == "cartpole":
-        return float(np.nanmean(np.abs(X[:, 1])))
-    return float(np.nanmean(np.hypot(X[:, 4], X[:, 5])))
+        return float(np.nanmean(np.abs(X[:, Cartpole.XDOT])))
+    return float(np.nanmean(np.hypot(X[:, Racecar.VX], X[:, Racecar.VY])))
 
 
 def _quad_speeds(world: dict, X: np.ndarray) -> dict:
     """mean_speed over every vehicle's samples; peak_speed: the fastest any vehicle flew;
     forest_speed: the mean speed while inside the obstacles' x extent (the trees, not the
-    run-up and the stop at the goal), None without. The speeds are computed once for all three."""
+    run-up and the stop at the goal), None without. The speeds are computed once for all three.
+    Both quadrotor models put position and velocity first (layout.Quadrotor, QuadrotorRate)."""
     nx, m = int(world.get("nx", X.shape[1])), int(world.get("vehicles", 1))
-    speeds = np.stack([np.linalg.norm(X[:, v * nx + 3:v * nx + 6], axis=1) for v in range(m)])
+    speeds = np.stack([np.linalg.norm(X[:, v * nx + Q.VX:v * nx + Q.VZ + 1], axis=1) for v in range(m)])
     obstacles = np.asarray(world.get("obstacles") or [], float).reshape(-1, 5)
     finite = np.isfinite(speeds).any()
     out = {"mean_speed": float(np.nanmean(speeds)) if finite else float("nan"),
@@ -229,7 +231,7 @@ def _goal(res: dict, crit: dict, f: Flown) -> None:
 def _tracking(res: dict, crit: dict, f: Flown) -> None:
     ref = f.world.get("reference", {})
     sel = f.t >= float(crit.get("settle", 0.0))
-    err = np.linalg.norm(f.X[sel, 0:3] - reference_eval(ref, f.t[sel]), axis=1)
+    err = np.linalg.norm(f.X[sel, Q.POS] - reference_eval(ref, f.t[sel]), axis=1)
     res["tracking_rmse"] = float(np.sqrt(np.mean(err ** 2))) if err.size else None
     ok = res["tracking_rmse"] is not None and res["tracking_rmse"] <= float(crit.get("max_rmse", 0.5))
     res["success"] = bool(f.full and ok)
@@ -248,7 +250,7 @@ def _mission(res: dict, crit: dict, f: Flown) -> None:
 
 def _swingup(res: dict, crit: dict, f: Flown) -> None:
     t, X = f.t, f.X
-    th, w = X[:, 2], X[:, 3]
+    th, w = X[:, Cartpole.THETA], X[:, Cartpole.THETADOT]
     err = np.abs(_wrap(th - np.pi))
     upright = (err < float(crit.get("angle_tol", 0.3))) & (np.abs(w) < float(crit.get("rate_tol", 2.0)))
     hold = t >= t[-1] - float(crit.get("hold", 2.0))
@@ -263,8 +265,9 @@ def _swingup(res: dict, crit: dict, f: Flown) -> None:
 
 def _laps(res: dict, crit: dict, f: Flown) -> None:
     X = f.X
-    d = (X[:, 0] / 13.0) ** 2 + (X[:, 1] / 6.0) ** 2 - 1.0
-    ang = np.unwrap(np.arctan2(X[:, 1] / 6.0, X[:, 0] / 13.0))
+    x, y = X[:, Racecar.X], X[:, Racecar.Y]
+    d = (x / 13.0) ** 2 + (y / 6.0) ** 2 - 1.0
+    ang = np.unwrap(np.arctan2(y / 6.0, x / 13.0))
     laps = abs(ang[-1] - ang[0]) / (2 * np.pi)
     res["laps"] = float(laps)
     res["tracking_rmse"] = float(np.sqrt(np.mean(d ** 2)))

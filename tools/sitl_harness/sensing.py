@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import logs
 
@@ -62,7 +63,7 @@ def sensing_figures(out: Path, world: dict, t: np.ndarray | None, X: np.ndarray 
     if t is None or X is None or not len(t) or not trees:
         return {"sensing": res}
     per_tree = []
-    for i, (dmin, tmin) in enumerate(closest_approaches(trees, t, X[:, :2])):
+    for i, (dmin, tmin) in enumerate(closest_approaches(trees, t, X[:, Q.PX:Q.PY + 1])):
         if dmin > PASSED_WITHIN_M:
             continue
         f = first[i]

@@ -54,23 +54,35 @@ def status_timing(status_msgs) -> dict:
                              "compute_ms_p99_worst_window", "period_ms_p99_worst_window",
                              "jitter_ms_p99_worst_window")}
     out.update(compute_samples_ms=None, timing_cycles=0, timing_source=None)
-    msgs = list(status_msgs)
-    if not msgs:
+    windows = _status_windows(list(status_msgs))
+    if not windows:
         return out
-    # Windows: each message covers the cycles since the previous one (counter `cycles`
-    # runs since start). Messages that close an empty window (the final status, say) or
-    # step the counter back (a restarted daemon) hold no cycles.
-    windows = []  # (cycles in the window, message)
+    total = sum(n for n, _ in windows)
+    _window_figures(out, windows, total)
+    single = [m for n, m in windows if n == 1]
+    if total > 0 and len(single) >= PER_CYCLE_MIN_COVERAGE * total:
+        _per_cycle_figures(out, single)
+    return out
+
+
+def _status_windows(msgs) -> list:
+    """(cycles in the window, message) for each message that covers cycles.
+
+    Each message covers the cycles since the previous one (counter `cycles` runs since
+    start). Messages that close an empty window (the final status, say) or step the counter
+    back (a restarted daemon) hold no cycles."""
+    windows = []
     prev = 0
     for m in msgs:
         n = int(m.cycles) - prev
         if n > 0:
             windows.append((n, m))
         prev = max(prev, int(m.cycles))
-    if not windows:
-        return out
-    total = sum(n for n, _ in windows)
+    return windows
 
+
+def _window_figures(out: dict, windows, total: int) -> None:
+    """The worst window's p99s and maximum, the cycle-weighted mean compute time."""
     def worst(field):
         vals = [getattr(m, field) for _, m in windows if _finite(getattr(m, field))]
         return float(max(vals)) if vals else None
@@ -85,24 +97,24 @@ def status_timing(status_msgs) -> dict:
     out["timing_cycles"] = total
     out["timing_source"] = "status windows"
 
-    single = [m for n, m in windows if n == 1]
-    if total > 0 and len(single) >= PER_CYCLE_MIN_COVERAGE * total:
-        comp = np.array([m.compute_ms_last for m in single], float)
-        comp = comp[np.isfinite(comp)]
-        # The first cycle has no period; a one-cycle window's p99 is that cycle's value.
-        per = np.array([m.period_ms_p99 for m in single[1:]], float)
-        jit = np.array([m.jitter_ms_p99 for m in single[1:]], float)
-        per, jit = per[np.isfinite(per)], jit[np.isfinite(jit)]
-        if comp.size:
-            out["compute_ms_p99"] = float(np.percentile(comp, 99))
-            out["compute_ms_p50"] = float(np.percentile(comp, 50))
-            out["compute_samples_ms"] = comp.tolist()
-            out["timing_source"] = "per-cycle status"
-        if per.size:
-            out["period_ms_p99"] = float(np.percentile(per, 99))
-        if jit.size:
-            out["jitter_ms_p99"] = float(np.percentile(jit, 99))
-    return out
+
+def _per_cycle_figures(out: dict, single) -> None:
+    """Percentiles over one-cycle windows (a status per cycle): each holds its cycle's values."""
+    comp = np.array([m.compute_ms_last for m in single], float)
+    comp = comp[np.isfinite(comp)]
+    # The first cycle has no period; a one-cycle window's p99 is that cycle's value.
+    per = np.array([m.period_ms_p99 for m in single[1:]], float)
+    jit = np.array([m.jitter_ms_p99 for m in single[1:]], float)
+    per, jit = per[np.isfinite(per)], jit[np.isfinite(jit)]
+    if comp.size:
+        out["compute_ms_p99"] = float(np.percentile(comp, 99))
+        out["compute_ms_p50"] = float(np.percentile(comp, 50))
+        out["compute_samples_ms"] = comp.tolist()
+        out["timing_source"] = "per-cycle status"
+    if per.size:
+        out["period_ms_p99"] = float(np.percentile(per, 99))
+    if jit.size:
+        out["jitter_ms_p99"] = float(np.percentile(jit, 99))
 
 
 def command_timing(command_msgs) -> dict:

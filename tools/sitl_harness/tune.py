@@ -164,13 +164,7 @@ def resolve_params(names, ranges: dict, settings: dict, config_name: str) -> lis
     user's --set applied). TuneError naming the field on anything unknown or unusable."""
     out = []
     for name in names:
-        d = TABLE.get(name)
-        if d is None:
-            sec = name.split(".", 1)[0]
-            if "." not in name or sec not in SECTIONS or not name.split(".", 1)[1]:
-                raise TuneError(f"{name}: unknown tuning parameter (known: {', '.join(TABLE)}, "
-                                f"or a settings key {'|'.join(SECTIONS)}.FIELD)")
-            d = ParamDef(name, "float", 0.1, 10.0, True)
+        d = _param_def(name)
         base = _lookup(settings, d.key)
         kind = d.kind
         if kind == "float" and isinstance(base, list):
@@ -179,29 +173,9 @@ def resolve_params(names, ranges: dict, settings: dict, config_name: str) -> lis
         if kind == "factor" and not (isinstance(base, list) and base and
                                      all(isinstance(x, (int, float)) for x in base)):
             raise TuneError(f"{d.key}: expected a list of numbers in {config_name} to scale, found {base!r}")
-        if name in ranges:
-            lo, hi, scale = ranges[name]
-            log = d.log if scale is None else scale == "log"
-        elif not d.rel:
-            lo, hi, log = d.lo, d.hi, d.log
-        else:
-            x = 1.0 if kind == "factor" else base
-            if isinstance(x, bool) or not isinstance(x, (int, float)):
-                raise TuneError(f"{d.key}: no number for it in {config_name} (found {base!r}): "
-                                f"give its range with --range {name}=LO:HI")
-            if x <= 0:
-                raise TuneError(f"{d.key}: its value in {config_name} is {x}, no range relative to it: "
-                                f"give one with --range {name}=LO:HI")
-            lo, hi, log = x * d.lo, x * d.hi, d.log
-            if d.floor is not None:
-                lo = max(lo, d.floor)
+        lo, hi, log = _range(name, d, kind, base, ranges, config_name)
         if kind in ("int", "odd"):
-            lo, hi = math.ceil(lo), math.floor(hi)
-            if kind == "odd":
-                lo += 1 - lo % 2 if lo % 2 == 0 else 0
-                hi -= 1 - hi % 2 if hi % 2 == 0 else 0
-            if hi <= lo:
-                raise TuneError(f"{d.key}: no integer range in [{lo}, {hi}]")
+            lo, hi = _integer_range(d, kind, lo, hi)
         if log and lo <= 0:
             raise TuneError(f"{d.key}: a log-scale range must be > 0 (got {lo:g}:{hi:g}; add :linear)")
         if not lo < hi:
@@ -212,6 +186,50 @@ def resolve_params(names, ranges: dict, settings: dict, config_name: str) -> lis
     if dup:
         raise TuneError(f"{', '.join(sorted(dup))}: named twice in --params")
     return out
+
+
+def _param_def(name: str) -> ParamDef:
+    """The table's entry, or a float scaled 0.1x..10x for any other settings key SECTION.FIELD."""
+    d = TABLE.get(name)
+    if d is None:
+        sec = name.split(".", 1)[0]
+        if "." not in name or sec not in SECTIONS or not name.split(".", 1)[1]:
+            raise TuneError(f"{name}: unknown tuning parameter (known: {', '.join(TABLE)}, "
+                            f"or a settings key {'|'.join(SECTIONS)}.FIELD)")
+        d = ParamDef(name, "float", 0.1, 10.0, True)
+    return d
+
+
+def _range(name: str, d: ParamDef, kind: str, base, ranges: dict, config_name: str) -> tuple:
+    """(lo, hi, log): the user's --range, the table's absolute one, or the table's relative one
+    around the task's value (`base`; 1 for a factor)."""
+    if name in ranges:
+        lo, hi, scale = ranges[name]
+        return lo, hi, d.log if scale is None else scale == "log"
+    if not d.rel:
+        return d.lo, d.hi, d.log
+    x = 1.0 if kind == "factor" else base
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise TuneError(f"{d.key}: no number for it in {config_name} (found {base!r}): "
+                        f"give its range with --range {name}=LO:HI")
+    if x <= 0:
+        raise TuneError(f"{d.key}: its value in {config_name} is {x}, no range relative to it: "
+                        f"give one with --range {name}=LO:HI")
+    lo, hi = x * d.lo, x * d.hi
+    if d.floor is not None:
+        lo = max(lo, d.floor)
+    return lo, hi, d.log
+
+
+def _integer_range(d: ParamDef, kind: str, lo, hi) -> tuple[int, int]:
+    """The integers (odd ones for "odd") within [lo, hi]; TuneError when none fit."""
+    lo, hi = math.ceil(lo), math.floor(hi)
+    if kind == "odd":
+        lo += 1 - lo % 2 if lo % 2 == 0 else 0
+        hi -= 1 - hi % 2 if hi % 2 == 0 else 0
+    if hi <= lo:
+        raise TuneError(f"{d.key}: no integer range in [{lo}, {hi}]")
+    return lo, hi
 
 
 def validate_with_daemon(cfg: Path, base_sets, params: list[Param], backend: str) -> None:
@@ -314,48 +332,58 @@ def add_tune_parser(sub):
     return t
 
 
+def _tuning_seeds(a) -> list[int]:
+    """--seeds: 1-MAX_TUNING_SEED only, unless --allow-test-seeds."""
+    from .campaign import parse_seeds
+
+    try:
+        seeds = parse_seeds(a.seeds, 1)
+    except ValueError as e:
+        raise TuneError(str(e)) from None
+    bad = [s for s in seeds if s > MAX_TUNING_SEED]
+    if bad and not a.allow_test_seeds:
+        raise TuneError(f"--seeds: tuning uses seeds 1-{MAX_TUNING_SEED} only (got {bad[0]}"
+                        f"{' ...' if len(bad) > 1 else ''}); seeds above are for reporting "
+                        "(--allow-test-seeds to override)")
+    return seeds
+
+
+def _settings_file(docs: dict) -> Path:
+    """The one controller settings file the scenarios share (TuneError when they differ)."""
+    cfgs = set()
+    for label, doc in docs.items():
+        mp = doc.get("mppid") or {}
+        cfgs.add(paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{doc['task']}.yaml")
+    if len(cfgs) != 1:
+        raise TuneError("the scenarios use different controller settings files "
+                        f"({', '.join(sorted(str(c) for c in cfgs))}): tune one task at a time")
+    return cfgs.pop()
+
+
+def _base_sets(a) -> list:
+    """--overlay files' settings, then --set: applied to every trial."""
+    try:
+        over = [kv for f in a.overlay for kv in ovl.load_sets(f)]
+    except ovl.OverlayError as e:
+        raise TuneError(str(e)) from None
+    return over + list(a.set)
+
+
 class Study:
     def __init__(self, a):
-        from .campaign import parse_seeds, resolve_scenarios
+        from .campaign import resolve_scenarios
 
         self.a = a
-        try:
-            self.seeds = parse_seeds(a.seeds, 1)
-        except ValueError as e:
-            raise TuneError(str(e)) from None
-        bad = [s for s in self.seeds if s > MAX_TUNING_SEED]
-        if bad and not a.allow_test_seeds:
-            raise TuneError(f"--seeds: tuning uses seeds 1-{MAX_TUNING_SEED} only (got {bad[0]}"
-                            f"{' ...' if len(bad) > 1 else ''}); seeds above are for reporting "
-                            "(--allow-test-seeds to override)")
+        self.seeds = _tuning_seeds(a)
         names = [s.strip() for s in a.scenarios.split(",") if s.strip()]
         try:
             self.scenarios = resolve_scenarios(names)
         except (FileNotFoundError, ValueError) as e:
             raise TuneError(str(e)) from None
         self.docs = {label: yaml.safe_load(paths.scenario_path(spec).read_text()) for spec, label in self.scenarios}
-        cfgs = set()
-        for label, doc in self.docs.items():
-            mp = doc.get("mppid") or {}
-            cfgs.add(paths.ROOT / mp["config"] if mp.get("config") else paths.TASKS / f"{doc['task']}.yaml")
-        if len(cfgs) != 1:
-            raise TuneError("the scenarios use different controller settings files "
-                            f"({', '.join(sorted(str(c) for c in cfgs))}): tune one task at a time")
-        self.cfg = cfgs.pop()
-        try:
-            over = [kv for f in a.overlay for kv in ovl.load_sets(f)]
-        except ovl.OverlayError as e:
-            raise TuneError(str(e)) from None
-        self.base_sets = over + list(a.set)
-        settings = ovl.merge_config(self.cfg, self.base_sets)
-        names = [p.strip() for p in a.params.split(",") if p.strip()]
-        if not names:
-            raise TuneError("--params: no parameter")
-        rel = self.cfg.relative_to(paths.ROOT) if self.cfg.is_relative_to(paths.ROOT) else self.cfg
-        self.params = resolve_params(names, parse_ranges(a.range), settings, str(rel))
-        unknown_ranges = set(parse_ranges(a.range)) - set(names)
-        if unknown_ranges:
-            raise TuneError(f"--range {', '.join(sorted(unknown_ranges))}: not in --params")
+        self.cfg = _settings_file(self.docs)
+        self.base_sets = _base_sets(a)
+        self.params = self._resolve_params()
         # The scenario's own mppid.set come first in a flight, like in `sitl run`.
         scen_sets = [str(kv) for d in self.docs.values() for kv in ((d.get("mppid") or {}).get("set") or [])]
         validate_with_daemon(self.cfg, scen_sets + self.base_sets, self.params, a.backend)
@@ -366,6 +394,20 @@ class Study:
         self.out = Path(a.out or paths.ROOT / "results" / "tune" / a.study).resolve()
         if a.trials < 1:
             raise TuneError("--trials: at least 1")
+
+    def _resolve_params(self) -> list[Param]:
+        """--params and --range against the settings file with the base sets applied."""
+        a = self.a
+        settings = ovl.merge_config(self.cfg, self.base_sets)
+        names = [p.strip() for p in a.params.split(",") if p.strip()]
+        if not names:
+            raise TuneError("--params: no parameter")
+        rel = self.cfg.relative_to(paths.ROOT) if self.cfg.is_relative_to(paths.ROOT) else self.cfg
+        params = resolve_params(names, parse_ranges(a.range), settings, str(rel))
+        unknown_ranges = set(parse_ranges(a.range)) - set(names)
+        if unknown_ranges:
+            raise TuneError(f"--range {', '.join(sorted(unknown_ranges))}: not in --params")
+        return params
 
     def definition(self) -> dict:
         """What the study is; a resumed study must be the same."""

@@ -74,6 +74,27 @@ def prior_axis(prior: dict, data: logs.FlightData, axis: int, delay: float, grid
     return fixed_axis(data, axis, float(rr["gain"][axis]), float(rr["tau"][axis]), delay, grid)
 
 
+def read_flight(a, prior: dict) -> logs.FlightData:
+    """The log: ArduPilot dataflash (--dataflash), PX4 ULog (--ulog or .ulg), else mppid's LCM log."""
+    if a.dataflash:
+        return logs.read_dataflash(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
+    if a.ulog or Path(a.log).suffix == ".ulg":
+        return logs.read_ulog(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
+    return logs.read_lcm(a.log, a.lockstep_latency)
+
+
+def fit_figures(delay, thrust, thrust_own, axes, own, excited) -> dict:
+    """The report's "fit": the common delay, the thrust fit, each axis's fit beside its own-delay fit."""
+    return {
+        "delay_s": delay, "mass_kg": thrust.mass, "drag_n_s_m": thrust.drag, "accel_m_s2": thrust.accel,
+        "thrust_delay_s": thrust_own.delay, "thrust_rmse_m_s2": thrust.rmse,
+        "axes": {AXES[i]: {"gain": axes[i].gain, "tau_s": axes[i].tau, "rmse_rad_s": axes[i].rmse,
+                           "own_delay_s": own[i].delay, "own_gain": own[i].gain, "own_tau_s": own[i].tau}
+                 for i in range(3)},
+        "kept_prior": [AXES[i] for i in range(3) if i not in excited],
+    }
+
+
 def fit_command(a) -> int:
     from mppi_mavlink import vehicle as vehicle_file
 
@@ -81,12 +102,7 @@ def fit_command(a) -> int:
     if prior["model"] != "quadrotor_rate":
         print(f"sysid: {a.vehicle} describes a {prior['model']}; tools/sysid fits the rate model", file=sys.stderr)
         return 1
-    if a.dataflash:
-        data = logs.read_dataflash(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
-    elif a.ulog or Path(a.log).suffix == ".ulg":
-        data = logs.read_ulog(a.log, prior["mass"], prior["gravity"], prior["hover_thrust"])
-    else:
-        data = logs.read_lcm(a.log, a.lockstep_latency)
+    data = read_flight(a, prior)
     split = data.split_time(1.0 - a.holdout)
     counted = sum(t1 - t0 for t0, t1 in data.spans())
     train, held = data.between(data.t[0], split), data.between(split, data.t[-1] + 1.0)
@@ -105,14 +121,7 @@ def fit_command(a) -> int:
         "commands": int(len(data.u)), "fit_s": (1.0 - a.holdout) * counted, "held_out_s": a.holdout * counted,
         "engaged_s": None if data.engaged is None else counted,
         "hover_thrust_logged": data.hover_thrust,
-        "fit": {
-            "delay_s": delay, "mass_kg": thrust.mass, "drag_n_s_m": thrust.drag, "accel_m_s2": thrust.accel,
-            "thrust_delay_s": thrust_own.delay, "thrust_rmse_m_s2": thrust.rmse,
-            "axes": {AXES[i]: {"gain": axes[i].gain, "tau_s": axes[i].tau, "rmse_rad_s": axes[i].rmse,
-                               "own_delay_s": own[i].delay, "own_gain": own[i].gain, "own_tau_s": own[i].tau}
-                     for i in range(3)},
-            "kept_prior": [AXES[i] for i in range(3) if i not in excited],
-        },
+        "fit": fit_figures(delay, thrust, thrust_own, axes, own, excited),
         "vehicle": {k: v for k, v in fitted.items() if k != "path"},
         "held_out": {"prior": prediction_errors(prior_model, held), "fitted": prediction_errors(model, held)},
     }

@@ -5,6 +5,7 @@ with the logged one then. RMSE over the starting points of position, velocity, a
 from __future__ import annotations
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from .logs import FlightData
 from .model import RateModel, attitude_error, predict
@@ -28,8 +29,8 @@ def prediction_errors(m: RateModel, data: FlightData, horizon: float = 0.5, stri
     return {
         "horizon_s": horizon,
         "starts": int(len(k0)),
-        "position_m": rms(np.linalg.norm(xp[:, 0:3] - xt[:, 0:3], axis=1)),
-        "velocity_m_s": rms(np.linalg.norm(xp[:, 3:6] - xt[:, 3:6], axis=1)),
-        "attitude_deg": float(np.degrees(rms(attitude_error(xp[:, 6:10], xt[:, 6:10])))),
-        "rate_rad_s": rms(np.linalg.norm(xp[:, 10:13] - xt[:, 10:13], axis=1)),
+        "position_m": rms(np.linalg.norm(xp[:, Q.POS] - xt[:, Q.POS], axis=1)),
+        "velocity_m_s": rms(np.linalg.norm(xp[:, Q.VEL] - xt[:, Q.VEL], axis=1)),
+        "attitude_deg": float(np.degrees(rms(attitude_error(xp[:, Q.QUAT], xt[:, Q.QUAT])))),
+        "rate_rad_s": rms(np.linalg.norm(xp[:, Q.RATES] - xt[:, Q.RATES], axis=1)),
     }

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 from scipy.optimize import minimize_scalar
 from scipy.signal import lfilter
 
@@ -89,12 +90,12 @@ class Grid:
 
 
 def _rate_cost(grid: Grid, data: FlightData, axis: int, delay: float, tau: float, pairs, gain: float | None = None):
-    u = grid.input(1 + axis, delay)
+    u = grid.input(Q.RATE_X + axis, delay)
     a = np.exp(-GRID_H / tau)
     y = lfilter([0.0, 1.0 - a], [1.0, -a], u)
     i, f = grid.at(data.t)
     yt = np.exp(-f / tau) * y[i] + (1.0 - np.exp(-f / tau)) * u[i]   # exact between grid points
-    w = data.x[:, 10 + axis]
+    w = data.x[:, Q.WX + axis]
     num = den = 0.0
     parts = []
     for k0, k1 in pairs:
@@ -145,7 +146,7 @@ def fit_rate_axis(data: FlightData, axis: int, grid: Grid | None = None, delay: 
 
 def excited_axes(data: FlightData, threshold: float = MIN_EXCITATION) -> list[int]:
     """The body axes whose commanded rate varies (standard deviation at least `threshold`)."""
-    return [a for a in range(3) if float(np.std(data.u[:, 1 + a])) >= threshold]
+    return [a for a in range(3) if float(np.std(data.u[:, Q.RATE_X + a])) >= threshold]
 
 
 def fixed_axis(data: FlightData, axis: int, gain: float, tau: float, delay: float, grid: Grid | None = None) -> AxisFit:
@@ -181,15 +182,15 @@ def fit_thrust(data: FlightData, grid: Grid | None = None, delay: float | None =
     dt = t[k1] - t[k0]
     period = float(np.median(dt))
     k0, k1, dt = (a[np.abs(dt - period) < 0.5 * period] for a in (k0, k1, dt))
-    qm = 0.5 * (x[k0, 6:10] + x[k1, 6:10])
+    qm = 0.5 * (x[k0, Q.QUAT] + x[k1, Q.QUAT])
     qm /= np.linalg.norm(qm, axis=1, keepdims=True)
     qw, qx, qy, qz = qm.T
     b = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)], axis=1)
-    dv = x[k1, 3:6] - x[k0, 3:6]
-    iv = 0.5 * (x[k0, 3:6] + x[k1, 3:6]) * dt[:, None]
+    dv = x[k1, Q.VEL] - x[k0, Q.VEL]
+    iv = 0.5 * (x[k0, Q.VEL] + x[k1, Q.VEL]) * dt[:, None]
 
     def solve(d):
-        it = grid.integral(0, d, t[k1]) - grid.integral(0, d, t[k0])
+        it = grid.integral(Q.THRUST, d, t[k1]) - grid.integral(Q.THRUST, d, t[k0])
         rows, rhs = [], []
         g = np.array([0.0, 0.0, gravity])
         for c in range(3):

@@ -255,20 +255,20 @@ def read_dataflash(path: str | Path, mass: float, gravity: float, hover_throttle
     interp = lambda src, col: np.interp(t, src[:, 0], src[:, col])  # noqa: E731
     q_ned = _q_from_euler_ned(interp(att, 1) * d2r, interp(att, 2) * d2r, interp(att, 3) * d2r)
     q = np.array([frames.q_ned_frd_to_enu_flu(tuple(r)) for r in q_ned])
-    p = np.stack([interp(ekf, 2), interp(ekf, 1), -interp(ekf, 3)], axis=1)   # NED -> ENU
-    v = np.stack([interp(ekf, 5), interp(ekf, 4), -interp(ekf, 6)], axis=1)
-    w = np.stack([rate[:, 2], -rate[:, 4], -rate[:, 6]], axis=1) * d2r          # FRD -> FLU
+    p = np.stack(frames.ned_to_enu([interp(ekf, c) for c in (1, 2, 3)]), axis=1)
+    v = np.stack(frames.ned_to_enu([interp(ekf, c) for c in (4, 5, 6)]), axis=1)
+    w = np.stack(frames.frd_to_flu([rate[:, c] for c in (2, 4, 6)]), axis=1) * d2r
     x = np.concatenate([p, v, q, w], axis=1)
     notes = []
     if counts["GUIA"] >= 50:
         g = np.array(rows["GUIA"], dtype=np.float64)
         tc = g[:, 0]
-        u = np.stack([g[:, 4] * newtons, g[:, 1] * d2r, -g[:, 2] * d2r, -g[:, 3] * d2r], axis=1)
+        u = np.stack([g[:, 4] * newtons, *frames.frd_to_flu([g[:, c] * d2r for c in (1, 2, 3)])], axis=1)
         notes.append("dataflash: GUIDED's attitude targets (GUIA) as the input")
     else:
         tc = t
-        u = np.stack([np.interp(t, ctun[:, 0], ctun[:, 1]) * newtons, rate[:, 1] * d2r, -rate[:, 3] * d2r,
-                      -rate[:, 5] * d2r], axis=1)
+        u = np.stack([np.interp(t, ctun[:, 0], ctun[:, 1]) * newtons,
+                      *frames.frd_to_flu([rate[:, c] * d2r for c in (1, 3, 5)])], axis=1)
         notes.append("dataflash without GUIA: RATE's desired rates and CTUN.ThO as the input, after ArduCopter's "
                      "input shaping (the fit leaves the shaping out)")
     t0 = min(t[0], tc[0])
@@ -345,12 +345,13 @@ def read_ulog(path: str | Path, mass: float, gravity: float, hover_throttle: flo
     interp = lambda src, key: np.interp(t, src["timestamp"], src[key])  # noqa: E731
     q_ned = np.stack([interp(att, f"q[{i}]") for i in range(4)], axis=1)
     q = np.array([frames.q_ned_frd_to_enu_flu(tuple(r / np.linalg.norm(r))) for r in q_ned])
-    p = np.stack([interp(lpos, "y"), interp(lpos, "x"), -interp(lpos, "z")], axis=1)
-    v = np.stack([interp(lpos, "vy"), interp(lpos, "vx"), -interp(lpos, "vz")], axis=1)
-    w = np.stack([interp(w_log, "xyz[0]"), -interp(w_log, "xyz[1]"), -interp(w_log, "xyz[2]")], axis=1)
+    p = np.stack(frames.ned_to_enu([interp(lpos, k) for k in ("x", "y", "z")]), axis=1)
+    v = np.stack(frames.ned_to_enu([interp(lpos, k) for k in ("vx", "vy", "vz")]), axis=1)
+    w = np.stack(frames.frd_to_flu([interp(w_log, f"xyz[{i}]") for i in range(3)]), axis=1)
     x = np.concatenate([p, v, q, w], axis=1)
     tc = rates["timestamp"]
-    u = np.stack([-rates["thrust_body[2]"] * newtons, rates["roll"], -rates["pitch"], -rates["yaw"]], axis=1)
+    u = np.stack([-rates["thrust_body[2]"] * newtons, *frames.frd_to_flu([rates[k] for k in ("roll", "pitch", "yaw")])],
+                 axis=1)
     t0 = min(t[0], tc[0])
     data = FlightData((t - t0) * 1e-6, x, (tc - t0) * 1e-6, u, str(path), "ulog", hover,
                       ["ulog: vehicle_rates_setpoint as the input (in OFFBOARD: the offboard rate setpoints)"])

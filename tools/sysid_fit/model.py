@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 
 @dataclass
@@ -36,19 +37,19 @@ def command_index(tc: np.ndarray, t: np.ndarray, delay: float) -> np.ndarray:
 
 
 def derivative(m: RateModel, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-    qw, qx, qy, qz = x[:, 6], x[:, 7], x[:, 8], x[:, 9]
-    wx, wy, wz = x[:, 10], x[:, 11], x[:, 12]
+    qw, qx, qy, qz = x[:, Q.QW], x[:, Q.QX], x[:, Q.QY], x[:, Q.QZ]
+    wx, wy, wz = x[:, Q.WX], x[:, Q.WY], x[:, Q.WZ]
     b = np.stack([2 * (qx * qz + qw * qy), 2 * (qy * qz - qw * qx), 1 - 2 * (qx * qx + qy * qy)], axis=1)
     dx = np.empty_like(x)
-    dx[:, 0:3] = x[:, 3:6]
-    dx[:, 3:6] = (u[:, 0:1] / m.mass) * b - (m.drag / m.mass) * x[:, 3:6]
-    dx[:, 5] -= m.gravity
-    dx[:, 6] = 0.5 * (-qx * wx - qy * wy - qz * wz)
-    dx[:, 7] = 0.5 * (qw * wx + qy * wz - qz * wy)
-    dx[:, 8] = 0.5 * (qw * wy - qx * wz + qz * wx)
-    dx[:, 9] = 0.5 * (qw * wz + qx * wy - qy * wx)
+    dx[:, Q.POS] = x[:, Q.VEL]
+    dx[:, Q.VEL] = (u[:, Q.THRUST:Q.THRUST + 1] / m.mass) * b - (m.drag / m.mass) * x[:, Q.VEL]
+    dx[:, Q.VZ] -= m.gravity
+    dx[:, Q.QW] = 0.5 * (-qx * wx - qy * wy - qz * wz)
+    dx[:, Q.QX] = 0.5 * (qw * wx + qy * wz - qz * wy)
+    dx[:, Q.QY] = 0.5 * (qw * wy - qx * wz + qz * wx)
+    dx[:, Q.QZ] = 0.5 * (qw * wz + qx * wy - qy * wx)
     for a in range(3):
-        dx[:, 10 + a] = (m.gain[a] * u[:, 1 + a] - x[:, 10 + a]) / m.tau[a]
+        dx[:, Q.WX + a] = (m.gain[a] * u[:, Q.RATE_X + a] - x[:, Q.WX + a]) / m.tau[a]
     return dx
 
 
@@ -66,7 +67,7 @@ def predict(m: RateModel, x0: np.ndarray, t0: np.ndarray, horizon: float, tc: np
         k3 = derivative(m, x + 0.5 * h * k2, uc)
         k4 = derivative(m, x + h * k3, uc)
         x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
-        x[:, 6:10] /= np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+        x[:, Q.QUAT] /= np.linalg.norm(x[:, Q.QUAT], axis=1, keepdims=True)
     return x
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from mppi_mavlink.layout import QuadrotorRate as Q
 from scipy.optimize import least_squares
 
 from .fit import GRID_H, Grid
@@ -32,9 +33,9 @@ class SecondOrderFit:
 
 
 def _predict(grid: Grid, data: FlightData, axis: int, starts: np.ndarray, gain, wn, zeta, delay) -> np.ndarray:
-    u = grid.input(1 + axis, delay)
-    w = data.x[starts, 10 + axis].copy()
-    wd = (data.x[starts, 10 + axis] - data.x[starts - 1, 10 + axis]) / (data.t[starts] - data.t[starts - 1])
+    u = grid.input(Q.RATE_X + axis, delay)
+    w = data.x[starts, Q.WX + axis].copy()
+    wd = (data.x[starts, Q.WX + axis] - data.x[starts - 1, Q.WX + axis]) / (data.t[starts] - data.t[starts - 1])
     t = data.t[starts].copy()
     out = []
     for n in range(1, STEPS + 1):
@@ -53,7 +54,7 @@ def _predict(grid: Grid, data: FlightData, axis: int, starts: np.ndarray, gain, 
 def fit_second_order(data: FlightData, axis: int, grid: Grid | None = None, stride: int = 2) -> SecondOrderFit:
     grid = grid or Grid(data)
     starts = np.arange(2, len(data.t) - STEPS - 1, stride)
-    truth = np.stack([data.x[starts + n, 10 + axis] for n in range(1, STEPS + 1)], axis=1)
+    truth = np.stack([data.x[starts + n, Q.WX + axis] for n in range(1, STEPS + 1)], axis=1)
     best = None
     for delay in np.arange(0.0, 0.05 + 1e-9, 0.005):
         r = least_squares(lambda p: (_predict(grid, data, axis, starts, p[0], p[1], p[2], delay) - truth).ravel(),

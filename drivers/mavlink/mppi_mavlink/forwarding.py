@@ -18,6 +18,7 @@ import threading
 import time
 
 from . import frames
+from .layout import QuadrotorRate as Q
 from .autopilots.base import mavlink
 from .engagement import ENGAGED, PRESTREAM
 from .gate import GateContext, gate, seq_restarted
@@ -114,8 +115,8 @@ class Forwarder:
             del self.ready_times[:256]
 
     def _forward(self, cmd, received: int):
-        thrust = self.checks.thrust.to_normalized(float(cmd.u[0]))
-        rates = frames.flu_to_frd((float(cmd.u[1]), float(cmd.u[2]), float(cmd.u[3])))
+        thrust = self.checks.thrust.to_normalized(float(cmd.u[Q.THRUST]))
+        rates = frames.flu_to_frd(tuple(float(c) for c in cmd.u[Q.BODY_RATES]))
         if not all(math.isfinite(c) for c in (thrust,) + tuple(rates)):  # the last gate before the encoder
             self.counters["dropped_nonfinite"] += 1
             return

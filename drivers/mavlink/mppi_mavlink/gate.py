@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .layout import QuadrotorRate as Q
+
 
 @dataclass(frozen=True)
 class GateContext:
@@ -69,7 +71,7 @@ def gate(cmd, ctx: GateContext) -> str | None:
         return reason
     if ctx.status_us is None or ctx.now_us - ctx.status_us > ctx.status_timeout_us or not ctx.status_healthy:
         return "unhealthy"
-    if not all(math.isfinite(float(c)) for c in cmd.u[:4]):
+    if not all(math.isfinite(float(c)) for c in cmd.u[:len(Q.COMMAND)]):
         return "nonfinite"
     if ctx.state_published_us is None or ctx.now_us - ctx.state_published_us > ctx.max_state_age_us:
         return "stale"

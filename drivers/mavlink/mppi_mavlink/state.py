@@ -22,6 +22,7 @@ from collections import OrderedDict
 
 from . import clock_sync, frames, telemetry
 from .autopilots.base import mavlink
+from .layout import QuadrotorRate as Q
 
 
 PAIR_MS = 2                    # an attitude and a position this close in time_boot_ms are one sample
@@ -158,12 +159,12 @@ class StatePublisher:
         msg.sample_utime = self.boot_clock.update(int(boot_us), recv_wall)
         msg.model = self.mppi_lcm.vehicle_state_t.MODEL_QUADROTOR_RATE
         msg.vehicle_count = 1
-        msg.nx = 13
-        msg.n = 13
+        msg.nx = len(Q.STATE)
+        msg.n = len(Q.STATE)
         msg.x = x
         self.publish(self.channel, msg.encode())
         with self.lock:
             self.times[msg.seq] += (mono_us(),)  # after the LCM publish
-        self.last_p = tuple(x[0:3])
+        self.last_p = tuple(x[Q.POS])
         self.counters["states_published"] += 1
         self.rate.add(time.monotonic())

@@ -61,27 +61,45 @@ def parse(doc, where: str = "vehicle file") -> dict:
     v["estimate_lag"] = _num(where, "estimate_lag", doc.get("estimate_lag", 0.0), 0.0, 0.5)
     h = doc.get("hover_thrust")
     v["hover_thrust"] = None if h is None else _num(where, "hover_thrust", h, 0.01, 0.99)
-    lim = doc.get("limits")
     if v["model"] == "quadrotor_rate":
-        if lim is None:
-            raise VehicleError(f"{where}: limits: missing (max_thrust, max_body_rate)")
-        _known(where, "limits", lim, {"max_thrust", "max_body_rate"})
-        v["limits"] = {"max_thrust": _num(where, "limits.max_thrust", lim.get("max_thrust"), 1e-3, 1e6),
-                       "max_body_rate": _axes(where, "limits.max_body_rate", lim.get("max_body_rate"), 1e-3, 100.0)}
-        rr = doc.get("rate_response") or {}
-        _known(where, "rate_response", rr, {"tau", "gain", "delay"})
-        v["rate_response"] = {"tau": _axes(where, "rate_response.tau", rr.get("tau", 0.05), 1e-3, 10.0),
-                              "gain": _axes(where, "rate_response.gain", rr.get("gain", 1.0), 0.05, 20.0),
-                              "delay": _num(where, "rate_response.delay", rr.get("delay", 0.0), 0.0, 1.0)}
+        v.update(_rate_model_fields(doc, where))
     elif v["model"] == "quadrotor":
-        if doc.get("rate_response") is not None:
-            raise VehicleError(f"{where}: rate_response: only for model quadrotor_rate")
-        if lim is None:
-            raise VehicleError(f"{where}: limits: missing (max_motor_speed)")
-        _known(where, "limits", lim, {"max_motor_speed"})
-        v["limits"] = {"max_motor_speed": _num(where, "limits.max_motor_speed", lim.get("max_motor_speed"), 1.0, 1e6)}
+        v.update(_motor_model_fields(doc, where))
     else:
         raise VehicleError(f"{where}: model: must be quadrotor_rate or quadrotor, got {v['model']!r}")
+    v["params"] = _params(doc, where)
+    return v
+
+
+def _rate_model_fields(doc, where: str) -> dict:
+    """quadrotor_rate's limits (required) and rate_response (defaults: tau 0.05, gain 1, delay 0)."""
+    lim = doc.get("limits")
+    if lim is None:
+        raise VehicleError(f"{where}: limits: missing (max_thrust, max_body_rate)")
+    _known(where, "limits", lim, {"max_thrust", "max_body_rate"})
+    limits = {"max_thrust": _num(where, "limits.max_thrust", lim.get("max_thrust"), 1e-3, 1e6),
+              "max_body_rate": _axes(where, "limits.max_body_rate", lim.get("max_body_rate"), 1e-3, 100.0)}
+    rr = doc.get("rate_response") or {}
+    _known(where, "rate_response", rr, {"tau", "gain", "delay"})
+    return {"limits": limits,
+            "rate_response": {"tau": _axes(where, "rate_response.tau", rr.get("tau", 0.05), 1e-3, 10.0),
+                              "gain": _axes(where, "rate_response.gain", rr.get("gain", 1.0), 0.05, 20.0),
+                              "delay": _num(where, "rate_response.delay", rr.get("delay", 0.0), 0.0, 1.0)}}
+
+
+def _motor_model_fields(doc, where: str) -> dict:
+    """quadrotor's limits (max_motor_speed, required); no rate_response."""
+    lim = doc.get("limits")
+    if doc.get("rate_response") is not None:
+        raise VehicleError(f"{where}: rate_response: only for model quadrotor_rate")
+    if lim is None:
+        raise VehicleError(f"{where}: limits: missing (max_motor_speed)")
+    _known(where, "limits", lim, {"max_motor_speed"})
+    return {"limits": {"max_motor_speed": _num(where, "limits.max_motor_speed", lim.get("max_motor_speed"), 1.0, 1e6)}}
+
+
+def _params(doc, where: str) -> dict:
+    """params: name: number, none of them a field of the file's own (OWN_FIELDS, rate_*)."""
     params = doc.get("params") or {}
     if not isinstance(params, dict):
         raise VehicleError(f"{where}: params: expected a map of name: number")
@@ -89,8 +107,7 @@ def parse(doc, where: str = "vehicle file") -> dict:
         if k in OWN_FIELDS or str(k).startswith("rate_"):
             raise VehicleError(f"{where}: params.{k}: has its own field in a vehicle file")
         _num(where, f"params.{k}", x, -1e12, 1e12)
-    v["params"] = dict(params)
-    return v
+    return dict(params)
 
 
 def load(path: str | Path) -> dict:

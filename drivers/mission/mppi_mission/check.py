@@ -17,9 +17,8 @@ from __future__ import annotations
 import math
 import time
 
-# quadrotor_rate's state and command (core/include/mppi/models/quadrotor_rate.hpp).
-QW, QX, QY, QZ, WX, WY, WZ = 6, 7, 8, 9, 10, 11, 12
-THRUST, RATE_X, RATE_Y = 0, 1, 2
+from mppi_mavlink.layout import QuadrotorRate as Q
+
 TILT_DEG = 5.0          # below this the vehicle counts as level (no sign to check)
 SMALL_RATE = 0.3        # rad/s: a mean rate command below this has no sign to check
 MODES = {0: "normal", 1: "hold_plan", 2: "failsafe"}
@@ -27,7 +26,7 @@ MODES = {0: "normal", 1: "hold_plan", 2: "failsafe"}
 
 def euler_deg(x) -> tuple[float, float, float]:
     """Roll, pitch, yaw [deg] of the state's attitude quaternion (w, x, y, z; body to world)."""
-    w, qx, qy, qz = x[QW], x[QX], x[QY], x[QZ]
+    w, qx, qy, qz = x[Q.QUAT]
     roll = math.atan2(2 * (w * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
     pitch = math.asin(max(-1.0, min(1.0, 2 * (w * qy - qz * qx))))
     yaw = math.atan2(2 * (w * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
@@ -45,11 +44,11 @@ def verdict(tilt_deg: float, rate_cmd: float) -> str:
 
 def line(x, u, mode: int, hover_n: float | None) -> str:
     r, p, y = euler_deg(x)
-    share = f" ({u[THRUST] / hover_n:.2f} x hover)" if hover_n else ""
-    return (f"autopilot: roll {r:+6.1f} pitch {p:+6.1f} yaw {y:+6.1f} deg, rates {x[WX]:+.2f} {x[WY]:+.2f} "
-            f"{x[WZ]:+.2f} rad/s | mppid ({MODES.get(mode, mode)}): thrust {u[THRUST]:5.2f} N{share}, rates "
-            f"{u[RATE_X]:+.2f} {u[RATE_Y]:+.2f} {u[3]:+.2f} rad/s | roll {verdict(r, u[RATE_X])}, "
-            f"pitch {verdict(p, u[RATE_Y])}")
+    share = f" ({u[Q.THRUST] / hover_n:.2f} x hover)" if hover_n else ""
+    return (f"autopilot: roll {r:+6.1f} pitch {p:+6.1f} yaw {y:+6.1f} deg, rates {x[Q.WX]:+.2f} {x[Q.WY]:+.2f} "
+            f"{x[Q.WZ]:+.2f} rad/s | mppid ({MODES.get(mode, mode)}): thrust {u[Q.THRUST]:5.2f} N{share}, rates "
+            f"{u[Q.RATE_X]:+.2f} {u[Q.RATE_Y]:+.2f} {u[Q.RATE_Z]:+.2f} rad/s | roll {verdict(r, u[Q.RATE_X])}, "
+            f"pitch {verdict(p, u[Q.RATE_Y])}")
 
 
 def run(lcm_url: str, seconds: float, hover_n: float | None, say=print) -> int:

@@ -119,27 +119,14 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
     unknown = set(doc) - TOP_KEYS
     if unknown:
         raise PlanError(f"{sorted(unknown)[0]}: unknown field (fields: {', '.join(sorted(TOP_KEYS))})")
-    legs = doc.get("legs")
-    if not isinstance(legs, list) or not legs:
-        raise PlanError("legs: a list of at least one leg")
-    yaw = doc.get("yaw", "hold")
-    _check_yaw("yaw", yaw)
-    for i, leg in enumerate(legs):
-        _check_leg(i, leg)
-        kind, a = next(iter(leg.items()))
-        _check_yaw(f"legs[{i}].{kind}.yaw", a.get("yaw", yaw), kind)
+    legs, yaw = _checked_legs(doc)
     frame = doc.get("frame", "start")
     if frame not in ("start", "local"):
         raise PlanError(f"frame: start or local, got {frame!r}")
     takeoff = doc.get("takeoff")
     if takeoff is not None and not _num(takeoff, 0.5, 100):
         raise PlanError(f"takeoff: an altitude in [0.5, 100] m, got {takeoff!r}")
-    obstacles = doc.get("obstacles") or {}
-    if set(obstacles) - {"trees", "forest"}:
-        raise PlanError("obstacles: trees and/or forest")
-    for j, tr in enumerate(obstacles.get("trees", [])):
-        if not (isinstance(tr, list) and len(tr) == 3 and all(_num(c) for c in tr) and tr[2] > 0):
-            raise PlanError(f"obstacles.trees[{j}]: [x, y, radius] with radius > 0")
+    obstacles = _checked_obstacles(doc)
     score = doc.get("score") or {}
     settle = score.get("settle", 3.0)
     if not _num(settle, 0, 600):
@@ -161,6 +148,31 @@ def from_dict(doc: dict, default_name="mission") -> Mission:
                 sensing=sensing)
     check_fence(m)
     return m
+
+
+def _checked_legs(doc: dict) -> tuple[list, object]:
+    """The legs (each checked, its yaw against the mission's) and the mission's yaw."""
+    legs = doc.get("legs")
+    if not isinstance(legs, list) or not legs:
+        raise PlanError("legs: a list of at least one leg")
+    yaw = doc.get("yaw", "hold")
+    _check_yaw("yaw", yaw)
+    for i, leg in enumerate(legs):
+        _check_leg(i, leg)
+        kind, a = next(iter(leg.items()))
+        _check_yaw(f"legs[{i}].{kind}.yaw", a.get("yaw", yaw), kind)
+    return legs, yaw
+
+
+def _checked_obstacles(doc: dict) -> dict:
+    """obstacles: trees [x, y, radius] and/or a forest."""
+    obstacles = doc.get("obstacles") or {}
+    if set(obstacles) - {"trees", "forest"}:
+        raise PlanError("obstacles: trees and/or forest")
+    for j, tr in enumerate(obstacles.get("trees", [])):
+        if not (isinstance(tr, list) and len(tr) == 3 and all(_num(c) for c in tr) and tr[2] > 0):
+            raise PlanError(f"obstacles.trees[{j}]: [x, y, radius] with radius > 0")
+    return obstacles
 
 
 def check_fence(m: Mission, dt: float = 0.05):
@@ -204,15 +216,8 @@ def _point(v) -> bool:
     return isinstance(v, list) and len(v) == 3 and all(_num(c) for c in v)
 
 
-def _check_leg(i: int, leg):
-    if not isinstance(leg, dict) or len(leg) != 1 or next(iter(leg)) not in LEG_KEYS:
-        raise PlanError(f"legs[{i}]: one of {', '.join(LEG_KEYS)}, as `- kind: {{...}}`")
-    kind, a = next(iter(leg.items()))
-    a = a or {}
-    leg[kind] = a
-    where = f"legs[{i}].{kind}"
-    if set(a) - LEG_KEYS[kind]:
-        raise PlanError(f"{where}.{sorted(set(a) - LEG_KEYS[kind])[0]}: unknown (fields: {sorted(LEG_KEYS[kind])})")
+def _check_points(where: str, kind: str, a: dict):
+    """The leg's points: each [x, y, z]; a goal's `at`, a line's `to`, the waypoints' list."""
     for key in ("at", "to", "center"):
         if key in a and not _point(a[key]):
             raise PlanError(f"{where}.{key}: a point [x, y, z]")
@@ -223,14 +228,31 @@ def _check_leg(i: int, leg):
     if kind == "waypoints" and not (isinstance(a.get("points"), list) and a["points"]
                                     and all(_point(p) for p in a["points"])):
         raise PlanError(f"{where}.points: a list of points [x, y, z]")
+
+
+def _check_curve(where: str, a: dict):
+    """A circle's or figure-eight's center, radius and speed (required), radius and laps in range."""
+    for key in ("center", "radius", "speed"):
+        if key not in a:
+            raise PlanError(f"{where}.{key}: required")
+    if not _num(a["radius"], 0.5, 1000):
+        raise PlanError(f"{where}.radius: metres in [0.5, 1000]")
+    if not _num(a.get("laps", 1), 0.1, 1000):
+        raise PlanError(f"{where}.laps: in [0.1, 1000]")
+
+
+def _check_leg(i: int, leg):
+    if not isinstance(leg, dict) or len(leg) != 1 or next(iter(leg)) not in LEG_KEYS:
+        raise PlanError(f"legs[{i}]: one of {', '.join(LEG_KEYS)}, as `- kind: {{...}}`")
+    kind, a = next(iter(leg.items()))
+    a = a or {}
+    leg[kind] = a
+    where = f"legs[{i}].{kind}"
+    if set(a) - LEG_KEYS[kind]:
+        raise PlanError(f"{where}.{sorted(set(a) - LEG_KEYS[kind])[0]}: unknown (fields: {sorted(LEG_KEYS[kind])})")
+    _check_points(where, kind, a)
     if kind in ("circle", "figure_eight"):
-        for key in ("center", "radius", "speed"):
-            if key not in a:
-                raise PlanError(f"{where}.{key}: required")
-        if not _num(a["radius"], 0.5, 1000):
-            raise PlanError(f"{where}.radius: metres in [0.5, 1000]")
-        if not _num(a.get("laps", 1), 0.1, 1000):
-            raise PlanError(f"{where}.laps: in [0.1, 1000]")
+        _check_curve(where, a)
     if kind in ("line", "waypoints", "circle", "figure_eight") and not _num(a.get("speed", 1.0), 0.05, 30):
         raise PlanError(f"{where}.speed: m/s in [0.05, 30]")
     if "ramp" in a and not _num(a["ramp"], 0, 60):

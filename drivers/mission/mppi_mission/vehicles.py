@@ -19,6 +19,8 @@ import threading
 import time
 
 import numpy as np
+from mppi_mavlink import frames
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import reference
 
@@ -129,13 +131,13 @@ class MppidLink(StateClock):
             m = self.t.vehicle_state_t.decode(data)
         except ValueError:
             return
-        if m.n < 3 or not all(math.isfinite(c) for c in m.x[:3]):
+        if m.n <= Q.PZ or not all(math.isfinite(c) for c in m.x[Q.POS]):
             return
         yaw = None
-        if m.n >= 10 and all(math.isfinite(c) for c in m.x[6:10]):
-            w, x, y, z = m.x[6:10]  # ENU/FLU attitude: the heading of the body x axis
+        if m.n > Q.QZ and all(math.isfinite(c) for c in m.x[Q.QUAT]):
+            w, x, y, z = m.x[Q.QUAT]  # ENU/FLU attitude: the heading of the body x axis
             yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        self._set_state(m.sample_utime, np.array(m.x[:3], float), yaw)
+        self._set_state(m.sample_utime, np.array(m.x[Q.POS], float), yaw)
 
     def _on_status(self, ch, data):
         try:
@@ -261,7 +263,7 @@ class GuidedLink(StateClock):
                 continue
             t = msg.get_type()
             if t == "LOCAL_POSITION_NED":
-                self._set_state(msg.time_boot_ms * 1000, np.array([msg.y, msg.x, -msg.z]))
+                self._set_state(msg.time_boot_ms * 1000, np.array(frames.ned_to_enu((msg.x, msg.y, msg.z))))
             elif t == "HEARTBEAT" and msg.get_srcSystem() == self.target and msg.type != self.mavlink.MAV_TYPE_GCS:
                 self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
             elif t == "EXTENDED_SYS_STATE":
@@ -311,11 +313,10 @@ class GuidedLink(StateClock):
         p, v, a = (x[0] for x in reference.evaluate(ref, [(now - t0_us) * 1e-6]))
         ml = self.mavlink
         mask = (ml.POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE)
-        # ENU -> NED: (x, y, z)_NED = (y, x, -z)_ENU; the heading as mppid's (ENU yaw 0: east,
-        # NED yaw pi/2).
+        # ENU -> NED; the heading as mppid's (ENU yaw 0: east, NED yaw pi/2).
         self.conn.mav.set_position_target_local_ned_send(
-            0, self.target, 1, ml.MAV_FRAME_LOCAL_NED, mask, p[1], p[0], -p[2], v[1], v[0], -v[2],
-            a[1], a[0], -a[2], math.pi / 2 - float(ref.get("yaw", 0.0)), 0.0)
+            0, self.target, 1, ml.MAV_FRAME_LOCAL_NED, mask, *frames.enu_to_ned(p), *frames.enu_to_ned(v),
+            *frames.enu_to_ned(a), frames.yaw_enu_to_ned(float(ref.get("yaw", 0.0))), 0.0)
 
     def close(self):
         self.stop.set()

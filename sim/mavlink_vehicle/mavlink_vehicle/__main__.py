@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import signal
 import sys
 import threading
@@ -24,7 +23,7 @@ from pathlib import Path
 from .vehicle import Vehicle, wall_us
 
 
-def main(argv=None) -> int:
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="mavlink-vehicle", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--url", default="udpout:127.0.0.1:14540")
@@ -42,43 +41,44 @@ def main(argv=None) -> int:
                     help="the autopilot's clock runs 1 + this as fast as the wall clock (stamps only; -0.007: "
                          "PX4 SIH lagging 0.7 %%); |drift| <= 0.05")
     ap.add_argument("--signing-key-file", help="MAVLink 2 signing key: 64 hex digits or 32 raw bytes")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def checked(a) -> tuple[bytes | None, str | None]:
+    """The signing key (None without one) and the first bad argument's message (None: all good)."""
     key = None
     if a.signing_key_file:
         raw = Path(a.signing_key_file).read_bytes()
         key = raw if len(raw) == 32 else bytes.fromhex(raw.decode().strip())
         if len(key) != 32:
-            print("mavlink-vehicle: --signing-key-file must hold 32 bytes", file=sys.stderr)
-            return 2
+            return key, "--signing-key-file must hold 32 bytes"
     if abs(a.clock_drift) > 0.05:
-        print("mavlink-vehicle: --clock-drift must be within +-0.05", file=sys.stderr)
-        return 2
+        return key, "--clock-drift must be within +-0.05"
     if a.physics_hz < 500:
-        print("mavlink-vehicle: --physics-hz must be >= 500", file=sys.stderr)
-        return 2
-    params = {}
-    for kv in a.param:
-        k, v = kv.split("=", 1)
-        params[k] = float(v)
-    out = a.out
-    if out:
-        Path(out).mkdir(parents=True, exist_ok=True)
+        return key, "--physics-hz must be >= 500"
+    return key, None
+
+
+def load_world(a, out):
+    """The world, its mission (publishing on LCM) and the start: (None, None, origin) without --world."""
     world = mission = None
     start = (0.0, 0.0, 0.0)
     if a.world:
         from mppi_mavlink import lcm_types
         import lcm
-        from .world import Mission, load_world
-        world = load_world(a.world)
+        from .world import Mission, load_world as load
+        world = load(a.world)
         mission = Mission(world, lcm_types.import_mppi_lcm(), lcm.LCM(a.lcm_url), wall_us)
         start = (float(world["start"][0]), float(world["start"][1]), 0.0)
         if out:
             (Path(out) / "world.json").write_text(json.dumps(world, indent=1, default=list))
     if a.start:
         start = tuple(float(c) for c in a.start.split(","))
-    v = Vehicle(a.url, autopilot=a.autopilot, params=params, world=world, mission=mission, out=out,
-                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass, signing_key=key,
-                clock_drift=a.clock_drift)
+    return world, mission, start
+
+
+def fly(v: Vehicle, a, out) -> None:
+    """Runs the vehicle until --duration or SIGTERM/SIGINT; the summary on the way out."""
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -90,6 +90,26 @@ def main(argv=None) -> int:
         v.close()
         if out:
             (Path(out) / "vehicle_summary.json").write_text(json.dumps(v.summary(), indent=1))
+
+
+def main(argv=None) -> int:
+    a = parser().parse_args(argv)
+    key, error = checked(a)
+    if error:
+        print(f"mavlink-vehicle: {error}", file=sys.stderr)
+        return 2
+    params = {}
+    for kv in a.param:
+        k, v = kv.split("=", 1)
+        params[k] = float(v)
+    out = a.out
+    if out:
+        Path(out).mkdir(parents=True, exist_ok=True)
+    world, mission, start = load_world(a, out)
+    v = Vehicle(a.url, autopilot=a.autopilot, params=params, world=world, mission=mission, out=out,
+                physics_hz=a.physics_hz, state_hz=a.state_hz, start=start, mass=a.mass, signing_key=key,
+                clock_drift=a.clock_drift)
+    fly(v, a, out)
     return 0
 
 

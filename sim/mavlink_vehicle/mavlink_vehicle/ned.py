@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+from mppi_mavlink.layout import QuadrotorRate as Q
+
 A = ((0.0, 1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, -1.0))
 B = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
 
@@ -52,10 +54,10 @@ def matrix_to_quat(m):
 
 def state_to_ned(x):
     """13-state ENU/FLU truth -> (p_ned, v_ned, q_ned_frd, v_body_frd, w_frd)."""
-    r_enu = quat_to_matrix(x[6:10])
+    r_enu = quat_to_matrix(x[Q.QUAT])
     r_ned = matmul(matmul(A, r_enu), B)
-    p = matvec(A, x[0:3])
-    v = matvec(A, x[3:6])
+    p = matvec(A, x[Q.POS])
+    v = matvec(A, x[Q.VEL])
     v_body = matvec(transpose(r_ned), v)
-    w = matvec(B, x[10:13])
+    w = matvec(B, x[Q.RATES])
     return p, v, matrix_to_quat(r_ned), v_body, w

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-PX, PY, PZ, VX, VY, VZ, QW, QX, QY, QZ, WX, WY, WZ = range(13)
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 
 class Params:
@@ -15,21 +15,21 @@ class Params:
 
 
 def derivative(p: Params, x, u):
-    qw, qx, qy, qz = x[QW], x[QX], x[QY], x[QZ]
-    wx, wy, wz = x[WX], x[WY], x[WZ]
+    qw, qx, qy, qz = x[Q.QW], x[Q.QX], x[Q.QY], x[Q.QZ]
+    wx, wy, wz = x[Q.WX], x[Q.WY], x[Q.WZ]
     bx = 2.0 * (qx * qz + qw * qy)
     by = 2.0 * (qy * qz - qw * qx)
     bz = 1.0 - 2.0 * (qx * qx + qy * qy)
-    a = u[0] / p.mass
+    a = u[Q.THRUST] / p.mass
     d = p.drag / p.mass
     k = 1.0 / p.rate_tau
-    return [x[VX], x[VY], x[VZ],
-            a * bx - d * x[VX], a * by - d * x[VY], a * bz - p.gravity - d * x[VZ],
+    return [x[Q.VX], x[Q.VY], x[Q.VZ],
+            a * bx - d * x[Q.VX], a * by - d * x[Q.VY], a * bz - p.gravity - d * x[Q.VZ],
             0.5 * (-qx * wx - qy * wy - qz * wz),
             0.5 * (qw * wx + qy * wz - qz * wy),
             0.5 * (qw * wy - qx * wz + qz * wx),
             0.5 * (qw * wz + qx * wy - qy * wx),
-            k * (u[1] - wx), k * (u[2] - wy), k * (u[3] - wz)]
+            k * (u[Q.RATE_X] - wx), k * (u[Q.RATE_Y] - wy), k * (u[Q.RATE_Z] - wz)]
 
 
 def rk4(p: Params, x, u, dt):
@@ -38,14 +38,14 @@ def rk4(p: Params, x, u, dt):
     k3 = derivative(p, [a + 0.5 * dt * b for a, b in zip(x, k2)], u)
     k4 = derivative(p, [a + dt * b for a, b in zip(x, k3)], u)
     y = [a + dt / 6.0 * (b + 2.0 * c + 2.0 * d + e) for a, b, c, d, e in zip(x, k1, k2, k3, k4)]
-    n = math.sqrt(y[QW] ** 2 + y[QX] ** 2 + y[QY] ** 2 + y[QZ] ** 2)
-    for i in range(QW, QZ + 1):
+    n = math.sqrt(y[Q.QW] ** 2 + y[Q.QX] ** 2 + y[Q.QY] ** 2 + y[Q.QZ] ** 2)
+    for i in range(Q.QW, Q.QZ + 1):
         y[i] /= n
     return y
 
 
 def yaw_of(x):
-    qw, qx, qy, qz = x[QW], x[QX], x[QY], x[QZ]
+    qw, qx, qy, qz = x[Q.QW], x[Q.QX], x[Q.QY], x[Q.QZ]
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
@@ -64,22 +64,22 @@ class Plant:
 
     def saturate(self, u):
         r = self.p.max_body_rate
-        return [min(max(u[0], 0.0), self.p.max_thrust)] + [min(max(c, -r), r) for c in u[1:4]]
+        return [min(max(u[Q.THRUST], 0.0), self.p.max_thrust)] + [min(max(c, -r), r) for c in u[Q.BODY_RATES]]
 
     def step(self, dt):
         x = self.x
         u = self.u
         if self.on_ground:
-            bz = 1.0 - 2.0 * (x[QX] ** 2 + x[QY] ** 2)
-            if u[0] * bz <= self.p.mass * self.p.gravity:
+            bz = 1.0 - 2.0 * (x[Q.QX] ** 2 + x[Q.QY] ** 2)
+            if u[Q.THRUST] * bz <= self.p.mass * self.p.gravity:
                 return  # resting: the ground carries the weight
             self.on_ground = False
         y = rk4(self.p, x, u, dt)
-        if y[PZ] < 0.0:
-            tilt_cos = 1.0 - 2.0 * (y[QX] ** 2 + y[QY] ** 2)
-            if -y[VZ] > self.crash_speed or tilt_cos < math.cos(math.radians(45)):
-                self.crashed = f"ground at {-y[VZ]:.2f} m/s, tilt {math.degrees(math.acos(max(-1, min(1, tilt_cos)))):.0f} deg"
+        if y[Q.PZ] < 0.0:
+            tilt_cos = 1.0 - 2.0 * (y[Q.QX] ** 2 + y[Q.QY] ** 2)
+            if -y[Q.VZ] > self.crash_speed or tilt_cos < math.cos(math.radians(45)):
+                self.crashed = f"ground at {-y[Q.VZ]:.2f} m/s, tilt {math.degrees(math.acos(max(-1, min(1, tilt_cos)))):.0f} deg"
             yaw = yaw_of(y)
-            y = [y[PX], y[PY], 0.0, 0.0, 0.0, 0.0, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2), 0.0, 0.0, 0.0]
+            y = [y[Q.PX], y[Q.PY], 0.0, 0.0, 0.0, 0.0, math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2), 0.0, 0.0, 0.0]
             self.on_ground = True
         self.x = y

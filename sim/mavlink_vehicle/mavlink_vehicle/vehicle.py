@@ -23,6 +23,8 @@ import time
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from mppi_mavlink.layout import QuadrotorRate as Q  # noqa: E402
+
 from . import ned, plant as pl  # noqa: E402
 
 mavlink = mavutil.mavlink
@@ -42,6 +44,36 @@ def wall_us():
     return time.time_ns() // 1000
 
 
+def connect(url, system_id, signing_key=None):
+    """The autopilot's end of the link. With a signing key, as an autopilot with signing on:
+    everything it sends is signed, and it takes only messages signed with the key (pymavlink's
+    own implementation, not the bridge's: the test checks one against the other)."""
+    conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
+    if signing_key is not None:
+        conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
+    return conn
+
+
+def default_params(offboard_loss_s):
+    """The stand-in autopilot's parameters before --param.
+
+    COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
+    4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
+    The battery failsafe (PX4 COM_LOW_BAT_ACT 2 or 3: land at BAT_CRIT_THR; ArduPilot
+    BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
+    capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
+    ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
+    without a ground station's HEARTBEAT, once one was heard, armed); PX4's data-link-loss
+    failsafe (NAV_DLL_ACT 1 Hold, 3 Land after COM_DL_LOSS_T s, the same way; 0, PX4's
+    default, off)."""
+    return {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
+            "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
+            "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
+            "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
+            "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
+            "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
+
+
 class Vehicle:
     # ArduPilot flies a rate setpoint for at most this long; later, the vehicle holds level until
     # the next one. PX4 flies the last one until COM_OF_LOSS_T runs out, as the real one does
@@ -51,27 +83,8 @@ class Vehicle:
     def __init__(self, url, autopilot="px4", params=None, world=None, mission=None, out=None, physics_hz=500.0,
                  state_hz=50.0, system_id=1, offboard_loss_s=0.5, start=(0.0, 0.0, 0.0), mass=1.0, signing_key=None, clock_drift=0.0):
         self.ap = autopilot
-        self.conn = mavutil.mavlink_connection(url, source_system=system_id, source_component=1)
-        if signing_key is not None:
-            # As an autopilot with signing on: everything it sends is signed, and it takes
-            # only messages signed with the key (pymavlink's own implementation, not the
-            # bridge's: the test checks one against the other).
-            self.conn.setup_signing(signing_key, sign_outgoing=True, allow_unsigned_callback=lambda mav, msg_id: False)
-        # COM_OBL_RC_ACT: what PX4 does COM_OF_LOSS_T after the offboard setpoints stop (0 Position,
-        # 4 Land, 5 Hold here; real PX4's default is 0, this stand-in's 4 so that it lands as it always did).
-        # The battery failsafe (PX4 COM_LOW_BAT_ACT 2 or 3: land at BAT_CRIT_THR; ArduPilot
-        # BATT_FS_LOW_ACT 1: LAND at BATT_LOW_PCT, a stand-in simplification of its voltage and
-        # capacity levels), with a battery that drains SIM_BATT_DRAIN %/s while armed (0: never);
-        # ArduPilot's ground-station failsafe (FS_GCS_ENABLE 5: LAND after FS_GCS_TIMEOUT s
-        # without a ground station's HEARTBEAT, once one was heard, armed); PX4's data-link-loss
-        # failsafe (NAV_DLL_ACT 1 Hold, 3 Land after COM_DL_LOSS_T s, the same way; 0, PX4's
-        # default, off).
-        self.params = {"MPC_THR_HOVER": 0.4, "MIS_TAKEOFF_ALT": 2.0, "COM_OF_LOSS_T": offboard_loss_s,
-                       "COM_OBL_RC_ACT": 4.0, "GUID_OPTIONS": 8.0, "MOT_THST_HOVER": 0.4, "COM_DISARM_LAND": 1.0,
-                       "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
-                       "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
-                       "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
-                       "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
+        self.conn = connect(url, system_id, signing_key)
+        self.params = default_params(offboard_loss_s)
         self.battery = 90.0                # % remaining
         self.last_gcs_t = None
         self.param_types = {"GUID_OPTIONS": mavlink.MAV_PARAM_TYPE_INT32}
@@ -155,14 +168,7 @@ class Vehicle:
             if t == "SET_ATTITUDE_TARGET":
                 self.on_setpoint(msg, now)
             elif t == "HEARTBEAT":
-                if msg.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
-                    self.counters["heartbeats_from_companion"] += 1
-                    if self.companion is None:
-                        self.companion = (msg.get_srcSystem(), msg.get_srcComponent())
-                        self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
-                elif msg.type == mavlink.MAV_TYPE_GCS:
-                    self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
-                    self.last_gcs_t = self.t
+                self.on_heartbeat(msg)
             elif t == "STATUSTEXT":  # a companion's, which an autopilot routes to the ground station
                 self.on_statustext(msg)
             elif t == "COMMAND_LONG":
@@ -170,18 +176,34 @@ class Vehicle:
                             "params": [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                                        msg.param7]})
                 self.on_command(msg)
-            elif t == "PARAM_REQUEST_READ":
-                self._wire({"mono_us": now, "type": t, "id": _pid(msg.param_id)})
-                self.send_param(_pid(msg.param_id))
-            elif t == "PARAM_REQUEST_LIST":
-                for name in sorted(self.params):
-                    self.send_param(name)
-            elif t == "PARAM_SET":
-                name = _pid(msg.param_id)
-                self._wire({"mono_us": now, "type": t, "id": name, "value": msg.param_value})
-                if name in self.params and math.isfinite(msg.param_value):
-                    self.params[name] = float(msg.param_value)
+            elif t.startswith("PARAM_"):
+                self.on_param_message(msg, t, now)
+
+    def on_heartbeat(self, msg):
+        """A companion's (the bridge's: counted, the first one an event) or a ground station's."""
+        if msg.type == mavlink.MAV_TYPE_ONBOARD_CONTROLLER:
+            self.counters["heartbeats_from_companion"] += 1
+            if self.companion is None:
+                self.companion = (msg.get_srcSystem(), msg.get_srcComponent())
+                self.event("companion_heartbeat", system=msg.get_srcSystem(), component=msg.get_srcComponent())
+        elif msg.type == mavlink.MAV_TYPE_GCS:
+            self.gcs_seen.add((msg.get_srcSystem(), msg.get_srcComponent()))
+            self.last_gcs_t = self.t
+
+    def on_param_message(self, msg, t, now):
+        """PARAM_REQUEST_READ, PARAM_REQUEST_LIST and PARAM_SET (a known name, a finite value)."""
+        if t == "PARAM_REQUEST_READ":
+            self._wire({"mono_us": now, "type": t, "id": _pid(msg.param_id)})
+            self.send_param(_pid(msg.param_id))
+        elif t == "PARAM_REQUEST_LIST":
+            for name in sorted(self.params):
                 self.send_param(name)
+        elif t == "PARAM_SET":
+            name = _pid(msg.param_id)
+            self._wire({"mono_us": now, "type": t, "id": name, "value": msg.param_value})
+            if name in self.params and math.isfinite(msg.param_value):
+                self.params[name] = float(msg.param_value)
+            self.send_param(name)
 
     def on_statustext(self, m):
         """Recorded as a ground station shows it: MAVLink 2 chunks (one id, 50 characters each
@@ -224,7 +246,7 @@ class Vehicle:
             self.event("offboard_resumed", reason="setpoints back, OFFBOARD still the intended mode")
         if self.ap == "ardupilot" and self.mode == "GUIDED" and self.taking_off:
             self.taking_off = False
-            self.event("takeoff_taken_over", z=round(self.plant.x[2], 3))
+            self.event("takeoff_taken_over", z=round(self.plant.x[Q.PZ], 3))
 
     def ack(self, cmd, result, text=None):
         self.conn.mav.command_ack_send(cmd, result)
@@ -235,45 +257,11 @@ class Vehicle:
     def on_command(self, m):
         c = m.command
         if c == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
-            if m.param1 >= 0.5:
-                why = self.arming_check()
-                if why:
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Arming denied: " + why)
-                self.armed = True
-                self.landed_since = None
-                self.event("armed")
-            else:
-                if not self.plant.on_ground and int(m.param2) != 21196:
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Disarm denied: in air")
-                self.disarm("command")
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_arm_disarm(m)
         if c == mavlink.MAV_CMD_DO_SET_MODE:
-            mode = self.decode_mode(m)
-            if mode is None:
-                return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
-            if mode == "OFFBOARD" and not self.fresh_setpoint():
-                return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
-            if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
-                self.hold_sp = list(self.plant.x[0:3])
-            if mode == "GUIDED":
-                self.hold_sp = list(self.plant.x[0:3])
-            self.set_mode(mode, "command")
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_set_mode(m)
         if c == mavlink.MAV_CMD_NAV_TAKEOFF:
-            if not self.armed:
-                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: disarmed")
-            if self.ap == "ardupilot":
-                if self.mode != "GUIDED":
-                    return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: not in GUIDED")
-                alt = m.param7
-            else:
-                alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
-                self.set_mode("AUTO.TAKEOFF", "command")
-            self.takeoff_alt = float(alt)
-            self.hold_sp = [self.plant.x[0], self.plant.x[1], float(alt)]
-            self.taking_off = self.ap == "ardupilot"
-            self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            return self.on_takeoff(m)
         if c == mavlink.MAV_CMD_NAV_LAND:
             self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", "command")
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
@@ -283,6 +271,55 @@ class Vehicle:
         if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED)
+
+    def on_arm_disarm(self, m):
+        """Arms after the arming check; disarms on the ground, or in the air when forced (21196)."""
+        c = m.command
+        if m.param1 >= 0.5:
+            why = self.arming_check()
+            if why:
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Arming denied: " + why)
+            self.armed = True
+            self.landed_since = None
+            self.event("armed")
+        else:
+            if not self.plant.on_ground and int(m.param2) != 21196:
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Disarm denied: in air")
+            self.disarm("command")
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+
+    def on_set_mode(self, m):
+        """A known mode; OFFBOARD only with fresh setpoints; the holding modes hold where it is."""
+        c = m.command
+        mode = self.decode_mode(m)
+        if mode is None:
+            return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
+        if mode == "OFFBOARD" and not self.fresh_setpoint():
+            return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
+        if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
+            self.hold_sp = list(self.plant.x[Q.POS])
+        if mode == "GUIDED":
+            self.hold_sp = list(self.plant.x[Q.POS])
+        self.set_mode(mode, "command")
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+
+    def on_takeoff(self, m):
+        """Armed only; ArduPilot in GUIDED to param7, PX4 into AUTO.TAKEOFF (MIS_TAKEOFF_ALT without param7)."""
+        c = m.command
+        if not self.armed:
+            return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: disarmed")
+        if self.ap == "ardupilot":
+            if self.mode != "GUIDED":
+                return self.ack(c, mavlink.MAV_RESULT_DENIED, "Takeoff denied: not in GUIDED")
+            alt = m.param7
+        else:
+            alt = m.param7 if math.isfinite(m.param7) else self.params["MIS_TAKEOFF_ALT"]  # home AMSL is 0
+            self.set_mode("AUTO.TAKEOFF", "command")
+        self.takeoff_alt = float(alt)
+        self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], float(alt)]
+        self.taking_off = self.ap == "ardupilot"
+        self.setpoint_t = None  # GUIDED's take-off replaces whatever target it had
+        return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
 
     def set_stream(self, msg_id: int, interval_us: float):
         """ArduPilot's MAV_CMD_SET_MESSAGE_INTERVAL: -1 stops a message, 0 is its default
@@ -356,13 +393,13 @@ class Vehicle:
     def position_control(self, p_sp, vz_sp=None, yaw_sp=0.0):
         """Cascaded P position -> P velocity -> thrust direction -> body rates (FLU)."""
         x = self.plant.x
-        vs = [min(max(1.0 * (p_sp[i] - x[i]), -2.0), 2.0) for i in range(2)]
-        vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[2]), -1.0), 1.5))
-        a = [min(max(3.0 * (vs[i] - x[3 + i]), -4.0), 4.0) for i in range(3)]
+        vs = [min(max(1.0 * (p_sp[i] - x[Q.PX + i]), -2.0), 2.0) for i in range(2)]
+        vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[Q.PZ]), -1.0), 1.5))
+        a = [min(max(3.0 * (vs[i] - x[Q.VX + i]), -4.0), 4.0) for i in range(3)]
         f = [self.pp.mass * a[0], self.pp.mass * a[1], self.pp.mass * (a[2] + self.pp.gravity)]
         fn = math.sqrt(sum(c * c for c in f))
         bz_des = [c / fn for c in f]
-        r = ned.quat_to_matrix(x[6:10])
+        r = ned.quat_to_matrix(x[Q.QUAT])
         bz = [r[0][2], r[1][2], r[2][2]]
         e = [bz[1] * bz_des[2] - bz[2] * bz_des[1], bz[2] * bz_des[0] - bz[0] * bz_des[2],
              bz[0] * bz_des[1] - bz[1] * bz_des[0]]
@@ -384,20 +421,20 @@ class Vehicle:
             th, p, q, r = self.setpoint
             if self.ap == "ardupilot" and not int(self.params["GUID_OPTIONS"]) & 8:
                 # ArduPilot without bit 3: thrust is a climb rate, 0.5 = hold altitude.
-                u = self.position_control([x[0], x[1], x[2]], vz_sp=(th - 0.5) * 5.0)
-                return [u[0], p, -q, -r]
+                u = self.position_control(list(x[Q.POS]), vz_sp=(th - 0.5) * 5.0)
+                return [u[Q.THRUST], p, -q, -r]
             return [th / hover * self.pp.mass * self.pp.gravity, p, -q, -r]  # FRD -> FLU
         if self.mode == "OFFBOARD" or (self.mode == "GUIDED" and self.setpoint_t is not None):
             # Setpoints late: hold level where it is until they return or the failsafe engages.
             if self.stale_hold is None:
-                self.stale_hold = list(x[0:3])
+                self.stale_hold = list(x[Q.POS])
             return self.position_control(self.stale_hold)
         if self.mode in ("AUTO.LAND", "LAND"):
             if self.hold_sp is None or len(self.hold_sp) != 3:
-                self.hold_sp = list(x[0:3])
-            return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[2] > 0.6 else -0.4)
+                self.hold_sp = list(x[Q.POS])
+            return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[Q.PZ] > 0.6 else -0.4)
         if self.hold_sp is None:
-            self.hold_sp = list(x[0:3])
+            self.hold_sp = list(x[Q.POS])
         if self.plant.on_ground and self.mode not in ("AUTO.TAKEOFF", "GUIDED"):
             return [0.0, 0.0, 0.0, 0.0]  # armed, idle on the ground
         if self.ap == "ardupilot" and self.mode == "LOITER":
@@ -438,7 +475,7 @@ class Vehicle:
         if self.armed and not landing and (low or gcs):
             reason = "battery low" if low else "ground station lost"
             self.counters["failsafes"] += 1
-            self.hold_sp = list(self.plant.x[0:3])
+            self.hold_sp = list(self.plant.x[Q.POS])
             self.set_mode(action, reason)
             self.event("failsafe", reason=reason, action=self.mode)
             self.statustext(f"Failsafe: {reason}, landing", mavlink.MAV_SEVERITY_CRITICAL)
@@ -448,7 +485,7 @@ class Vehicle:
         self.other_failsafes()
         if self.mode == "OFFBOARD" and self.setpoint_t is not None and not self.fresh_setpoint():
             self.counters["failsafes"] += 1
-            self.hold_sp = list(self.plant.x[0:3])
+            self.hold_sp = list(self.plant.x[Q.POS])
             action = OFFBOARD_LOSS_ACTIONS.get(int(self.params["COM_OBL_RC_ACT"]), "AUTO.LAND")
             self.set_mode(action, "offboard lost")
             self.offboard_fallback = True
@@ -458,12 +495,12 @@ class Vehicle:
         if self.mode == "OFFBOARD" and self.setpoint_t is None and not self.plant.on_ground:
             pass
         if self.mode == "AUTO.TAKEOFF" and self.takeoff_alt is not None and \
-                abs(self.plant.x[2] - self.takeoff_alt) < 0.15:
-            self.hold_sp = [self.plant.x[0], self.plant.x[1], self.takeoff_alt]
+                abs(self.plant.x[Q.PZ] - self.takeoff_alt) < 0.15:
+            self.hold_sp = [self.plant.x[Q.PX], self.plant.x[Q.PY], self.takeoff_alt]
             self.set_mode("AUTO.LOITER", "takeoff complete")
-        if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[2] - self.takeoff_alt) < 0.15):
+        if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[Q.PZ] - self.takeoff_alt) < 0.15):
             self.taking_off = False  # ArduPilot stays in GUIDED, holding where the take-off ended
-            self.event("takeoff_complete", z=round(self.plant.x[2], 3))
+            self.event("takeoff_complete", z=round(self.plant.x[Q.PZ], 3))
         if self.armed and self.plant.on_ground and self.mode in ("AUTO.LAND", "LAND"):
             self.landed_since = self.landed_since if self.landed_since is not None else self.t
             if self.t - self.landed_since > self.params["COM_DISARM_LAND"]:
@@ -509,25 +546,29 @@ class Vehicle:
             self.conn.mav.extended_sys_state_send(mavlink.MAV_VTOL_STATE_UNDEFINED, self.landed_state())
 
     # ---- run ----------------------------------------------------------------------------
+    def step_physics(self, next_state):
+        """Physics steps up to the wall clock, stopping at the next telemetry tick (next_state)."""
+        target = time.monotonic() - self.boot
+        steps = 0
+        while self.t + self.dt <= target:
+            self.plant.u = self.plant.saturate(self.control())
+            self.plant.step(self.dt)
+            self.t += self.dt
+            self.supervise()
+            steps += 1
+            if steps >= 50:  # fell > 0.1 s behind: skip, don't catch up
+                self.counters["overruns"] += 1
+                self.t = target
+                break
+            if self.t >= next_state:
+                break  # telemetry at its tick, not after a catch-up burst
+
     def run(self, duration=0.0, stop=None):
         next_state = next_hb = next_slow = next_mission = 0.0
         fd = self.conn.fd if hasattr(self.conn, "fd") and self.conn.fd is not None else None
         while stop is None or not stop.is_set():
             self.receive()
-            target = time.monotonic() - self.boot
-            steps = 0
-            while self.t + self.dt <= target:
-                self.plant.u = self.plant.saturate(self.control())
-                self.plant.step(self.dt)
-                self.t += self.dt
-                self.supervise()
-                steps += 1
-                if steps >= 50:  # fell > 0.1 s behind: skip, don't catch up
-                    self.counters["overruns"] += 1
-                    self.t = target
-                    break
-                if self.t >= next_state:
-                    break  # telemetry at its tick, not after a catch-up burst
+            self.step_physics(next_state)
             if self.t >= next_state:
                 next_state = max(next_state + self.state_period, self.t)
                 self.send_telemetry()

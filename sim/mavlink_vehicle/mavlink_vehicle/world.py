@@ -20,6 +20,7 @@ import math
 
 import yaml
 
+from mppi_mavlink.layout import QuadrotorRate as Q
 from mppi_mission import forest
 
 
@@ -68,7 +69,7 @@ class Mission:
 
     # Called at ~10 Hz by the vehicle.
     def update(self, t: float, x, offboard: bool, airborne: bool):
-        p = x[0:3]
+        p = x[Q.POS]
         if self.phase == "wait":
             # on_hold: within 0.5 m of the hold point; on_offboard: at altitude (a forest's
             # obstacle cost may hold the vehicle off the take-off spot).
@@ -106,7 +107,7 @@ class Mission:
             tr = t - self.t0
             if tr >= self.w["mission"]["settle"]:
                 r = circle_eval(self.w["reference"], tr)
-                self.err2.append(sum((a - b) ** 2 for a, b in zip(x[0:3], r)))
+                self.err2.append(sum((a - b) ** 2 for a, b in zip(x[Q.POS], r)))
 
     def clearance(self, x) -> float:
         best = forest.clearance(x, self.w["obstacles"], self.w["vehicle_radius"])
