@@ -12,8 +12,7 @@ import yaml
 from mavtest import LCM_URL, PYTHON, ROOT
 from mavchain import Chain
 from mppi_mavlink import lcm_types
-
-QW = 6  # the rate quadrotor's state: p(3), v(3), q(4: w x y z), w(3)
+from mppi_mavlink.layout import QuadrotorRate as Q
 
 pytestmark = pytest.mark.timeout(150)
 
@@ -58,8 +57,8 @@ def test_mission_tool_flies_the_simulated_ardupilot_through_the_bridge(netns, pr
 
 
 def heading(x):
-    """ENU yaw (rad) of a state's attitude quaternion (w, x, y, z at QW)."""
-    w, qx, qy, qz = x[QW:QW + 4]
+    """ENU yaw (rad) of a rate quadrotor state's attitude quaternion."""
+    w, qx, qy, qz = x[Q.QUAT]
     return math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
