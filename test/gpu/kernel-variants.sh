@@ -1,14 +1,14 @@
 #!/bin/bash
-# Kernel measurements on the GPU machine, after tools/gpu/run-all.sh has built build-gpu/:
-# every rollout-kernel variant on the target sizes (the test scenario: sigma 20, 32
+# Kernel measurements on a GPU host, after tools/gpu/run-all.sh has built build-gpu/:
+# every rollout-kernel variant on the kernel target sizes (the test scenario: sigma 20, 32
 # obstacles, T = 100), a build with denormals flushed (MPPID_CUDA_FTZ) checked for parity
 # and timed, then Nsight Compute on one update's kernels. gpu/NOTES.md holds the predictions
-# these are checked against. Logs land in $OUT (or results/).
-#   test/gpu/device_session.sh build-ftz     (first, or beside run-all.sh's build)
-#   test/gpu/device_session.sh [quick]
+# these are checked against. Logs land in $MPPID_RESULTS (default results/).
+#   test/gpu/kernel-variants.sh build-ftz     (first, or beside run-all.sh's build)
+#   test/gpu/kernel-variants.sh [quick]
 set -u
 B=${B:-build-gpu}
-OUT=${OUT:-results}
+OUT=${MPPID_RESULTS:-results}
 mkdir -p "$OUT"
 export LD_LIBRARY_PATH=$PWD/.devdeps/lib:${LD_LIBRARY_PATH:-}
 T0=$(date +%s)
@@ -29,7 +29,7 @@ if [ "${1:-}" = build-ftz ]; then
   exit
 fi
 TM="$B/bin/mppid-gpu-timing"
-[ -x "$TM" ] || { echo "device_session: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
+[ -x "$TM" ] || { echo "kernel-variants: $TM missing (run tools/gpu/run-all.sh --stages build first)"; exit 1; }
 {
   stamp "variants (median of the iterations)"
   row "lanes   " mppi.cuda.kernel=lanes -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096
@@ -64,7 +64,7 @@ if [ -x build-ftz/bin/cuda_backend_tests ]; then
     row "ftz     " -- --iters 30 --warmup 3 quadrotor_forest:1048576
   } 2>&1 | tee "$OUT/ftz.txt"
 else
-  echo "no build-ftz/ (test/gpu/device_session.sh build-ftz makes it)"
+  echo "no build-ftz/ (test/gpu/kernel-variants.sh build-ftz makes it)"
 fi
 
 if [ "${1:-}" != quick ] && command -v ncu > /dev/null; then

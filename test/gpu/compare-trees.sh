@@ -1,21 +1,22 @@
 #!/bin/bash
 # A change to the CUDA backend that must not change what it computes nor slow it (issue 28's
-# host-side split), on the GPU machine in one device call: this tree and a base tree built side
+# host-side split), on a GPU host in one run: this tree and a base tree built side
 # by side (CUDA, no LCM, no SIMD), the CUDA tests of both with their `[parity]` lines compared
 # line by line, then mppid-bench (Controller::iterate) and mppid-gpu-timing (the update alone)
 # for quadrotor, rate, team3 and team9, base and this interleaved, two rounds.
-#   test/gpu/compare_session.sh BASE_TREE [build] [test] [bench]
-# From a copied worktree in main's checkout (tools/gpu/README.md): carry .gpuwork and .devdeps
-# (Random123 is all it needs), put the base's tree in .gpuwork/base (git archive), and run
-# `cd .gpuwork && ln -sfn ../.devdeps .devdeps && test/gpu/compare_session.sh base build test bench`
-# (~1 min on an H100 or H200). Everything lands in $OUT/session.tgz; the summary on stdout.
+#   test/gpu/compare-trees.sh BASE_TREE [build] [test] [bench]
+# BASE_TREE is a copy of the base commit (e.g. `git archive BASE | tar -x -C base`); of .devdeps
+# (tools/gpu/pack-deps.sh) it needs only Random123. ~1 min on an H100 or H200. Builds go to
+# $MPPID_BUILD_ROOT/build-cmp-{base,this} (default: this tree), the logs and results to
+# $MPPID_RESULTS (default results/compare) and a .tgz of it beside; the summary on stdout.
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 BASE="$(cd "${1:?base tree}" && pwd)"; shift
 D="${MPPID_DEVDEPS:-$HERE/.devdeps}"
-R=/root/session-results
+R="${MPPID_RESULTS:-$HERE/results/compare}"
+BR="${MPPID_BUILD_ROOT:-$HERE}"
 mkdir -p "$R"
-finish() { [[ -n "${OUT:-}" ]] && tar czf "$OUT/session.tgz" -C "$R" . ; }
+finish() { tar czf "$R.tgz" -C "$R" . ; }
 trap finish EXIT
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
@@ -26,8 +27,8 @@ build() {  # tree, build dir, label, targets...
     ninja -C "$2" -j8 "${@:4}" >"$R/build-$3.log" 2>&1
 }
 if [[ " $* " == *" build "* ]]; then
-  build "$BASE" /root/b-base base cuda_backend_tests mppid-bench mppid-gpu-timing & p1=$!
-  build "$HERE" /root/b-this this cuda_backend_tests mppid-bench mppid-gpu-timing launch_plan_tests cuda_settings_tests & p2=$!
+  build "$BASE" "$BR/build-cmp-base" base cuda_backend_tests mppid-bench mppid-gpu-timing & p1=$!
+  build "$HERE" "$BR/build-cmp-this" this cuda_backend_tests mppid-bench mppid-gpu-timing launch_plan_tests cuda_settings_tests & p2=$!
   wait $p1 || { echo "BASE BUILD FAILED"; grep -E "error" "$R/build-base.log" "$R/configure-base.log" | head -20; }
   wait $p2 || { echo "THIS BUILD FAILED"; grep -E "error" "$R/build-this.log" "$R/configure-this.log" | head -30; exit 1; }
   stamp "built"
@@ -37,12 +38,12 @@ nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv,
 if [[ " $* " == *" test "* ]]; then
   for t in base this; do
     # stdout alone: the backend's log line (stderr) must not cut a [parity] line.
-    timeout 300 /root/b-$t/bin/cuda_backend_tests >"$R/tests-$t.log" 2>"$R/tests-$t.err"
+    timeout 300 "$BR/build-cmp-$t"/bin/cuda_backend_tests >"$R/tests-$t.log" 2>"$R/tests-$t.err"
     echo "$t cuda_backend_tests rc=$? $(grep -E '^\[  (PASSED|FAILED|SKIPPED)' "$R/tests-$t.log" | tr '\n' ' ')"
     grep -E '^\[  FAILED' "$R/tests-$t.log" | head
   done
-  /root/b-this/bin/launch_plan_tests >"$R/host-tests.log" 2>&1; echo "launch_plan_tests rc=$?"
-  /root/b-this/bin/cuda_settings_tests >>"$R/host-tests.log" 2>&1; echo "cuda_settings_tests rc=$?"
+  "$BR/build-cmp-this"/bin/launch_plan_tests >"$R/host-tests.log" 2>&1; echo "launch_plan_tests rc=$?"
+  "$BR/build-cmp-this"/bin/cuda_settings_tests >>"$R/host-tests.log" 2>&1; echo "cuda_settings_tests rc=$?"
   for t in base this; do grep -E '^\[parity\]' "$R/tests-$t.log" >"$R/parity-$t.txt"; done
   # Tests only this tree has: compare the lines the base has (issue 28: LaunchSwitches).
   grep -vE 'no graph|host.s grid' "$R/parity-this.txt" >"$R/parity-this-common.txt"
@@ -56,10 +57,10 @@ if [[ " $* " == *" bench "* ]]; then
     for t in base this; do
       for m in "quadrotor 16384" "quadrotor_rate 16384" "team3 1200" "team9 6000"; do
         set -- $m
-        /root/b-$t/bin/mppid-bench --model "$1" --backend cuda --rollouts "$2" --horizon 100 --obstacles 32 \
+        "$BR/build-cmp-$t"/bin/mppid-bench --model "$1" --backend cuda --rollouts "$2" --horizon 100 --obstacles 32 \
           --iterations 1000 2>>"$R/bench-$t.err" | grep '^{' | sed "s/^{/{\"tree\":\"$t\",\"round\":$round,/" >>"$R/bench.jsonl"
       done
-      /root/b-$t/bin/mppid-gpu-timing --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 \
+      "$BR/build-cmp-$t"/bin/mppid-gpu-timing --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 \
         team9_forest:6000 >"$R/timing-$t-$round.json" 2>>"$R/bench-$t.err"
     done
   done

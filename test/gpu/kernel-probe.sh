@@ -1,7 +1,7 @@
 #!/bin/bash
-# Kernel work on the GPU machine in one device call: build only the CUDA targets (no LCM, no
+# Kernel work on a GPU host in one run: build only the CUDA targets (no LCM, no
 # SIMD CPU kernels: the parity reference is the scalar CPU backend), then the steps named.
-#   test/gpu/kernel_session.sh STEP...
+#   test/gpu/kernel-probe.sh STEP...
 # Steps:
 #   build        build-k/ (or $B): cuda_backend_tests, mppid-gpu-timing (ptxas resource report
 #                of the rollout kernels into $OUT/ptxas.txt)
@@ -10,22 +10,22 @@
 #   parity-ftz   the same on the FTZ build
 #   build-fast, parity-fast, timing-fast: the same with MPPID_CUDA_FAST_MATH=ON ($B-fast)
 #   build-fmad, parity-fmad, timing-fmad: the same with MPPID_CUDA_FMAD=ON ($B-fmad)
-#   timing       the issue's targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
+#   timing       the kernel targets (mppid-gpu-timing, test scenario, obstacle grid), one JSON
 #   timing2      the same again (the spread between two runs)
 #   timing-ftz   the same on the FTZ build
 #   variants     block shapes and kernels at K = 16,384 (mppi.cuda settings)
 #   ncu          Nsight Compute, full set with per-instruction samples, on the chunked kernel
 #   ncu-others   Nsight Compute on one update's kernels of each other target ($OUT/ncu-*.txt)
 #   sass         cuobjdump -sass of the quadrotor_forest instantiation ($OUT/sass.txt.gz)
-# Logs and results land in $OUT (the device tool's output folder) or results/kernel.
+# Logs and results land in $MPPID_RESULTS (default results/kernel), with kernel.tgz of them all;
+# $OUT below is the work folder results/kernel-work. Build: $B (default build-k/ in this tree).
 set -uo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$ROOT"
 D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
-B="${B:-/root/build-k}"
-# Everything goes to a work folder; at the end one archive of it (and the summaries) lands in
-# $OUT (the device tool brings back at most 8 files).
-DEST="${OUT:-$ROOT/results/kernel}"
+B="${B:-$ROOT/build-k}"
+# Everything goes to a work folder; at the end one archive of it lands in $DEST.
+DEST="${MPPID_RESULTS:-$ROOT/results/kernel}"
 OUT="$ROOT/results/kernel-work"
 rm -rf "$OUT" && mkdir -p "$OUT" "$DEST"
 export LD_LIBRARY_PATH="$D/lib:${LD_LIBRARY_PATH:-}"
@@ -88,17 +88,17 @@ for step in "$@"; do
     cpucheck)
       # The CPU side of a change to core/ (fsincos): core's tests with the SIMD targets, -Werror.
       stamp "cpu build"
-      # (-Werror off: this machine's newer g++ warns in code outside core; the log is searched
+      # (-Werror off: an Ubuntu 24.04 host's newer g++ warns in code outside core; the log is searched
       # for warnings in core's headers instead.)
-      cmake -S . -B /root/build-cpu -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=OFF -DMPPID_WERROR=OFF -DMPPID_LCM=OFF \
+      cmake -S . -B "$B-cpu" -G Ninja -DCMAKE_BUILD_TYPE=Release -DMPPID_CUDA=OFF -DMPPID_WERROR=OFF -DMPPID_LCM=OFF \
         -DMPPID_SIMD=ON -DMPPID_BENCH=OFF -DMPPID_TESTS=ON -DRANDOM123_INCLUDE_DIR="$D/usr/include" \
         -DCMAKE_PREFIX_PATH="$D/usr" >"$OUT/configure-cpu.log" 2>&1 &&
-        ninja -C /root/build-cpu -k 0 -j"$(nproc)" core_tests core_simd_tests core_alloc_tests closed_loop_tests >"$OUT/build-cpu.log" 2>&1 ||
+        ninja -C "$B-cpu" -k 0 -j"$(nproc)" core_tests core_simd_tests core_alloc_tests closed_loop_tests >"$OUT/build-cpu.log" 2>&1 ||
         { echo "CPU BUILD FAILED"; grep -E "error|warning" "$OUT/build-cpu.log" | head -20; }
       echo "warnings in core/: $(grep -cE 'core/include/.*warning|core/src/.*warning' "$OUT/build-cpu.log")"
       export LD_LIBRARY_PATH="$D/usr/lib/x86_64-linux-gnu:$LD_LIBRARY_PATH"
       for t in core_tests core_simd_tests core_alloc_tests closed_loop_tests; do
-        timeout 300 /root/build-cpu/bin/$t >"$OUT/cpu-$t.log" 2>&1
+        timeout 300 "$B-cpu"/bin/$t >"$OUT/cpu-$t.log" 2>&1
         echo "cpu $t: rc $? $(grep -E '^\[  (PASSED|FAILED)' "$OUT/cpu-$t.log" | tr '\n' ' ')"
       done
       stamp "cpu tests done" ;;
@@ -156,5 +156,5 @@ for step in "$@"; do
     *) echo "unknown step $step" ;;
   esac
 done
-stamp "session done"
-tar czf "$DEST/session.tgz" -C "$OUT" . && ls -la "$DEST"
+stamp "all done"
+tar czf "$DEST/kernel.tgz" -C "$OUT" . && ls -la "$DEST"

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # The whole control cycle on the GPU machine, this tree against a base tree in the same call
 # (issue 24): the cost of Controller::iterate around the update, the daemon's state -> command,
-# and the update at the loop rates of tools/gpu/rate_dial.py. Offline, from carried trees
-# (tools/gpu/README.md): run from this tree, with .devdeps beside it.
+# and the update at the loop rates of tools/gpu/rate_dial.py. Offline (tools/gpu/README.md):
+# run from this tree, with .devdeps (tools/gpu/pack-deps.sh) beside it.
 #
-#   tools/gpu/cycle_session.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60]
-#        [--seeds 3] [--first-seed 51] [--session-seconds 570] STEP...
+#   tools/gpu/cycle-compare.sh [--base DIR] [--daemon-seconds 30] [--rate-seconds 60]
+#        [--seeds 3] [--first-seed 51] [--time-budget 570] [--archive DIR] STEP...
 #   STEP: build cudatest bench daemon rates flights pdl spin400 track
 #     build     configure and build the targets below in this tree (and --base) at once
 #     cudatest  the CUDA tests of this tree (parity, device obstacle grid)
@@ -19,18 +19,19 @@
 #               daemon-bench at 400 Hz (states at 400 Hz) for --rate-seconds
 #     flights   real-time SITL campaigns at each loop rate (rate_dial.py; seeds 51..): CUDA at
 #               50/100/200/400 Hz on 3 cores each, the CPU backend at 50/100 Hz on 2 cores each,
-#               all at once (the CUDA flights share the GPU), until --session-seconds after the
-#               session's start less 25 s; the table (rate_table.py) in summary.md
+#               all at once (the CUDA flights share the GPU), until --time-budget seconds after
+#               the script's start less 25 s; the table (rate_table.py) in summary.md
 #     pdl       this tree's update with and without programmatic dependent launches
 #               (mppi.cuda.pdl=off), test and bench scenes
 #     spin400   daemon-bench at 400 Hz (as in rates) with daemon.spin
 #     track     rate_track_circle_fast alone at 50/100/200/400 Hz on CUDA, 4 cores each, at once
-# Results: results/cycle-<time>/ (one log per step, summary.md last); with $OUT set (the device
-# tool), summary.md and everything as cycle.tgz there.
+# Results: results/cycle-<time>/ (one log per step, summary.md last); with --archive DIR,
+# summary.md and everything as cycle.tgz there too. Builds: $MPPID_BUILD_ROOT/{this,base}
+# (default build-cycle/ in this tree; put it where a rebuild is not needed next time).
 set -uo pipefail
 HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 cd "$HERE"
-BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 FIRST_SEED=51 SESSION_S=570 STEPS=()
+BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 FIRST_SEED=51 BUDGET_S=570 ARCHIVE="" STEPS=()
 while (($#)); do
   case "$1" in
     --base) BASE="$(cd "$2" && pwd)"; shift ;;
@@ -38,8 +39,9 @@ while (($#)); do
     --rate-seconds) RATE_S="$2"; shift ;;
     --seeds) SEEDS="$2"; shift ;;
     --first-seed) FIRST_SEED="$2"; shift ;;
-    --session-seconds) SESSION_S="$2"; shift ;;
-    -h|--help) sed -n '2,20s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    --time-budget) BUDGET_S="$2"; shift ;;
+    --archive) ARCHIVE="$2"; shift ;;
+    -h|--help) sed -n '2,30s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) STEPS+=("$1") ;;
   esac
   shift
@@ -50,27 +52,28 @@ mkdir -p "$RES"
 SUMMARY="$RES/summary.md"
 T0=$(date +%s)
 status=0
-say() { printf '[cycle %4ds] %s\n' $(($(date +%s) - T0)) "$*" | tee -a "$RES/session.log"; }
+say() { printf '[cycle %4ds] %s\n' $(($(date +%s) - T0)) "$*" | tee -a "$RES/cycle.log"; }
 fail() { say "FAILED: $*"; status=1; }
 want() { [[ " ${STEPS[*]} " == *" $1 "* ]]; }
-B_THIS=/root/build-this B_BASE=/root/build-base
+BUILD_ROOT="${MPPID_BUILD_ROOT:-$HERE/build-cycle}"
+B_THIS="$BUILD_ROOT/this" B_BASE="$BUILD_ROOT/base"
 
 # ---- setup (as tools/gpu/run-all.sh) ----
 export PATH="$D/bin:$PATH"
 export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 PY="$(command -v python3)"
 "$PY" -c 'import lcm' 2>/dev/null ||
-  "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl >>"$RES/session.log" 2>&1
+  "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl >>"$RES/cycle.log" 2>&1
 LCM_DIR="$("$PY" -c 'import lcm,os;print(os.path.join(os.path.dirname(os.path.dirname(lcm.__file__)),"lib","lcm","cmake"))')"
 for tree in "$HERE" ${BASE:+"$BASE"}; do
   mkdir -p "$tree/.venv/bin"
   for n in python python3; do printf '#!/bin/sh\nexec %s "$@"\n' "$PY" >"$tree/.venv/bin/$n"; chmod +x "$tree/.venv/bin/$n"; done
 done
 {
-  echo "# cycle session ($(date -u +%FT%TZ))"
+  echo "# control cycle, this tree against the base ($(date -u +%FT%TZ))"
   echo "- GPU: $(nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv,noheader 2>&1)"
   echo "- CPU: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
-  echo "- this tree: ${MPPID_COMMIT:-$(cat .gpuwork-commit 2>/dev/null || echo unknown)}; base: ${BASE:-none} ${MPPID_BASE_COMMIT:-}"
+  echo "- this tree: ${MPPID_COMMIT:-$(git -C "$HERE" rev-parse --short HEAD 2>/dev/null || echo unknown)}; base: ${BASE:-none} ${MPPID_BASE_COMMIT:-}"
 } >"$SUMMARY"
 
 build() {  # tree dir
@@ -161,7 +164,7 @@ if want rates; then
 fi
 
 # One (backend, rate) on its own cores: its three task groups' campaigns in turn, each stopped
-# at the session's flight deadline (finished flights are kept).
+# at the flights' deadline (--time-budget) (finished flights are kept).
 fly_rate() {  # backend rate cores forest_rollouts [groups, default: forest track team3]
   local be=$1 rate=$2 cores=$3 k_forest=$4 groups=${5:-forest track team3} dir="$RES/flights/$1-$2" scen="$RES/scenarios-$2"
   mkdir -p "$dir" "$scen"
@@ -189,12 +192,12 @@ LIST
 }
 if want flights; then
   export MPPID_BUILD_DIR="$B_THIS"
-  FLIGHT_END=$((T0 + SESSION_S - 25))
+  FLIGHT_END=$((T0 + BUDGET_S - 25))
   fly_rate cuda 50 0-2 16384 & fly_rate cuda 100 3-5 16384 & fly_rate cuda 200 6-8 8192 & fly_rate cuda 400 9-11 4096 &
   fly_rate cpu 50 12-13 0 & fly_rate cpu 100 14-15 0 &
   wait
   { echo; echo "## Loop rates (real time, seeds $FIRST_SEED-$((FIRST_SEED + SEEDS - 1)), all flights at once)"; echo
-    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/session.log"
+    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/cycle.log"
   say "flights done"
 fi
 
@@ -218,11 +221,11 @@ fi
 
 if want track; then
   export MPPID_BUILD_DIR="$B_THIS"
-  FLIGHT_END=$((T0 + SESSION_S - 25))
+  FLIGHT_END=$((T0 + BUDGET_S - 25))
   fly_rate cuda 50 0-3 0 track & fly_rate cuda 100 4-7 0 track & fly_rate cuda 200 8-11 0 track & fly_rate cuda 400 12-15 0 track &
   wait
   { echo; echo "## rate_track_circle_fast alone (real time, CUDA, seeds $FIRST_SEED-$((FIRST_SEED + SEEDS - 1)), four rates at once)"; echo
-    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/session.log"
+    "$PY" tools/gpu/rate_table.py "$RES/flights"; } >>"$SUMMARY" 2>>"$RES/cycle.log"
   say "track done"
 fi
 
@@ -235,8 +238,8 @@ if [[ -f "$RES/daemon-table.md" ]]; then
 fi
 say "all done, status $status"
 cat "$SUMMARY"
-if [[ -n "${OUT:-}" ]]; then
-  cp "$SUMMARY" "$OUT/"
-  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' --exclude='truth.jsonl' --exclude='*.png' --exclude='build-*.log' -czf "$OUT/cycle.tgz" "$(basename "$RES")"
+if [[ -n "$ARCHIVE" ]]; then
+  mkdir -p "$ARCHIVE" && cp "$SUMMARY" "$ARCHIVE/"
+  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' --exclude='truth.jsonl' --exclude='*.png' --exclude='build-*.log' -czf "$ARCHIVE/cycle.tgz" "$(basename "$RES")"
 fi
 exit $status
