@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Sets up and builds (tools/setup.sh), then runs every test: ctest over the build, pytest
-# over test/ (a real-time forest flight among them), a short soak with scheduled faults
+# Sets up and builds (tools/setup.sh), then runs every test: the hygiene check
+# (tools/check-hygiene.py), ctest over the build, pytest over test/ (a real-time forest flight
+# among them), a short soak with scheduled faults
 # (tools/soak, every fault once), the sanitizer and fuzzing stage (tools/sanitize.sh:
 # ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
 # then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user) and the
@@ -34,6 +35,9 @@ else
 fi
 
 status=0
+
+echo "[test] tools/check-hygiene.py (the tracked files: no development talk, no third-party recipe, sizes)"
+python3 tools/check-hygiene.py || status=1
 
 echo "[test] ctest --test-dir $BUILD_DIR --output-on-failure -j2 ${CTEST_ARGS:-}"
 # shellcheck disable=SC2086  # CTEST_ARGS is a list of words on purpose
