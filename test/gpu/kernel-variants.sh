@@ -8,8 +8,8 @@
 #   test/gpu/kernel-variants.sh [quick]
 set -u
 B=${B:-build-gpu}
-OUT=${MPPID_RESULTS:-results}
-mkdir -p "$OUT"
+RES=${MPPID_RESULTS:-results}
+mkdir -p "$RES"
 export LD_LIBRARY_PATH=$PWD/.devdeps/lib:${LD_LIBRARY_PATH:-}
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
@@ -52,7 +52,7 @@ TM="$B/bin/mppid-gpu-timing"
   row "chunked " -- --iters 1000 quadrotor_forest:16384 quadrotor_forest:1024 quadrotor_forest:256
   row "graph off" mppi.cuda.graph=false -- --iters 500 quadrotor_forest:16384
   stamp "variants done"
-} 2>&1 | tee "$OUT/variants.txt"
+} 2>&1 | tee "$RES/variants.txt"
 
 if [ -x build-ftz/bin/cuda_backend_tests ]; then
   {
@@ -62,7 +62,7 @@ if [ -x build-ftz/bin/cuda_backend_tests ]; then
     TM=build-ftz/bin/mppid-gpu-timing
     row "ftz     " -- --iters 500 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000
     row "ftz     " -- --iters 30 --warmup 3 quadrotor_forest:1048576
-  } 2>&1 | tee "$OUT/ftz.txt"
+  } 2>&1 | tee "$RES/ftz.txt"
 else
   echo "no build-ftz/ (test/gpu/kernel-variants.sh build-ftz makes it)"
 fi
@@ -73,8 +73,8 @@ if [ "${1:-}" != quick ] && command -v ncu > /dev/null; then
     timeout 120 ncu --kernel-name regex:'rollout|weigh|finalize|partial_min' --launch-skip 12 --launch-count 3 \
       --section SpeedOfLight --section WarpStateStats --section SchedulerStats --section Occupancy --section LaunchStats \
       --section InstructionStats "$TM" --iters 5 --warmup 5 $c
-  done > "$OUT/ncu.txt" 2>&1
+  done > "$RES/ncu.txt" 2>&1
   grep -E '^  [a-z_]+.*\(|Duration|Executed Ipc A|Issued Warp Per|No Eligible|Warp Cycles Per Issued|Achieved Occupancy|Executed Instructions  |Block Limit (Sh|Reg)' \
-    "$OUT/ncu.txt" | head -80
+    "$RES/ncu.txt" | head -80
   stamp ncu
 fi

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The whole control cycle on the GPU machine, this tree against a base tree in the same call
+# The whole control cycle on a GPU host, this tree against a base tree in the same run
 # (issue 24): the cost of Controller::iterate around the update, the daemon's state -> command,
 # and the update at the loop rates of tools/gpu/rate_dial.py. Offline (tools/gpu/README.md):
 # run from this tree, with .devdeps (tools/gpu/pack-deps.sh) beside it.
