@@ -10,9 +10,9 @@
 # $MPPID_BUILD_ROOT/build-cmp-{base,this} (default: this tree), the logs and results to
 # $MPPID_RESULTS (default results/compare) and a .tgz of it beside; the summary on stdout.
 set -uo pipefail
-HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/../../tools/gpu/devdeps.sh"
+HERE="$ROOT"
 BASE="$(cd "${1:?base tree}" && pwd)"; shift
-D="${MPPID_DEVDEPS:-$HERE/.devdeps}"
 R="${MPPID_RESULTS:-$HERE/results/compare}"
 BR="${MPPID_BUILD_ROOT:-$HERE}"
 mkdir -p "$R"

@@ -11,7 +11,7 @@
 # Results in $MPPID_RESULTS (default results/field): field-timing.txt (the summary), parity.txt,
 # timing.json. Builds: $MPPID_BUILD_ROOT/build-field{,-base,-LABEL} (default: this tree).
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/../../tools/gpu/devdeps.sh"
 cd "$ROOT"
 BASE=""
 ALSO=()
@@ -19,16 +19,14 @@ while (($#)); do
   case "$1" in
     --base) BASE="$(cd "$2" && pwd)"; shift 2 ;;
     --also) ALSO+=("$2"); shift 2 ;;
-    *) echo "unknown argument $1"; exit 2 ;;
+    *) other_arg "${BASH_SOURCE[0]}" "$1" ;;
   esac
 done
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
 DEST="${MPPID_RESULTS:-$ROOT/results/field}"
 BR="${MPPID_BUILD_ROOT:-$ROOT}"
 BUILT=("$BR/build-field")
 W="$ROOT/results/field-work"
 rm -rf "$W" && mkdir -p "$W" "$DEST"
-export LD_LIBRARY_PATH="$D/lib:${LD_LIBRARY_PATH:-}"
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
 

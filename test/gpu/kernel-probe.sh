@@ -20,15 +20,13 @@
 # Logs and results are written to results/kernel-work; one archive of them, kernel.tgz, lands in
 # $MPPID_RESULTS (default results/kernel). Build: $B (default build-k/ in this tree).
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/../../tools/gpu/devdeps.sh"
 cd "$ROOT"
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
 B="${B:-$ROOT/build-k}"
 # Everything goes to a work folder; at the end one archive of it lands in $DEST.
 DEST="${MPPID_RESULTS:-$ROOT/results/kernel}"
 WORK="$ROOT/results/kernel-work"
 rm -rf "$WORK" && mkdir -p "$WORK" "$DEST"
-export LD_LIBRARY_PATH="$D/lib:${LD_LIBRARY_PATH:-}"
 T0=$(date +%s)
 stamp() { echo "[$(($(date +%s) - T0)) s] $*"; }
 TARGETS=(quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 team9_forest:6000)

@@ -29,7 +29,8 @@
 # summary.md and everything as cycle.tgz there too. Builds: $MPPID_BUILD_ROOT/{this,base}
 # (default build-cycle/ in this tree; put it where a rebuild is not needed next time).
 set -uo pipefail
-HERE="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/devdeps.sh"
+HERE="$ROOT"
 cd "$HERE"
 BASE="" DAEMON_S=30 RATE_S=60 SEEDS=3 FIRST_SEED=51 BUDGET_S=570 ARCHIVE="" STEPS=()
 while (($#)); do
@@ -41,12 +42,11 @@ while (($#)); do
     --first-seed) FIRST_SEED="$2"; shift ;;
     --time-budget) BUDGET_S="$2"; shift ;;
     --archive) ARCHIVE="$2"; shift ;;
-    -h|--help) sed -n '2,30s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) other_arg "${BASH_SOURCE[0]}" "$1" ;;
     *) STEPS+=("$1") ;;
   esac
   shift
 done
-D="${MPPID_DEVDEPS:-$HERE/.devdeps}"
 RES="$HERE/results/cycle-$(date -u +%Y%m%d-%H%M%S)"
 mkdir -p "$RES"
 SUMMARY="$RES/summary.md"
@@ -59,8 +59,6 @@ BUILD_ROOT="${MPPID_BUILD_ROOT:-$HERE/build-cycle}"
 B_THIS="$BUILD_ROOT/this" B_BASE="$BUILD_ROOT/base"
 
 # ---- setup (as tools/gpu/run-all.sh) ----
-export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 PY="$(command -v python3)"
 "$PY" -c 'import lcm' 2>/dev/null ||
   "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl >>"$RES/cycle.log" 2>&1

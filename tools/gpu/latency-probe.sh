@@ -9,7 +9,7 @@
 #    the daemon's threads (top -H) and the GPU's clock sampled during the run.
 # Results (JSON, logs, a summary) land in DIR; with --archive A, summary.md and latency-probe.tgz in A too.
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/devdeps.sh"
 cd "$ROOT"
 ARCHIVE="" SECONDS_RUN=60 RUNS=1 K=16384 RES="$ROOT/results/latency-$(date -u +%Y%m%d-%H%M%S)"
 while (($#)); do
@@ -19,8 +19,7 @@ while (($#)); do
     --runs) RUNS="$2"; shift ;;
     --results) RES="$2"; shift ;;
     --archive) ARCHIVE="$2"; shift ;;
-    -h|--help) sed -n '2,11s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
-    *) echo "latency-probe.sh: unknown argument '$1'" >&2; exit 2 ;;
+    *) other_arg "${BASH_SOURCE[0]}" "$1" ;;
   esac
   shift
 done
@@ -32,9 +31,6 @@ say() { printf '[probe %4ds] %s\n' $(($(date +%s) - T0)) "$*" | tee -a "$RES/pro
 if [[ ! -x "$B/bin/mppid" || ! -x "$B/bin/mppid-gpu-timing" ]]; then
   tools/gpu/run-all.sh --stages build --results "$RES/build" >/dev/null 2>&1 || { say "build failed"; tail -30 "$RES/build/build.log"; exit 1; }
 fi
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
-export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 say "built ($B)"
 {
   echo "# latency probe ($(date -u +%FT%TZ)), K = $K, ${SECONDS_RUN} s"

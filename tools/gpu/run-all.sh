@@ -35,9 +35,8 @@
 # Reported results use seeds 51-70 (tuning uses 1-50): --first-seed 51 by default.
 # Exit status: non-zero when a stage failed (the others still run).
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/devdeps.sh"
 cd "$ROOT"
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
 B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"
 STAGES="build,test,bench,daemon,campaign"
 FOREST_SCEN=forest_4m
@@ -66,8 +65,7 @@ while (($#)); do
     --campaign-timeout) CAMP_TIMEOUT="$2"; shift ;;
     --results) RES="$2"; shift ;;
     --archive) ARCHIVE="$2"; shift ;;
-    -h|--help) sed -n '2,30s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
-    *) echo "run-all.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+    *) other_arg "${BASH_SOURCE[0]}" "$1" ;;
   esac
   shift
 done
@@ -85,8 +83,6 @@ fail() { say "FAILED: $*"; note "- FAILED: $*"; status=1; }
 
 # ---- setup: tools and libraries from .devdeps, the lcm wheel, a .venv stand-in -------------
 [[ -d "$D" ]] || { echo "run-all.sh: $D missing: run tools/gpu/pack-deps.sh on a networked machine and copy .devdeps beside this tree" >&2; exit 2; }
-export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 PY="$(command -v python3)"
 if ! "$PY" -c 'import lcm' 2>/dev/null; then
   "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl \
