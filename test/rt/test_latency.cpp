@@ -120,11 +120,7 @@ struct LoopRig {
   // A state sampled `age_ns` before now, received now; x[0] = 0.
   void state(std::int64_t age_ns, std::int64_t wall_ahead_ns = 0) {
     auto& s = inbox.state_buffer();
-    s.seq = ++seq;
-    s.nx = 16;
-    s.vehicle_count = 1;
-    s.n = 16;
-    s.model = 1;
+    test::shape_state(s, ++seq);
     s.recv_ns = clock.now_ns();
     // A wall clock 1000 s ahead of the monotonic one: only differences matter.
     s.recv_utime = (clock.now_ns() + 1000 * rt::kNsPerS) / 1000;

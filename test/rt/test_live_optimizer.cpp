@@ -82,11 +82,7 @@ struct LiveRig {
   }
   void fresh_cycle() {
     auto& st = inbox->state_buffer();
-    st.seq = ++seq;
-    st.nx = 16;
-    st.vehicle_count = 1;
-    st.n = 16;
-    st.model = 1;
+    test::shape_state(st, ++seq);
     st.recv_ns = clock.now_ns();
     st.sample_utime = clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) st.x[i] = 1.0f;
@@ -349,11 +345,7 @@ TEST(LiveUpdate, RealControllerContinuesBitForBitAcrossARebuild) {
   };
   auto step = [](Run* run, int k) {
     auto& st = run->inbox->state_buffer();
-    st.seq = k + 1;
-    st.nx = 16;
-    st.vehicle_count = 1;
-    st.n = 16;
-    st.model = 1;
+    test::shape_state(st, k + 1);
     st.recv_ns = run->clock.now_ns();
     st.sample_utime = run->clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) st.x[i] = 0.0f;
