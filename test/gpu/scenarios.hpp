@@ -58,38 +58,39 @@ inline void quad_mppi(MppiSettings& s, int vehicles, float hover) {
 template <class T>
 Scenario<T> make_scenario(int k, int t);
 
-template <>
-inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
-  Scenario<QuadrotorForest> sc;
+// One motor-speed quadrotor: K rollouts of T steps, at rest with its motors at hover speed.
+template <class T>
+inline Scenario<T> quad_scenario(int k, int t) {
+  Scenario<T> sc;
   const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
   sc.settings.rollouts = k;
   sc.settings.horizon = t;
   quad_mppi(sc.settings, 1, hover);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
   sc.x0.assign(Quadrotor::kNx, 0.0f);
-  sc.x0[Quadrotor::PZ] = 2.0f;
-  sc.x0[Quadrotor::VX] = 1.0f;
   for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
   return sc;
 }
 
 template <>
+inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
+  auto sc = quad_scenario<QuadrotorForest>(k, t);
+  sc.params.cost.goal[0][0] = 20.0f;
+  sc.params.cost.goal[0][2] = 2.0f;
+  sc.params.cost.obstacles = forest(32);
+  sc.x0[Quadrotor::PZ] = 2.0f;
+  sc.x0[Quadrotor::VX] = 1.0f;
+  return sc;
+}
+
+template <>
 inline Scenario<QuadrotorTrack> make_scenario<QuadrotorTrack>(int k, int t) {
-  Scenario<QuadrotorTrack> sc;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
-  quad_mppi(sc.settings, 1, hover);
+  auto sc = quad_scenario<QuadrotorTrack>(k, t);
   sc.params.cost.reference.kind = Reference::kCircle;
   sc.params.cost.reference.center[2] = 2.0f;
   sc.params.cost.reference.radius = 2.0f;
   sc.params.cost.reference.speed = 2.0f;
-  sc.x0.assign(Quadrotor::kNx, 0.0f);
   sc.x0[Quadrotor::PX] = 2.0f;
   sc.x0[Quadrotor::PZ] = 2.0f;
-  for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
   return sc;
 }
 
@@ -113,30 +114,33 @@ inline std::vector<float> rate_hover(float x, float z) {
   return s;
 }
 
-template <>
-inline Scenario<RateQuadrotorForest> make_scenario<RateQuadrotorForest>(int k, int t) {
-  Scenario<RateQuadrotorForest> sc;
+// One rate-controlled quadrotor: K rollouts of T steps, at 2 m height moving at 1 m/s along x.
+template <class T>
+inline Scenario<T> rate_scenario(int k, int t) {
+  Scenario<T> sc;
   sc.settings.rollouts = k;
   sc.settings.horizon = t;
   rate_mppi(sc.settings);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
   sc.x0 = rate_hover(0.0f, 2.0f);
   return sc;
 }
 
 template <>
+inline Scenario<RateQuadrotorForest> make_scenario<RateQuadrotorForest>(int k, int t) {
+  auto sc = rate_scenario<RateQuadrotorForest>(k, t);
+  sc.params.cost.goal[0][0] = 20.0f;
+  sc.params.cost.goal[0][2] = 2.0f;
+  sc.params.cost.obstacles = forest(32);
+  return sc;
+}
+
+template <>
 inline Scenario<RateQuadrotorTrack> make_scenario<RateQuadrotorTrack>(int k, int t) {
-  Scenario<RateQuadrotorTrack> sc;
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
-  rate_mppi(sc.settings);
+  auto sc = rate_scenario<RateQuadrotorTrack>(k, t);
   sc.params.cost.reference.kind = Reference::kFigureEight;
   sc.params.cost.reference.center[2] = 2.0f;
   sc.params.cost.reference.radius = 3.0f;
   sc.params.cost.reference.speed = 2.0f;
-  sc.x0 = rate_hover(0.0f, 2.0f);
   return sc;
 }
 
