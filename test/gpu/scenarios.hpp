@@ -58,13 +58,20 @@ inline void quad_mppi(MppiSettings& s, int vehicles, float hover) {
 template <class T>
 Scenario<T> make_scenario(int k, int t);
 
+// K rollouts of T steps; the rest as each scenario sets it.
+template <class T>
+inline Scenario<T> sized(int k, int t) {
+  Scenario<T> sc;
+  sc.settings.rollouts = k;
+  sc.settings.horizon = t;
+  return sc;
+}
+
 // One motor-speed quadrotor: K rollouts of T steps, at rest with its motors at hover speed.
 template <class T>
 inline Scenario<T> quad_scenario(int k, int t) {
-  Scenario<T> sc;
+  auto sc = sized<T>(k, t);
   const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
   quad_mppi(sc.settings, 1, hover);
   sc.x0.assign(Quadrotor::kNx, 0.0f);
   for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
@@ -117,9 +124,7 @@ inline std::vector<float> rate_hover(float x, float z) {
 // One rate-controlled quadrotor: K rollouts of T steps, at 2 m height moving at 1 m/s along x.
 template <class T>
 inline Scenario<T> rate_scenario(int k, int t) {
-  Scenario<T> sc;
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
+  auto sc = sized<T>(k, t);
   rate_mppi(sc.settings);
   sc.x0 = rate_hover(0.0f, 2.0f);
   return sc;
@@ -146,10 +151,8 @@ inline Scenario<RateQuadrotorTrack> make_scenario<RateQuadrotorTrack>(int k, int
 
 template <>
 inline Scenario<CartpoleSwingup> make_scenario<CartpoleSwingup>(int k, int t) {
-  Scenario<CartpoleSwingup> sc;
+  auto sc = sized<CartpoleSwingup>(k, t);
   auto& s = sc.settings;
-  s.rollouts = k;
-  s.horizon = t;
   s.dt = 0.01f;  // 1 s horizon at T = 100
   s.lambda = 2000.0f;
   s.nu = 10.0f;
@@ -163,10 +166,8 @@ inline Scenario<CartpoleSwingup> make_scenario<CartpoleSwingup>(int k, int t) {
 
 template <>
 inline Scenario<RacecarEllipse> make_scenario<RacecarEllipse>(int k, int t) {
-  Scenario<RacecarEllipse> sc;
+  auto sc = sized<RacecarEllipse>(k, t);
   auto& s = sc.settings;
-  s.rollouts = k;
-  s.horizon = t;
   s.lambda = 300.0f;
   s.nu = 2.0f;
   s.sigma = {0.1f, 10.0f};
@@ -184,10 +185,8 @@ inline Scenario<RacecarEllipse> make_scenario<RacecarEllipse>(int k, int t) {
 template <class T>
 Scenario<T> team_scenario(int k, int t) {
   constexpr int m = T::kVehicles;
-  Scenario<T> sc;
+  auto sc = sized<T>(k, t);
   const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
   quad_mppi(sc.settings, m, hover);
   sc.params.cost.obstacles = forest(32);
   sc.x0.assign(T::kNx, 0.0f);
