@@ -67,6 +67,22 @@ inline Scenario<T> sized(int k, int t) {
   return sc;
 }
 
+// The forest scene: the goal 20 m ahead at 2 m height among 32 trees.
+template <class Cost>
+inline void forest_scene(Cost& cost) {
+  cost.goal[0][0] = 20.0f;
+  cost.goal[0][2] = 2.0f;
+  cost.obstacles = forest(32);
+}
+
+// A reference curve at 2 m height, flown at 2 m/s.
+inline void track_scene(Reference& r, Reference::Kind kind, float radius) {
+  r.kind = kind;
+  r.center[2] = 2.0f;
+  r.radius = radius;
+  r.speed = 2.0f;
+}
+
 // One motor-speed quadrotor: K rollouts of T steps, at rest with its motors at hover speed.
 template <class T>
 inline Scenario<T> quad_scenario(int k, int t) {
@@ -81,9 +97,7 @@ inline Scenario<T> quad_scenario(int k, int t) {
 template <>
 inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
   auto sc = quad_scenario<QuadrotorForest>(k, t);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
+  forest_scene(sc.params.cost);
   sc.x0[Quadrotor::PZ] = 2.0f;
   sc.x0[Quadrotor::VX] = 1.0f;
   return sc;
@@ -92,10 +106,7 @@ inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
 template <>
 inline Scenario<QuadrotorTrack> make_scenario<QuadrotorTrack>(int k, int t) {
   auto sc = quad_scenario<QuadrotorTrack>(k, t);
-  sc.params.cost.reference.kind = Reference::kCircle;
-  sc.params.cost.reference.center[2] = 2.0f;
-  sc.params.cost.reference.radius = 2.0f;
-  sc.params.cost.reference.speed = 2.0f;
+  track_scene(sc.params.cost.reference, Reference::kCircle, 2.0f);
   sc.x0[Quadrotor::PX] = 2.0f;
   sc.x0[Quadrotor::PZ] = 2.0f;
   return sc;
@@ -133,19 +144,14 @@ inline Scenario<T> rate_scenario(int k, int t) {
 template <>
 inline Scenario<RateQuadrotorForest> make_scenario<RateQuadrotorForest>(int k, int t) {
   auto sc = rate_scenario<RateQuadrotorForest>(k, t);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
+  forest_scene(sc.params.cost);
   return sc;
 }
 
 template <>
 inline Scenario<RateQuadrotorTrack> make_scenario<RateQuadrotorTrack>(int k, int t) {
   auto sc = rate_scenario<RateQuadrotorTrack>(k, t);
-  sc.params.cost.reference.kind = Reference::kFigureEight;
-  sc.params.cost.reference.center[2] = 2.0f;
-  sc.params.cost.reference.radius = 3.0f;
-  sc.params.cost.reference.speed = 2.0f;
+  track_scene(sc.params.cost.reference, Reference::kFigureEight, 3.0f);
   return sc;
 }
 
