@@ -56,7 +56,7 @@ log() { printf '[setup] %s\n' "$*"; }
 APT_PACKAGES=(
   # toolchain and build
   build-essential cmake ninja-build pkg-config git ca-certificates
-  ccache  # a second build of the same sources (CI after a session, the sanitizer builds) is a cache hit
+  ccache  # a second build of the same sources (a later CI run, the sanitizer builds) is a cache hit
   # C++ libraries (OpenMP comes with gcc as libgomp)
   libeigen3-dev librandom123-dev libyaml-cpp-dev libcli11-dev libspdlog-dev
   libhwy-dev  # Google Highway: the CPU backend's SIMD targets and vector math

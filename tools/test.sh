@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Sets up and builds (tools/setup.sh), then runs every test: ctest over the build, pytest
-# over test/ on two workers (a real-time forest flight among them), a short soak with scheduled faults
-# (tools/soak, every fault once, flown beside the sanitizer stage), the sanitizer and fuzzing stage (tools/sanitize.sh:
+# Sets up and builds (tools/setup.sh), then runs every test: the hygiene check
+# (tools/check-hygiene.py), ctest over the build, pytest over test/ on two workers (a real-time
+# forest flight among them), a short soak with scheduled faults (tools/soak, every fault once,
+# flown beside the sanitizer stage), the sanitizer and fuzzing stage (tools/sanitize.sh:
 # ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
 # then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user) and the
 # package stage (tools/package-test.sh: the .debs built, installed into a clean Debian 12 root
@@ -39,6 +40,10 @@ status=0
 stage_names=() stage_secs=() stage_t0=$SECONDS
 stage_done() { stage_names+=("$1"); stage_secs+=($((SECONDS - stage_t0))); stage_t0=$SECONDS; }
 stage_done setup
+
+echo "[test] tools/check-hygiene.py (the tracked files: no development talk, no third-party recipe, sizes)"
+python3 tools/check-hygiene.py || status=1
+stage_done hygiene
 
 echo "[test] ctest --test-dir $BUILD_DIR --output-on-failure -j2 ${CTEST_ARGS:-}"
 # shellcheck disable=SC2086  # CTEST_ARGS is a list of words on purpose

@@ -72,6 +72,17 @@ struct Receiver {
   transport::Inbox inbox{expect()};
   transport::LcmDecoder decoder{&clock};
   std::int64_t undecodable() const { return inbox.counters.rejected_undecodable.load(); }
+
+  // A daemon fuzz target's crash regression through `decode`: its count field at `count_at`
+  // reads `count`; decoding it throws nothing and counts one undecodable message.
+  using Decode = void (transport::LcmDecoder::*)(const void*, std::size_t, transport::Inbox*);
+  void regression_is_undecodable(Decode decode, const std::string& target, const std::string& name,
+                                 std::size_t count_at, std::int64_t count) {
+    const auto found = regression(target, name, true);
+    EXPECT_EQ(read_be(found, count_at, 4), count);
+    EXPECT_NO_THROW((decoder.*decode)(found.data(), found.size(), &inbox));
+    EXPECT_EQ(undecodable(), 1);
+  }
 };
 
 }  // namespace
@@ -133,10 +144,8 @@ TEST(LcmDecode, ValidMessagesDecode) {
 // of the receive thread, which ends the daemon.
 TEST(LcmDecode, StateCountTheBytesDoNotBackIsUndecodable) {
   Receiver r;
-  const auto found = regression("fuzz_state", "state_count_1040187397_asks_4GB", true);
-  EXPECT_EQ(read_be(found, wire::kStateCount, 4), 1040187397);
-  r.decoder.state(found.data(), found.size(), &r.inbox);
-  EXPECT_EQ(r.undecodable(), 1);
+  r.regression_is_undecodable(&transport::LcmDecoder::state, "fuzz_state", "state_count_1040187397_asks_4GB",
+                              wire::kStateCount, 1040187397);
   for (std::uint32_t n : {0xFFFFFFFFu, 0x80000000u, 0x7FFFFFFFu, 17u}) {
     auto b = encode(state16(1));
     write_be32(&b, wire::kStateCount, n);
@@ -155,10 +164,8 @@ TEST(LcmDecode, StateCountTheBytesDoNotBackIsUndecodable) {
 // initialise 21 GB before finding the bytes missing.
 TEST(LcmDecode, ObstacleCountTheBytesDoNotBackIsUndecodable) {
   Receiver r;
-  const auto found = regression("fuzz_obstacles", "obstacles_count_1085276160_touches_21GB", true);
-  EXPECT_EQ(read_be(found, wire::kObstaclesCount, 4), 1085276160);
-  r.decoder.obstacles(found.data(), found.size(), &r.inbox);
-  EXPECT_EQ(r.undecodable(), 1);
+  r.regression_is_undecodable(&transport::LcmDecoder::obstacles, "fuzz_obstacles",
+                              "obstacles_count_1085276160_touches_21GB", wire::kObstaclesCount, 1085276160);
   EXPECT_EQ(r.inbox.obstacles.writes(), 0);
   // More than the daemon keeps, every byte there: decodable, refused as a bad input (as before).
   mppi_lcm::obstacles_t o{};
@@ -174,10 +181,8 @@ TEST(LcmDecode, ObstacleCountTheBytesDoNotBackIsUndecodable) {
 // assign 2^64-1 characters: std::length_error out of the receive thread.
 TEST(LcmDecode, ParamKeyLengthZeroOrNegativeIsUndecodable) {
   Receiver r;
-  const auto found = regression("fuzz_params", "param_key_length_0_throws", true);
-  EXPECT_EQ(read_be(found, wire::kParamKeyLength, 4), 0);
-  EXPECT_NO_THROW(r.decoder.param(found.data(), found.size(), &r.inbox));
-  EXPECT_EQ(r.undecodable(), 1);
+  r.regression_is_undecodable(&transport::LcmDecoder::param, "fuzz_params", "param_key_length_0_throws",
+                              wire::kParamKeyLength, 0);
   mppi_lcm::param_update_t p{};
   p.key = "cost.w_xy";
   p.value = 3.0;

@@ -25,16 +25,6 @@ using transport::Mode;
 
 namespace {
 
-// A hang guard, not a timing assertion: generous enough for a sanitizer build on a loaded machine.
-bool wait_until(const std::function<bool()>& cond, int timeout_ms = 30000) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < end) {
-    if (cond()) return true;
-    std::this_thread::yield();
-  }
-  return cond();
-}
-
 // What left the process on the command and status channels, decoded as a peer would.
 struct Listener {
   std::mutex mu;
@@ -192,17 +182,17 @@ TEST(LcmTransport, GarbageAndWrongTypeOnTheStateChannelAreCounted) {
   std::vector<std::uint8_t> buf(static_cast<std::size_t>(m.getEncodedSize()));
   m.encode(buf.data(), 0, static_cast<int>(buf.size()));
   r.tx.lcm().publish("MPPI_STATE", buf.data(), static_cast<unsigned>(buf.size() - 1));
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.rejected_undecodable.load() == 3; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.rejected_undecodable.load() == 3; }));
   EXPECT_EQ(r.inbox.counters.states.load(), 0);
   r.cycle();
   EXPECT_EQ(r.fake.iterations, 0);  // nothing valid arrived: failsafe, no optimizer run
   // A good state after the garbage is accepted and answered.
   r.send_state(2);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 1; }));
   r.cycle();
-  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 2; }));
+  ASSERT_TRUE(test::eventually([&] { return r.listener.n_commands() == 2; }));
   // The status follows the command (a mode change forces one).
-  ASSERT_TRUE(wait_until([&] {
+  ASSERT_TRUE(test::eventually([&] {
     std::lock_guard<std::mutex> l(r.listener.mu);
     return !r.listener.statuses.empty();
   }));
@@ -216,14 +206,14 @@ TEST(LcmTransport, GarbageAndWrongTypeOnTheStateChannelAreCounted) {
 TEST(LcmTransport, NanStateOverLcmIsRejectedAndNoNanLeaves) {
   LcmRig r;
   r.send_state(1);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 1; }));
   r.send_state(2, std::numeric_limits<float>::quiet_NaN());
   r.send_state(3, std::numeric_limits<float>::infinity());
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.rejected_nan.load() == 2; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.rejected_nan.load() == 2; }));
   for (int k = 0; k < 51; ++k) r.cycle();
-  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 51; }));
+  ASSERT_TRUE(test::eventually([&] { return r.listener.n_commands() == 51; }));
   EXPECT_FALSE(r.listener.any_nonfinite());
-  ASSERT_TRUE(wait_until([&] {
+  ASSERT_TRUE(test::eventually([&] {
     std::lock_guard<std::mutex> l(r.listener.mu);
     return !r.listener.statuses.empty() && r.listener.statuses.back().rejected_nan == 2;
   }));
@@ -234,7 +224,7 @@ TEST(LcmTransport, NanStateOverLcmIsRejectedAndNoNanLeaves) {
 TEST(LcmTransport, OutOfOrderAndDuplicateOverLcmAreCounted) {
   LcmRig r;
   for (std::int64_t s : {10, 10, 9, 11, 8, 11}) r.send_state(s);
-  ASSERT_TRUE(wait_until([&] {
+  ASSERT_TRUE(test::eventually([&] {
     return r.inbox.counters.states.load() + r.inbox.counters.rejected_duplicate.load() +
                r.inbox.counters.rejected_out_of_order.load() == 6;
   }));
@@ -242,7 +232,7 @@ TEST(LcmTransport, OutOfOrderAndDuplicateOverLcmAreCounted) {
   EXPECT_EQ(r.inbox.counters.rejected_duplicate.load(), 2);
   EXPECT_EQ(r.inbox.counters.rejected_out_of_order.load(), 2);
   r.cycle();
-  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.listener.n_commands() == 1; }));
   std::lock_guard<std::mutex> l(r.listener.mu);
   EXPECT_EQ(r.listener.commands[0].state_seq, 11);
 }
@@ -258,16 +248,16 @@ TEST(LcmTransport, InvalidParameterUpdateIsRejectedAndReported) {
   p.key = "cost.w_xy";
   p.value = 7.0;
   r.send("MPPI_PARAMS", p);
-  ASSERT_TRUE(wait_until([&] { return !r.inbox.params.empty(); }));
+  ASSERT_TRUE(test::eventually([&] { return !r.inbox.params.empty(); }));
   r.send_state(1);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 1; }));
   for (int k = 0; k < 50; ++k) r.cycle();
   EXPECT_EQ(r.loop->counters().params_rejected.load(), 1);
   EXPECT_EQ(r.loop->counters().params_applied.load(), 1);
   ASSERT_EQ(r.fake.params_set.size(), 1u);
   EXPECT_EQ(r.fake.params_set[0].second, 7.0);
   EXPECT_EQ(r.fake.mid_cycle_changes, 0);
-  ASSERT_TRUE(wait_until([&] {
+  ASSERT_TRUE(test::eventually([&] {
     std::lock_guard<std::mutex> l(r.listener.mu);
     return !r.listener.statuses.empty() && r.listener.statuses.back().rejected_params == 1;
   }));
@@ -296,10 +286,10 @@ TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
   LcmRig r(controller.get());
   for (int k = 1; k <= 20; ++k) {
     r.send_state(k);
-    ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == k; }));
+    ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == k; }));
     r.cycle();
   }
-  ASSERT_TRUE(wait_until([&] { return r.listener.n_commands() == 20; }));
+  ASSERT_TRUE(test::eventually([&] { return r.listener.n_commands() == 20; }));
   EXPECT_EQ(r.loop->counters().stale_cycles.load(), 0);
   EXPECT_EQ(r.loop->counters().commands_normal.load(), 20);
   EXPECT_FALSE(r.listener.any_nonfinite());
@@ -345,7 +335,7 @@ TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
     tick.step = k;
     tick.sim_utime = k * 20000;
     tx.lcm().publish("MPPI_SIM_CLOCK", &tick);
-    ASSERT_TRUE(wait_until([&] { return listener.n_commands() == static_cast<std::size_t>(k); })) << "step " << k;
+    ASSERT_TRUE(test::eventually([&] { return listener.n_commands() == static_cast<std::size_t>(k); })) << "step " << k;
   }
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   stop = true;

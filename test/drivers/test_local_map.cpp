@@ -5,17 +5,16 @@
 // assertion.
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
 #include <mutex>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "../rt/fakes.hpp"
+#include "../support/local_map.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
@@ -28,46 +27,15 @@ using mppi::test::FakeClock;
 
 namespace {
 
-bool wait_until(const std::function<bool()>& cond, int timeout_ms = 30000) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < end) {
-    if (cond()) return true;
-    std::this_thread::yield();
-  }
-  return cond();
-}
-
 // A 20 x 10 x 5 map at 0.25 m from (-1, -1.25, 0), every cell `fill` mm.
 mppi_lcm::local_map_t map_msg(std::int64_t seq, std::int64_t utime, std::int16_t fill = 3000) {
-  mppi_lcm::local_map_t m{};
-  m.utime = utime;
-  m.seq = seq;
-  m.origin[0] = -1.0f;
-  m.origin[1] = -1.25f;
-  m.origin[2] = 0.0f;
-  m.resolution = 0.25f;
-  m.nx = 20;
-  m.ny = 10;
-  m.nz = 5;
-  m.max_distance = 5.0f;
-  m.n_cells = m.nx * m.ny * m.nz;
-  m.distance_mm.assign(static_cast<std::size_t>(m.n_cells), fill);
-  return m;
+  return mppi::test::local_map_msg({{-1.0f, -1.25f, 0.0f}, 0.25f, 20, 10, 5}, seq, utime, fill);
 }
 
 std::vector<std::uint8_t> bytes_of(const mppi_lcm::local_map_t& m) {
   std::vector<std::uint8_t> b(static_cast<std::size_t>(m.getEncodedSize()));
   m.encode(b.data(), 0, static_cast<int>(b.size()));
   return b;
-}
-
-transport::Inbox::Expect map_expect() {
-  transport::Inbox::Expect e;
-  e.nx = 16;
-  e.model = 1;
-  e.local_map = true;
-  e.map_timeout_ns = 500'000'000;
-  return e;
 }
 
 constexpr std::int64_t kT0 = 1'000'000'000;  // us
@@ -81,7 +49,7 @@ TEST(LocalMapIntake, NoSlotUnlessExpectedAndAValidMapIsTaken) {
   decoder.local_map(b.data(), b.size(), &none);  // ignored: the inbox takes no maps
   EXPECT_EQ(none.counters.maps.load() + none.counters.maps_rejected(), 0);
 
-  transport::Inbox in(map_expect());
+  transport::Inbox in(test::map_expect());
   ASSERT_NE(in.map, nullptr);
   decoder.local_map(b.data(), b.size(), &in);
   EXPECT_EQ(in.counters.maps.load(), 1);
@@ -133,7 +101,7 @@ TEST(LocalMapIntake, BadMapsAreRefusedCountedAndTheLastGoodOneKept) {
   for (const Case& c : cases) {
     FakeClock clock;
     transport::LcmDecoder decoder(&clock);
-    transport::Inbox in(map_expect());
+    transport::Inbox in(test::map_expect());
     const auto good = bytes_of(map_msg(10, kT0 - 1'000'000, 2500));
     decoder.local_map(good.data(), good.size(), &in);
     // The newest state: sampled at kT0 + 0.1 s (a map from before kT0 - 0.4 s is stale).
@@ -162,7 +130,7 @@ TEST(LocalMapIntake, BadMapsAreRefusedCountedAndTheLastGoodOneKept) {
 TEST(LocalMapIntake, GarbageAndCountsTheBytesDoNotBackAreUndecodable) {
   FakeClock clock;
   transport::LcmDecoder decoder(&clock);
-  transport::Inbox in(map_expect());
+  transport::Inbox in(test::map_expect());
   auto b = bytes_of(map_msg(1, kT0));
   decoder.local_map(b.data(), b.size() - 2, &in);  // truncated: the count is not backed
   const std::uint8_t junk[7] = {1, 2, 3, 4, 5, 6, 7};
@@ -178,7 +146,7 @@ TEST(LocalMapIntake, GarbageAndCountsTheBytesDoNotBackAreUndecodable) {
 TEST(LocalMapIntake, APublisherRestartAfterAQuietSpellIsTaken) {
   FakeClock clock;
   transport::LcmDecoder decoder(&clock);
-  transport::Inbox::Expect e = map_expect();
+  transport::Inbox::Expect e = test::map_expect();
   e.restart_after_ns = 100'000'000;
   transport::Inbox in(e);
   const auto first = bytes_of(map_msg(500, kT0));
@@ -228,7 +196,7 @@ struct MapRig {
                              {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"})),
         controller(app::make_controller(cfg)),
         tx("memq://", {}, &clock, 4096),
-        inbox(map_expect()) {
+        inbox(test::map_expect()) {
     tx.lcm().subscribe("MPPI_STATUS", &Statuses::on, &statuses);
     daemon::LoopSettings settings;
     settings.latency.use_sample_time = false;  // fresh by receipt on the fake clock (test_lcm_transport.cpp)
@@ -268,13 +236,13 @@ TEST(LocalMapLoop, TheMapReachesTheForestCostAndTheStatusAndBadOnesLeaveIt) {
   MapRig r;
   std::int64_t seq = 0;
   r.send_state(++seq, kT0);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 1; }));
   r.cycle();
   EXPECT_FALSE(r.field().present()) << "no map yet";
   r.send_map(map_msg(1, kT0, 1200));
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.maps.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.maps.load() == 1; }));
   r.send_state(++seq, kT0 + 20'000);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 2; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 2; }));
   r.cycle();
   ASSERT_TRUE(r.field().present());
   EXPECT_EQ(r.field().nx, 20);
@@ -287,13 +255,13 @@ TEST(LocalMapLoop, TheMapReachesTheForestCostAndTheStatusAndBadOnesLeaveIt) {
   auto bad = map_msg(2, kT0 + 30'000, 100);
   bad.resolution = std::numeric_limits<float>::quiet_NaN();
   r.send_map(bad);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.maps_rejected() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.maps_rejected() == 1; }));
   r.send_state(++seq, kT0 + 40'000);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 3; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 3; }));
   r.cycle();
   EXPECT_EQ(r.field().stamp, stamp);
   EXPECT_FLOAT_EQ(r.field().distance(0.0f, 0.0f, 0.5f), 1.2f);
-  ASSERT_TRUE(wait_until([&] { return r.statuses.last().maps_rejected == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.statuses.last().maps_rejected == 1; }));
   const auto st = r.statuses.last();
   EXPECT_EQ(st.maps_accepted, 1);
   EXPECT_NEAR(st.map_age_ms, 40.0f, 1e-3f);  // the state at kT0 + 40 ms, the map at kT0
@@ -301,9 +269,9 @@ TEST(LocalMapLoop, TheMapReachesTheForestCostAndTheStatusAndBadOnesLeaveIt) {
 
   // A new good map replaces it (a new stamp: the GPU's copy follows).
   r.send_map(map_msg(3, kT0 + 50'000, 800));
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.maps.load() == 2; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.maps.load() == 2; }));
   r.send_state(++seq, kT0 + 60'000);
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == 4; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == 4; }));
   r.cycle();
   EXPECT_NE(r.field().stamp, stamp);
   EXPECT_FLOAT_EQ(r.field().distance(0.0f, 0.0f, 0.5f), 0.8f);
@@ -312,17 +280,17 @@ TEST(LocalMapLoop, TheMapReachesTheForestCostAndTheStatusAndBadOnesLeaveIt) {
 TEST(LocalMapLoop, AMapNoNewerOneReplacesIsKeptAndItsStaleCyclesCounted) {
   MapRig r;
   r.send_map(map_msg(1, kT0, 1500));
-  ASSERT_TRUE(wait_until([&] { return r.inbox.counters.maps.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.maps.load() == 1; }));
   // States 0.1 s apart: the map passes its 0.5 s timeout after the fifth.
   for (int k = 1; k <= 8; ++k) {
     r.send_state(k, kT0 + 100'000 * k);
-    ASSERT_TRUE(wait_until([&] { return r.inbox.counters.states.load() == k; }));
+    ASSERT_TRUE(test::eventually([&] { return r.inbox.counters.states.load() == k; }));
     r.cycle();
     ASSERT_TRUE(r.field().present()) << "cycle " << k << ": the cost keeps the last map";
   }
   EXPECT_EQ(r.loop->counters().map_stale_cycles.load(), 3);  // ages 0.6, 0.7, 0.8 s
   EXPECT_EQ(r.loop->counters().commands_normal.load(), 8);
-  ASSERT_TRUE(wait_until([&] { return r.statuses.last().map_stale_cycles == 3; }));
+  ASSERT_TRUE(test::eventually([&] { return r.statuses.last().map_stale_cycles == 3; }));
   EXPECT_NEAR(r.statuses.last().map_age_ms, 800.0f, 1e-3f);
 }
 

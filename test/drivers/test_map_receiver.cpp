@@ -9,12 +9,12 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <mutex>
 #include <thread>
 
 #include "../rt/fakes.hpp"
+#include "../support/local_map.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/tasks.hpp"
@@ -27,16 +27,6 @@ using namespace mppi;
 using mppi::test::FakeClock;
 
 namespace {
-
-// A hang guard, not a timing assertion: generous for a sanitizer build on a loaded machine.
-bool wait_until(const std::function<bool()>& cond, int timeout_ms = 60000) {
-  const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < end) {
-    if (cond()) return true;
-    std::this_thread::yield();
-  }
-  return cond();
-}
 
 constexpr std::int64_t kT0 = 1'000'000'000;  // us
 
@@ -54,28 +44,7 @@ mppi_lcm::vehicle_state_t state_msg(std::int64_t seq) {
 // A 40 x 40 x 10 map at 0.2 m (32 kB of cells: several memq messages' worth of copying). Its
 // utime is past every state's, so no interleaving of the two streams makes it stale.
 mppi_lcm::local_map_t map_msg(std::int64_t seq, std::int16_t fill_mm) {
-  mppi_lcm::local_map_t m{};
-  m.utime = kT0 + 100'000'000 + seq;
-  m.seq = seq;
-  m.origin[0] = -4.0f;
-  m.origin[1] = -4.0f;
-  m.origin[2] = 0.0f;
-  m.resolution = 0.2f;
-  m.nx = 40;
-  m.ny = 40;
-  m.nz = 10;
-  m.max_distance = 5.0f;
-  m.n_cells = m.nx * m.ny * m.nz;
-  m.distance_mm.assign(static_cast<std::size_t>(m.n_cells), fill_mm);
-  return m;
-}
-
-transport::Inbox::Expect map_expect() {
-  transport::Inbox::Expect e;
-  e.nx = 16;
-  e.model = 1;
-  e.local_map = true;
-  return e;
+  return mppi::test::local_map_msg({{-4.0f, -4.0f, 0.0f}, 0.2f, 40, 40, 10}, seq, kT0 + 100'000'000 + seq, fill_mm);
 }
 
 template <class Msg>
@@ -103,7 +72,7 @@ TEST(MapReceiver, TheStatesInstanceTakesNoMapAndTheMapsOneNoState) {
   transport::LcmTransport tx("memq://", {}, &clock, 64);
   tx.open_map_receiver();
   EXPECT_EQ(tx.self_test(), "") << "both instances loop back";
-  transport::Inbox inbox(map_expect());
+  transport::Inbox inbox(test::map_expect());
   tx.start(&inbox);
   ASSERT_NE(&tx.map_lcm(), &tx.lcm()) << "maps have an instance of their own";
   const auto map = map_msg(1, 1500);
@@ -111,7 +80,7 @@ TEST(MapReceiver, TheStatesInstanceTakesNoMapAndTheMapsOneNoState) {
   publish(tx.map_lcm(), "MPPI_STATE", state_msg(1));  // on the maps' instance: nobody takes it
   publish(tx.lcm(), "MPPI_STATE", state_msg(2));
   publish(tx.map_lcm(), "MPPI_LOCAL_MAP", map);
-  ASSERT_TRUE(wait_until([&] { return inbox.counters.states.load() == 1 && inbox.counters.maps.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return inbox.counters.states.load() == 1 && inbox.counters.maps.load() == 1; }));
   tx.stop();
   ASSERT_TRUE(inbox.state.update());
   EXPECT_EQ(inbox.state.front().seq, 2);
@@ -130,7 +99,7 @@ TEST(MapReceiver, StatesAndMapsAtOnceAreAllTakenWhileTheLoopCycles) {
   const auto controller = app::make_controller(cfg);
   FakeClock clock;
   transport::LcmTransport tx("memq://", {}, &clock, 4096);
-  transport::Inbox inbox(map_expect());
+  transport::Inbox inbox(test::map_expect());
   LastStatus status;
   tx.lcm().subscribe("MPPI_STATUS", &LastStatus::on, &status);
   daemon::LoopSettings settings;
@@ -146,12 +115,12 @@ TEST(MapReceiver, StatesAndMapsAtOnceAreAllTakenWhileTheLoopCycles) {
   std::thread maps([&] {
     for (int k = 1; k <= kMaps; ++k) {
       publish(tx.map_lcm(), "MPPI_LOCAL_MAP", map_msg(k, static_cast<std::int16_t>(500 + 50 * k)));
-      ASSERT_TRUE(wait_until([&] { return inbox.counters.maps.load() + inbox.counters.maps_rejected() == k; }));
+      ASSERT_TRUE(test::eventually([&] { return inbox.counters.maps.load() + inbox.counters.maps_rejected() == k; }));
     }
   });
   for (int k = 1; k <= kStates; ++k) {
     publish(tx.lcm(), "MPPI_STATE", state_msg(k));
-    ASSERT_TRUE(wait_until([&] { return inbox.counters.states.load() == k; }));
+    ASSERT_TRUE(test::eventually([&] { return inbox.counters.states.load() == k; }));
   }
   maps.join();
   publishing = false;
@@ -163,13 +132,13 @@ TEST(MapReceiver, StatesAndMapsAtOnceAreAllTakenWhileTheLoopCycles) {
   EXPECT_EQ(inbox.counters.rejected_undecodable.load(), 0);
   // One more cycle takes the newest map (if the loop had not) and reports the counts.
   publish(tx.lcm(), "MPPI_STATE", state_msg(kStates + 1));
-  ASSERT_TRUE(wait_until([&] { return inbox.counters.states.load() == kStates + 1; }));
+  ASSERT_TRUE(test::eventually([&] { return inbox.counters.states.load() == kStates + 1; }));
   const std::int64_t statuses = [&] {
     std::lock_guard<std::mutex> l(status.mu);
     return status.n;
   }();
   ASSERT_TRUE(loop.step_realtime(stop));
-  ASSERT_TRUE(wait_until([&] {
+  ASSERT_TRUE(test::eventually([&] {
     std::lock_guard<std::mutex> l(status.mu);
     return status.n > statuses;
   }));
@@ -186,13 +155,13 @@ TEST(MapReceiver, OnTheStatesThreadMapsShareTheStatesQueue) {
   FakeClock clock;
   transport::LcmTransport tx("memq://", {}, &clock, 64);
   tx.set_map_thread(transport::LcmTransport::MapThread::kStateThread);
-  transport::Inbox inbox(map_expect());
+  transport::Inbox inbox(test::map_expect());
   tx.start(&inbox);
   EXPECT_EQ(&tx.map_lcm(), &tx.lcm());
   const auto map = map_msg(1, 1500);
   publish(tx.lcm(), "MPPI_LOCAL_MAP", map);
   publish(tx.lcm(), "MPPI_STATE", state_msg(1));
-  ASSERT_TRUE(wait_until([&] { return inbox.counters.states.load() == 1; }));
+  ASSERT_TRUE(test::eventually([&] { return inbox.counters.states.load() == 1; }));
   EXPECT_EQ(inbox.counters.maps.load(), 1) << "handled before the state published after it";
   tx.stop();
 }

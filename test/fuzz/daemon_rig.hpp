@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <map>
 #include <memory>
 #include <string>
@@ -154,6 +155,18 @@ int run_input(const std::uint8_t* data, std::size_t size, Feed feed, bool tick_o
   feed(rig, data, size - 1);
   rig.run_cycles();
   return 0;
+}
+
+// The target of one decoder method (LcmDecoder::obstacles, ::param, ...): the message through
+// it, then valid states 1, 2, ... sampled at `state_utimes`.
+using Decode = void (transport::LcmDecoder::*)(const void*, std::size_t, transport::Inbox*);
+inline int decode_then_states(const std::uint8_t* data, std::size_t size, Decode decode,
+                              std::initializer_list<std::int64_t> state_utimes) {
+  return run_input(data, size, [&](Rig& rig, const std::uint8_t* msg, std::size_t n) {
+    (rig.decoder.*decode)(msg, n, rig.inbox.get());
+    std::int64_t seq = 0;
+    for (const std::int64_t utime : state_utimes) rig.valid_state(++seq, utime);
+  });
 }
 
 }  // namespace mppi::fuzz

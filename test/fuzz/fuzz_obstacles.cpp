@@ -9,9 +9,5 @@
 using namespace mppi;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  return fuzz::run_input(data, size, [](fuzz::Rig& rig, const std::uint8_t* msg, std::size_t n) {
-    rig.decoder.obstacles(msg, n, rig.inbox.get());
-    rig.valid_state(1, 1'000'000);
-    rig.valid_state(2, 1'020'000);
-  });
+  return fuzz::decode_then_states(data, size, &transport::LcmDecoder::obstacles, {1'000'000, 1'020'000});
 }

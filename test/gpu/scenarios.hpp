@@ -58,38 +58,57 @@ inline void quad_mppi(MppiSettings& s, int vehicles, float hover) {
 template <class T>
 Scenario<T> make_scenario(int k, int t);
 
-template <>
-inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
-  Scenario<QuadrotorForest> sc;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
+// K rollouts of T steps; the rest as each scenario sets it.
+template <class T>
+inline Scenario<T> sized(int k, int t) {
+  Scenario<T> sc;
   sc.settings.rollouts = k;
   sc.settings.horizon = t;
+  return sc;
+}
+
+// The forest scene: the goal 20 m ahead at 2 m height among 32 trees.
+template <class Cost>
+inline void forest_scene(Cost& cost) {
+  cost.goal[0][0] = 20.0f;
+  cost.goal[0][2] = 2.0f;
+  cost.obstacles = forest(32);
+}
+
+// A reference curve at 2 m height, flown at 2 m/s.
+inline void track_scene(Reference& r, Reference::Kind kind, float radius) {
+  r.kind = kind;
+  r.center[2] = 2.0f;
+  r.radius = radius;
+  r.speed = 2.0f;
+}
+
+// One motor-speed quadrotor: K rollouts of T steps, at rest with its motors at hover speed.
+template <class T>
+inline Scenario<T> quad_scenario(int k, int t) {
+  auto sc = sized<T>(k, t);
+  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
   quad_mppi(sc.settings, 1, hover);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
   sc.x0.assign(Quadrotor::kNx, 0.0f);
-  sc.x0[Quadrotor::PZ] = 2.0f;
-  sc.x0[Quadrotor::VX] = 1.0f;
   for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
   return sc;
 }
 
 template <>
+inline Scenario<QuadrotorForest> make_scenario<QuadrotorForest>(int k, int t) {
+  auto sc = quad_scenario<QuadrotorForest>(k, t);
+  forest_scene(sc.params.cost);
+  sc.x0[Quadrotor::PZ] = 2.0f;
+  sc.x0[Quadrotor::VX] = 1.0f;
+  return sc;
+}
+
+template <>
 inline Scenario<QuadrotorTrack> make_scenario<QuadrotorTrack>(int k, int t) {
-  Scenario<QuadrotorTrack> sc;
-  const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
-  quad_mppi(sc.settings, 1, hover);
-  sc.params.cost.reference.kind = Reference::kCircle;
-  sc.params.cost.reference.center[2] = 2.0f;
-  sc.params.cost.reference.radius = 2.0f;
-  sc.params.cost.reference.speed = 2.0f;
-  sc.x0.assign(Quadrotor::kNx, 0.0f);
+  auto sc = quad_scenario<QuadrotorTrack>(k, t);
+  track_scene(sc.params.cost.reference, Reference::kCircle, 2.0f);
   sc.x0[Quadrotor::PX] = 2.0f;
   sc.x0[Quadrotor::PZ] = 2.0f;
-  for (int i = 0; i < 4; ++i) sc.x0[Quadrotor::M1 + i] = hover;
   return sc;
 }
 
@@ -113,39 +132,33 @@ inline std::vector<float> rate_hover(float x, float z) {
   return s;
 }
 
+// One rate-controlled quadrotor: K rollouts of T steps, at 2 m height moving at 1 m/s along x.
+template <class T>
+inline Scenario<T> rate_scenario(int k, int t) {
+  auto sc = sized<T>(k, t);
+  rate_mppi(sc.settings);
+  sc.x0 = rate_hover(0.0f, 2.0f);
+  return sc;
+}
+
 template <>
 inline Scenario<RateQuadrotorForest> make_scenario<RateQuadrotorForest>(int k, int t) {
-  Scenario<RateQuadrotorForest> sc;
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
-  rate_mppi(sc.settings);
-  sc.params.cost.goal[0][0] = 20.0f;
-  sc.params.cost.goal[0][2] = 2.0f;
-  sc.params.cost.obstacles = forest(32);
-  sc.x0 = rate_hover(0.0f, 2.0f);
+  auto sc = rate_scenario<RateQuadrotorForest>(k, t);
+  forest_scene(sc.params.cost);
   return sc;
 }
 
 template <>
 inline Scenario<RateQuadrotorTrack> make_scenario<RateQuadrotorTrack>(int k, int t) {
-  Scenario<RateQuadrotorTrack> sc;
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
-  rate_mppi(sc.settings);
-  sc.params.cost.reference.kind = Reference::kFigureEight;
-  sc.params.cost.reference.center[2] = 2.0f;
-  sc.params.cost.reference.radius = 3.0f;
-  sc.params.cost.reference.speed = 2.0f;
-  sc.x0 = rate_hover(0.0f, 2.0f);
+  auto sc = rate_scenario<RateQuadrotorTrack>(k, t);
+  track_scene(sc.params.cost.reference, Reference::kFigureEight, 3.0f);
   return sc;
 }
 
 template <>
 inline Scenario<CartpoleSwingup> make_scenario<CartpoleSwingup>(int k, int t) {
-  Scenario<CartpoleSwingup> sc;
+  auto sc = sized<CartpoleSwingup>(k, t);
   auto& s = sc.settings;
-  s.rollouts = k;
-  s.horizon = t;
   s.dt = 0.01f;  // 1 s horizon at T = 100
   s.lambda = 2000.0f;
   s.nu = 10.0f;
@@ -159,10 +172,8 @@ inline Scenario<CartpoleSwingup> make_scenario<CartpoleSwingup>(int k, int t) {
 
 template <>
 inline Scenario<RacecarEllipse> make_scenario<RacecarEllipse>(int k, int t) {
-  Scenario<RacecarEllipse> sc;
+  auto sc = sized<RacecarEllipse>(k, t);
   auto& s = sc.settings;
-  s.rollouts = k;
-  s.horizon = t;
   s.lambda = 300.0f;
   s.nu = 2.0f;
   s.sigma = {0.1f, 10.0f};
@@ -180,10 +191,8 @@ inline Scenario<RacecarEllipse> make_scenario<RacecarEllipse>(int k, int t) {
 template <class T>
 Scenario<T> team_scenario(int k, int t) {
   constexpr int m = T::kVehicles;
-  Scenario<T> sc;
+  auto sc = sized<T>(k, t);
   const float hover = Quadrotor::hover_speed(Quadrotor::Params{});
-  sc.settings.rollouts = k;
-  sc.settings.horizon = t;
   quad_mppi(sc.settings, m, hover);
   sc.params.cost.obstacles = forest(32);
   sc.x0.assign(T::kNx, 0.0f);

@@ -12,7 +12,6 @@ goes back to the namespace it came from.
 from __future__ import annotations
 
 import ctypes
-import json
 import math
 import os
 import signal
@@ -23,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+from sitl_harness.logs import read_jsonl  # noqa: F401  (the tests read their flights' JSON lines through it)
 
 ROOT = Path(__file__).resolve().parents[2]
 # The bridge (mppi_mavlink) and the simulated autopilot (mavlink_vehicle) are the packages
@@ -138,18 +138,6 @@ def wait_for(pred, timeout, what, step=0.05):
             return v
         time.sleep(step)
     raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-
-
-def read_jsonl(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    out = []
-    for line in path.read_text().splitlines():
-        try:
-            out.append(json.loads(line))
-        except json.JSONDecodeError:
-            pass  # the line being written
-    return out
 
 
 def events(out: Path, name=None) -> list[dict]:

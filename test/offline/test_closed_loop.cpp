@@ -8,19 +8,15 @@
 #include <cstdio>
 #include <memory>
 
+#include "../support/task_controller.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/offline/offline.hpp"
 
 namespace mppi {
 namespace {
 
-std::unique_ptr<Controller> controller_for(const std::string& task, std::vector<std::string> sets = {}) {
-  sets.push_back("backend=cpu");
-  return app::make_controller(app::load_config(app::default_config_path(task), sets));
-}
-
 TEST(ClosedLoop, CartpoleSwingsUpAndHolds) {
-  auto c = controller_for("cartpole_swingup");
+  auto c = test::task_controller("cartpole_swingup", {}, "backend=cpu");
   const auto r = offline::fly(*c, offline::cartpole_scenario(*c));
   ASSERT_FALSE(r.nonfinite);
   EXPECT_LT(r.max_angle_error_late, 0.1f) << "|theta - pi| from 4 s to 10 s";
@@ -30,7 +26,7 @@ TEST(ClosedLoop, CartpoleSwingsUpAndHolds) {
 class Forest : public ::testing::TestWithParam<int> {};
 
 TEST_P(Forest, QuadrotorCrossesWithoutCollision) {
-  auto c = controller_for("quadrotor_forest");
+  auto c = test::task_controller("quadrotor_forest", {}, "backend=cpu");
   const auto scenario = offline::forest_scenario(*c, 4.0f, static_cast<std::uint64_t>(GetParam()));
   ASSERT_GT(scenario.forest.size(), 30u);
   const auto r = offline::fly(*c, scenario);
@@ -41,7 +37,7 @@ TEST_P(Forest, QuadrotorCrossesWithoutCollision) {
 INSTANTIATE_TEST_SUITE_P(Seeds, Forest, ::testing::Values(1, 2, 3));
 
 TEST(ClosedLoop, RateQuadrotorTracksCircle) {
-  auto c = controller_for("quadrotor_rate_track");
+  auto c = test::task_controller("quadrotor_rate_track", {}, "backend=cpu");
   const auto r = offline::fly(*c, offline::tracking_scenario(*c, Reference::kCircle, 5.0f, 3.0f));
   ASSERT_FALSE(r.nonfinite);
   EXPECT_LT(r.tracking_rmse, 0.3f);
@@ -49,7 +45,7 @@ TEST(ClosedLoop, RateQuadrotorTracksCircle) {
 }
 
 TEST(ClosedLoop, RacecarLapsTheEllipse) {
-  auto c = controller_for("racecar_ellipse");
+  auto c = test::task_controller("racecar_ellipse", {}, "backend=cpu");
   const auto r = offline::fly(*c, offline::ellipse_scenario(*c));
   ASSERT_FALSE(r.nonfinite);
   EXPECT_GE(r.mean_speed, 6.0f);

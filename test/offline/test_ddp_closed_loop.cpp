@@ -5,6 +5,7 @@
 #include <memory>
 #include <string>
 
+#include "../support/task_controller.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/ddp/ddp_controller.hpp"
 #include "mppi/offline/offline.hpp"
@@ -12,13 +13,8 @@
 namespace mppi {
 namespace {
 
-std::unique_ptr<Controller> ddp_for(const std::string& task, std::vector<std::string> sets = {}) {
-  sets.push_back("controller=ddp");
-  return app::make_controller(app::load_config(app::default_config_path(task), sets));
-}
-
 TEST(DdpClosedLoop, CartpoleSwingsUpAndHolds) {
-  auto c = ddp_for("cartpole_swingup");
+  auto c = test::task_controller("cartpole_swingup", {}, "controller=ddp");
   ASSERT_STREQ(c->backend(), "ddp");
   const auto r = offline::fly(*c, offline::cartpole_scenario(*c));
   ASSERT_FALSE(r.nonfinite);
@@ -29,13 +25,13 @@ TEST(DdpClosedLoop, CartpoleSwingsUpAndHolds) {
 TEST(DdpClosedLoop, CartpoleStaysDownWithoutThePush) {
   // From rest at the bottom with a zero guess every gradient is zero: the push of
   // ddp.initial_plan is what starts the swing (the settings file says why it is there).
-  auto c = ddp_for("cartpole_swingup", {"ddp.initial_plan=[0.0]"});
+  auto c = test::task_controller("cartpole_swingup", {"ddp.initial_plan=[0.0]"}, "controller=ddp");
   const auto r = offline::fly(*c, offline::cartpole_scenario(*c));
   EXPECT_FALSE(r.success);
 }
 
 TEST(DdpClosedLoop, QuadrotorCrossesAForest) {
-  auto c = ddp_for("quadrotor_forest");
+  auto c = test::task_controller("quadrotor_forest", {}, "controller=ddp");
   const auto scenario = offline::forest_scenario(*c, 4.0f, 1);  // a tuning seed
   const auto r = offline::fly(*c, scenario);
   EXPECT_FALSE(r.collided) << "collision at " << r.collision_time << " s";
@@ -45,7 +41,7 @@ TEST(DdpClosedLoop, QuadrotorCrossesAForest) {
 
 std::string config_error(const std::string& task, const std::vector<std::string>& sets) {
   try {
-    auto c = ddp_for(task, sets);
+    auto c = test::task_controller(task, sets, "controller=ddp");
     return "";
   } catch (const app::ConfigError& e) {
     return e.what();

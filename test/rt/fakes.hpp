@@ -93,27 +93,21 @@ inline bool eventually(const std::function<bool()>& cond, double seconds = 60.0)
   return true;
 }
 
-class RecordingTransport final : public transport::Transport {
+// A transport with nothing to open or close: the fakes publish into memory.
+class InMemoryTransport : public transport::Transport {
  public:
   std::string self_test() override { return {}; }
   void start(transport::Inbox*) override {}
   void stop() override {}
-  bool publish_command(const transport::Command& c) override {
-    commands.push_back(c);
-    return true;
-  }
-  bool publish_status(const transport::StatusReport& s) override {
-    statuses.push_back(s);
-    return true;
-  }
-  bool publish_plan(const transport::PlanView& p) override {
-    plans.push_back(p);
-    return true;
-  }
-  bool publish_param_result(const transport::ParamResult& r) override {
-    param_results.push_back(r);
-    return true;
-  }
+};
+
+// Keeps everything published, in order.
+class RecordingTransport final : public InMemoryTransport {
+ public:
+  bool publish_command(const transport::Command& c) override { return record(&commands, c); }
+  bool publish_status(const transport::StatusReport& s) override { return record(&statuses, s); }
+  bool publish_plan(const transport::PlanView& p) override { return record(&plans, p); }
+  bool publish_param_result(const transport::ParamResult& r) override { return record(&param_results, r); }
   bool any_nonfinite() const {
     for (const auto& c : commands)
       for (int i = 0; i < c.n; ++i)
@@ -124,6 +118,13 @@ class RecordingTransport final : public transport::Transport {
   std::vector<transport::StatusReport> statuses;
   std::vector<transport::PlanView> plans;
   std::vector<transport::ParamResult> param_results;
+
+ private:
+  template <class T>
+  static bool record(std::vector<T>* kept, const T& message) {
+    kept->push_back(message);
+    return true;
+  }
 };
 
 // nx = 16, nu = 4, plan of T steps. iterate() writes u = plan[0] where the plan's step i
@@ -258,13 +259,14 @@ class FakeController final : public Controller {
   bool in_iterate_ = false;
 };
 
-// The header of a one-vehicle, 16-state quadrotor state (the shape the rigs' inboxes expect).
-inline void shape_state(transport::StateSample& s, std::int64_t seq) {
+// The header of a one-vehicle state: by default a 16-state quadrotor (model 1, the shape the
+// rigs' inboxes expect).
+inline void shape_state(transport::StateSample& s, std::int64_t seq, std::int16_t nx = 16, std::int8_t model = 1) {
   s.seq = seq;
-  s.nx = 16;
+  s.nx = nx;
   s.vehicle_count = 1;
-  s.n = 16;
-  s.model = 1;
+  s.n = nx;
+  s.model = model;
 }
 
 }  // namespace mppi::test

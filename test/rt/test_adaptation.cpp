@@ -317,11 +317,7 @@ TEST(RestartEstimates, ForgetsWhatCommandsNeverFlownTaught) {
   std::atomic<bool> run{false};
   const auto state = [&](int k) {
     auto& st = inbox.state_buffer();
-    st.seq = k;
-    st.nx = 13;
-    st.n = 13;
-    st.vehicle_count = 1;
-    st.model = 2;
+    test::shape_state(st, k, 13, 2);
     st.recv_ns = clock.now_ns();
     st.sample_utime = clock.now_ns() / 1000;
     const double t = 0.02 * k;

@@ -15,9 +15,6 @@
 #include "mppi/rt/latency_estimator.hpp"
 
 using namespace mppi;
-using mppi::test::FakeClock;
-using mppi::test::FakeController;
-using mppi::test::RecordingTransport;
 using transport::Mode;
 
 namespace {
@@ -68,8 +65,8 @@ TEST(LatencyEstimator, ClockJumpsAreRefusedAndCountedNeverNegative) {
 }
 
 TEST(CommandHistory, PredictsThroughEachCommandInEffect) {
-  FakeClock clock;
-  FakeController c(&clock);
+  test::FakeClock clock;
+  test::FakeController c(&clock);
   daemon::CommandHistory h(4, {100, 0, 0, 0});
   const float u1[4] = {200, 0, 0, 0}, u2[4] = {-50, 0, 0, 0};
   h.add(10 * kMs, u1);
@@ -93,8 +90,8 @@ TEST(CommandHistory, PredictsThroughEachCommandInEffect) {
 }
 
 TEST(CommandHistory, KeepsTheNewestAndWhatActedBeforeThem) {
-  FakeClock clock;
-  FakeController c(&clock);
+  test::FakeClock clock;
+  test::FakeController c(&clock);
   daemon::CommandHistory h(4, {1, 0, 0, 0});
   for (int k = 0; k < daemon::CommandHistory::kCapacity + 5; ++k) {
     const float u[4] = {static_cast<float>(10 + k), 0, 0, 0};
@@ -120,11 +117,7 @@ struct LoopRig {
   // A state sampled `age_ns` before now, received now; x[0] = 0.
   void state(std::int64_t age_ns, std::int64_t wall_ahead_ns = 0) {
     auto& s = inbox.state_buffer();
-    s.seq = ++seq;
-    s.nx = 16;
-    s.vehicle_count = 1;
-    s.n = 16;
-    s.model = 1;
+    test::shape_state(s, ++seq);
     s.recv_ns = clock.now_ns();
     // A wall clock 1000 s ahead of the monotonic one: only differences matter.
     s.recv_utime = (clock.now_ns() + 1000 * rt::kNsPerS) / 1000;
@@ -132,9 +125,9 @@ struct LoopRig {
     for (float& v : s.x) v = 0.0f;
     ASSERT_EQ(inbox.offer_state(), transport::Reject::kNone);
   }
-  FakeClock clock;
-  RecordingTransport tx;
-  FakeController ctl{&clock};
+  test::FakeClock clock;
+  test::RecordingTransport tx;
+  test::FakeController ctl{&clock};
   transport::Inbox inbox;
   daemon::ControlLoop loop;
   std::atomic<bool> run{false};
@@ -344,8 +337,8 @@ TEST(LatencyCompensation, ARepeatedLockstepTickIsNotAnsweredTwice) {
 TEST(DisturbanceObserver, FindsTheAccelerationTheModelMisses) {
   // The fake model: x[0] moves at u[0]/s and nothing moves the velocities x[3..5]; the
   // "plant" accelerates x[5] at -0.8 m/s^2 (a heavier vehicle). The estimate converges to it.
-  FakeClock clock;
-  FakeController c(&clock);
+  test::FakeClock clock;
+  test::FakeController c(&clock);
   daemon::CommandHistory h(4, {0, 0, 0, 0});
   daemon::DisturbanceSettings s;
   s.time_constant_s = 0.2;

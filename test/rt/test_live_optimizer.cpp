@@ -53,9 +53,19 @@ daemon::LiveSettings limits() {
   return l;
 }
 
+// A control loop with a live optimizer, on a fake clock, publishing into memory (members are
+// destroyed in reverse: the loop first).
+struct LiveLoopParts {
+  FakeClock clock;
+  RecordingTransport tx;
+  std::unique_ptr<LiveOptimizer> live;
+  std::unique_ptr<transport::Inbox> inbox;
+  std::unique_ptr<daemon::ControlLoop> loop;
+};
+
 // A loop around fake controllers built by a live-update factory (commands base + 10 n + i,
 // the first controller's base 1000, every rebuilt one 5000).
-struct LiveRig {
+struct LiveRig : LiveLoopParts {
   explicit LiveRig(LiveOptimizer::Mode mode, std::function<void()> on_build = {}) {
     daemon::LoopSettings s;
     s.latency.compensate = false;  // the plan is shifted only by the cycles themselves
@@ -82,11 +92,7 @@ struct LiveRig {
   }
   void fresh_cycle() {
     auto& st = inbox->state_buffer();
-    st.seq = ++seq;
-    st.nx = 16;
-    st.vehicle_count = 1;
-    st.n = 16;
-    st.model = 1;
+    test::shape_state(st, ++seq);
     st.recv_ns = clock.now_ns();
     st.sample_utime = clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) st.x[i] = 1.0f;
@@ -95,11 +101,6 @@ struct LiveRig {
   }
   FakeController& fake() { return static_cast<FakeController&>(loop->controller()); }
 
-  FakeClock clock;
-  RecordingTransport tx;
-  std::unique_ptr<LiveOptimizer> live;
-  std::unique_ptr<transport::Inbox> inbox;
-  std::unique_ptr<daemon::ControlLoop> loop;
   std::atomic<bool> run{false};
   std::atomic<int> built{0};
   std::int64_t seq = 0;
@@ -327,12 +328,7 @@ TEST(LiveUpdate, RealControllerContinuesBitForBitAcrossARebuild) {
   auto factory = [cfg](const MppiSettings& s) {
     return app::make_controller(cfg.with_mppi(s));
   };
-  struct Run {
-    FakeClock clock;
-    RecordingTransport tx;
-    std::unique_ptr<LiveOptimizer> live;
-    std::unique_ptr<transport::Inbox> inbox;
-    std::unique_ptr<daemon::ControlLoop> loop;
+  struct Run : LiveLoopParts {
     std::atomic<bool> stop{false};
   };
   auto make = [&](Run* run) {
@@ -349,11 +345,7 @@ TEST(LiveUpdate, RealControllerContinuesBitForBitAcrossARebuild) {
   };
   auto step = [](Run* run, int k) {
     auto& st = run->inbox->state_buffer();
-    st.seq = k + 1;
-    st.nx = 16;
-    st.vehicle_count = 1;
-    st.n = 16;
-    st.model = 1;
+    test::shape_state(st, k + 1);
     st.recv_ns = run->clock.now_ns();
     st.sample_utime = run->clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) st.x[i] = 0.0f;

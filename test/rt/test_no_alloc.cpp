@@ -35,11 +35,8 @@ using namespace mppi;
 
 namespace {
 // Publishes into fixed storage: what a transport must do to keep the loop allocation-free.
-class NullTransport final : public transport::Transport {
+class NullTransport final : public test::InMemoryTransport {
  public:
-  std::string self_test() override { return {}; }
-  void start(transport::Inbox*) override {}
-  void stop() override {}
   bool publish_command(const transport::Command& c) override {
     last = c;
     ++commands;
@@ -84,11 +81,7 @@ void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts
   auto offer_state = [&](std::int64_t seq) {
     if (trigger == daemon::Trigger::kState && seq > 1) clock.advance(20 * rt::kNsPerMs);
     auto& st = inbox.state_buffer();
-    st.seq = seq;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
+    test::shape_state(st, seq);
     st.recv_ns = clock.now_ns();
     for (int i = 0; i < 16; ++i) st.x[i] = 0.0f;
     st.x[2] = 2.0f;
@@ -182,11 +175,7 @@ TEST(HotPath, LiveOptimizerSwapAllocatesNothingInTheLoop) {
   std::int64_t seq = 0;
   auto offer_state = [&] {
     auto& st = inbox.state_buffer();
-    st.seq = ++seq;
-    st.nx = 16;
-    st.n = 16;
-    st.vehicle_count = 1;
-    st.model = 1;
+    test::shape_state(st, ++seq);
     st.recv_ns = clock.now_ns();
     st.sample_utime = clock.now_ns() / 1000;
     for (int i = 0; i < 16; ++i) st.x[i] = 0.0f;

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Markdown tables of a cycle session (tools/gpu/cycle_session.sh) from its result files.
+"""Markdown tables of a cycle comparison (tools/gpu/cycle-compare.sh) from its result files.
 
     cycle_tables.py bench RESULTS_DIR     # mppid-bench and mppid-gpu-timing, base and this tree
     cycle_tables.py daemon LABEL FILE     # one daemon-bench row

@@ -1,25 +1,25 @@
 #!/usr/bin/env bash
-# Where the CUDA daemon's state -> command time goes, on the GPU machine, in one call:
-#   tools/gpu/latency-probe.sh [--seconds 60] [--runs 1] [--rollouts 16384] [--results DIR]
+# Where the CUDA daemon's state -> command time goes, on a GPU host (offline is fine):
+#   tools/gpu/latency-probe.sh [--seconds 60] [--runs 1] [--rollouts 16384] [--results DIR] [--archive DIR]
 # 1. builds the stack (tools/gpu/run-all.sh --stages build, into build-gpu/ unless it is there);
 # 2. mppid-gpu-timing quadrotor_forest:K back to back, then one update every 20 ms with the GPU
 #    and the thread idle in between (--period-us 20000, as in the daemon);
 # 3. --runs times daemon-bench --realtime --backend cuda at K, trigger state: state in -> command out, split
 #    into the state's wait for its cycle ("wake") and the optimizer's update ("optimize"), with
 #    the daemon's threads (top -H) and the GPU's clock sampled during the run.
-# Results (JSON, logs, a summary) land in DIR and in $OUT when it is set (the device tool).
+# Results (JSON, logs, a summary) land in DIR; with --archive A, summary.md and latency-probe.tgz in A too.
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/devdeps.sh"
 cd "$ROOT"
-SECONDS_RUN=60 RUNS=1 K=16384 RES="$ROOT/results/latency-$(date -u +%Y%m%d-%H%M%S)"
+ARCHIVE="" SECONDS_RUN=60 RUNS=1 K=16384 RES="$ROOT/results/latency-$(date -u +%Y%m%d-%H%M%S)"
 while (($#)); do
   case "$1" in
     --seconds) SECONDS_RUN="$2"; shift ;;
     --rollouts) K="$2"; shift ;;
     --runs) RUNS="$2"; shift ;;
     --results) RES="$2"; shift ;;
-    -h|--help) sed -n '2,11s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
-    *) echo "latency-probe.sh: unknown argument '$1'" >&2; exit 2 ;;
+    --archive) ARCHIVE="$2"; shift ;;
+    *) other_arg "${BASH_SOURCE[0]}" "$1" ;;
   esac
   shift
 done
@@ -31,9 +31,6 @@ say() { printf '[probe %4ds] %s\n' $(($(date +%s) - T0)) "$*" | tee -a "$RES/pro
 if [[ ! -x "$B/bin/mppid" || ! -x "$B/bin/mppid-gpu-timing" ]]; then
   tools/gpu/run-all.sh --stages build --results "$RES/build" >/dev/null 2>&1 || { say "build failed"; tail -30 "$RES/build/build.log"; exit 1; }
 fi
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
-export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 say "built ($B)"
 {
   echo "# latency probe ($(date -u +%FT%TZ)), K = $K, ${SECONDS_RUN} s"
@@ -70,4 +67,4 @@ PY
 }
 for ((r = 1; r <= RUNS; r++)); do bench "run$r"; done
 cat "$RES/summary.md"
-if [[ -n "${OUT:-}" ]]; then tar czf "$OUT/latency-probe.tgz" -C "$RES" . && cp "$RES/summary.md" "$OUT/"; fi
+if [[ -n "$ARCHIVE" ]]; then mkdir -p "$ARCHIVE" && tar czf "$ARCHIVE/latency-probe.tgz" -C "$RES" . && cp "$RES/summary.md" "$ARCHIVE/"; fi

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The loop-rate table (issue 24) from the campaigns of tools/gpu/cycle_session.sh's `flights`:
+"""The loop-rate table (issue 24) from the campaigns of tools/gpu/cycle-compare.sh's `flights`:
 FOLDER/<backend>-<rate>/<group>/summary.json, one campaign per task group.
 
     tools/gpu/rate_table.py FOLDER     # markdown on stdout

@@ -1,21 +1,20 @@
 #!/usr/bin/env bash
-# The whole stack on the GPU machine, offline, from the carried tree (tools/gpu/README.md):
+# The whole stack on an offline GPU host, from a copy of this tree (tools/gpu/README.md):
 # build with CUDA and LCM, the full ctest suite (CUDA tests included), mppid-bench and
 # mppid-gpu-timing for the README tables, daemon-bench with the CUDA backend, and real-time
 # SITL campaigns with the CUDA backend. Everything lands in one results folder (with the
-# plots), tarred into $OUT when $OUT is set (the device tool's output folder).
+# plots); with --archive DIR, its summary, log and a tarball of it (no flight logs) there too.
 #
 #   tools/gpu/run-all.sh [--stages setup,build,test,bench,daemon,campaign] [--quick]
 #                        [--forest-seeds 20] [--team-seeds 10] [--first-seed 51]
 #                        [--forest-scenarios LIST] [--team-scenarios LIST] [--campaign-set K=V]... [--speed-limits 5,7,10] [--realtime-jobs 1] [--daemon-seconds 60]
-#                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR]
+#                        [--trigger state|clock] [--campaign-timeout 7200] [--results DIR] [--archive DIR]
 #
 #   --stages          which stages (default: all; setup always runs; also: cudatest = the CUDA
 #                     tests alone, timing = mppid-gpu-timing alone, with and without the
-#                     obstacle grid and over block shapes). A machine kept warm
-#                     between device calls keeps build-gpu/ (MPPID_GPU_BUILD: elsewhere) unless
-#                     the call's carried paths replace it, so a later call can run, e.g.,
-#                     --stages campaign alone without rebuilding.
+#                     obstacle grid and over block shapes). The build stays in build-gpu/
+#                     (MPPID_GPU_BUILD: elsewhere), so a later run can do, e.g., --stages
+#                     campaign alone without rebuilding.
 #   --quick           a short end-to-end check: daemon-bench 20 s, 2 seeds of forest_4m and 1
 #                     of each team scenario, fewer benchmark iterations
 #   --forest-scenarios the forest campaign's scenarios (default forest_4m; e.g. forest_4m_sensed,
@@ -30,21 +29,21 @@
 #   --realtime-jobs N real-time flights at once, each pinned to its own 1/N of the cores
 #                     (tools/sitl campaign --realtime-jobs; default 1: one at a time)
 #   --campaign-timeout S  each campaign stops after S seconds (its finished flights are kept),
-#                     so a device call ends in time to bring its results back
+#                     so a run under an outside time limit ends in time to write its results
 #   --trigger T       the daemon's daemon.trigger in daemon-bench and the flights (default
 #                     state: each state starts its cycle; clock: the fixed-rate grid)
 # Reported results use seeds 51-70 (tuning uses 1-50): --first-seed 51 by default.
 # Exit status: non-zero when a stage failed (the others still run).
 set -uo pipefail
-ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/devdeps.sh"
 cd "$ROOT"
-D="${MPPID_DEVDEPS:-$ROOT/.devdeps}"
-B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"  # outside a carried folder, a warm machine keeps it
+B="${MPPID_GPU_BUILD:-$ROOT/build-gpu}"
 STAGES="build,test,bench,daemon,campaign"
 FOREST_SCEN=forest_4m
 TEAM_SCEN=team3_fixed,team3_moving,team9_fixed,team9_moving
 QUICK=0 FOREST_SEEDS=20 TEAM_SEEDS=10 FIRST_SEED=51 RT_JOBS=1 DAEMON_S=60 TRIGGER=state CAMP_TIMEOUT=7200
 RES="$ROOT/results/gpu-$(date -u +%Y%m%d-%H%M%S)"
+ARCHIVE=""
 CAMP_SETS=()
 SPEED_LIMITS=""
 CAMP_BACKEND=cuda
@@ -65,8 +64,8 @@ while (($#)); do
     --trigger) TRIGGER="$2"; shift ;;
     --campaign-timeout) CAMP_TIMEOUT="$2"; shift ;;
     --results) RES="$2"; shift ;;
-    -h|--help) sed -n '2,30s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
-    *) echo "run-all.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
+    --archive) ARCHIVE="$2"; shift ;;
+    *) other_arg "${BASH_SOURCE[0]}" "$1" ;;
   esac
   shift
 done
@@ -83,9 +82,7 @@ want() { [[ ",$STAGES," == *",$1,"* ]]; }
 fail() { say "FAILED: $*"; note "- FAILED: $*"; status=1; }
 
 # ---- setup: tools and libraries from .devdeps, the lcm wheel, a .venv stand-in -------------
-[[ -d "$D" ]] || { echo "run-all.sh: $D missing: run tools/gpu/pack-deps.sh here and carry .devdeps" >&2; exit 2; }
-export PATH="$D/bin:$PATH"
-export LD_LIBRARY_PATH="$D/lib:$D/usr/lib/x86_64-linux-gnu${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+[[ -d "$D" ]] || { echo "run-all.sh: $D missing: run tools/gpu/pack-deps.sh on a networked machine and copy .devdeps beside this tree" >&2; exit 2; }
 PY="$(command -v python3)"
 if ! "$PY" -c 'import lcm' 2>/dev/null; then
   "$PY" -m pip install -q --no-index --no-deps --no-compile --disable-pip-version-check "$D"/wheels/lcm-*.whl \
@@ -118,9 +115,8 @@ install_packages() {
   echo
   echo "- GPU: $(nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader 2>&1)"
   echo "- CPU: $(nproc) x $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'); $(. /etc/os-release && echo "$PRETTY_NAME")"
-  # A copied tree (no .git of its own) names its source in .gpuwork-commit, when there is one.
-  # MPPID_COMMIT (set on the command line that ships the tree) wins.
-  commit="${MPPID_COMMIT:-$(cat .gpuwork-commit 2>/dev/null || true)}"
+  # A copied tree has no .git of its own: MPPID_COMMIT names its commit.
+  commit="${MPPID_COMMIT:-}"
   [[ -n "$commit" || ! -d .git && ! -f .git ]] || commit="$(git rev-parse --short HEAD 2>/dev/null)"
   echo "- commit: ${commit:-unknown}; stages: $STAGES; quick: $QUICK"
 } >>"$SUMMARY"
@@ -148,7 +144,7 @@ export MPPID_BUILD_DIR="$B"
 if want test; then
   # The CUDA tests alone (they time nothing, but share one GPU), then the rest in parallel.
   timeout 900 ctest --test-dir "$B" -L gpu -V >"$RES/ctest-gpu.log" 2>&1 || fail "ctest -L gpu"
-  # -j6: DaemonBinary.SigtermStopsWithin100msWithFinalStatus (now SigtermStopsPromptlyWithFinalStatus, bound 1.5 s) measured 140 ms at -j8 there.
+  # -j6: at -j8 on a 16-core host DaemonBinary.SigtermStopsPromptlyWithFinalStatus came close to its bound.
   timeout 1200 ctest --test-dir "$B" -LE gpu --output-on-failure -j6 >"$RES/ctest.log" 2>&1 || fail "ctest (all but gpu)"
   grep -ho '\[parity\].*' "$RES/ctest-gpu.log" >"$RES/parity.txt" 2>/dev/null || true
   note "- ctest, CUDA tests: $(grep -E 'tests passed|tests failed' "$RES/ctest-gpu.log" | tail -1)"
@@ -165,7 +161,7 @@ if want cudatest; then
   say "CUDA tests done"
 fi
 
-# ---- the issue's kernel targets alone: with the obstacle grid (as the daemon runs), without,
+# ---- the kernel targets alone: with the obstacle grid (as the daemon runs), without,
 # and over the chunked kernel's block shapes ---------------------------------------------------
 if want timing; then
   cases=(quadrotor_forest:16384 quadrotor_rate_forest:16384 quadrotor_forest:4096 team3_forest:1200 team9_forest:6000)
@@ -191,7 +187,7 @@ PYEOF
   say "timing done"
 fi
 
-# ---- benchmarks: mppid-bench (docs/gpu.md, Fig. 11) and the issue's targets ---------------------
+# ---- benchmarks: mppid-bench (docs/gpu.md, Fig. 11) and the kernel targets ---------------------
 if want bench; then
   it=1000 itbig=100
   ((QUICK)) && it=200 itbig=20
@@ -207,7 +203,7 @@ if want bench; then
   # backend, which is a plain OpenMP loop over the same scalar model.
   "$B/bin/mppid-bench" --model quadrotor --backend cpu --rollouts 16384 --horizon 100 --threads "$(nproc)"     --obstacles 48 --simd off,auto --iterations $((it / 10)) >"$RES/bench-cpu.jsonl" 2>>"$RES/bench.err" ||
     fail "mppid-bench cpu (see bench.err)"
-  # The issue's targets on the test scenario (sigma 20, 32 obstacles), one full update each.
+  # The kernel targets on the test scenario (sigma 20, 32 obstacles), one full update each.
   "$B/bin/mppid-gpu-timing" --iters 1000 quadrotor_forest:16384 quadrotor_rate_forest:16384 team3_forest:1200 \
     team9_forest:6000 >"$RES/gpu-timing.json" 2>>"$RES/bench.err" || fail "mppid-gpu-timing"
   "$B/bin/mppid-gpu-timing" --iters $itbig --warmup 5 quadrotor_forest:1048576 >"$RES/gpu-timing-1m.json" \
@@ -275,10 +271,10 @@ fi
 
 say "all done in $(($(date +%s) - T0)) s, status $status"
 cat "$SUMMARY"
-if [[ -n "${OUT:-}" ]]; then
-  mkdir -p "$OUT"
-  cp "$SUMMARY" "$LOG" "$OUT/" 2>/dev/null
+if [[ -n "$ARCHIVE" ]]; then
+  mkdir -p "$ARCHIVE"
+  cp "$SUMMARY" "$LOG" "$ARCHIVE/" 2>/dev/null
   # The flight logs (.lcmlog) are large: the results tarball keeps everything else.
-  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' -czf "$OUT/$(basename "$RES").tar.gz" "$(basename "$RES")"
+  tar -C "$(dirname "$RES")" --exclude='*.lcmlog' -czf "$ARCHIVE/$(basename "$RES").tar.gz" "$(basename "$RES")"
 fi
 exit $status
