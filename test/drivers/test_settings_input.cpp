@@ -5,13 +5,16 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cstdint>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/settings.hpp"
+#include "mppi/settings_table.hpp"
 #include "mppi/simd.hpp"
 
 using namespace mppi;
@@ -218,4 +221,73 @@ TEST(SettingsInput, ShippedCpuTargetsFlyFewerRolloutsOnNarrowerLanes) {
       EXPECT_NO_THROW(daemon::parse_daemon_settings(v->root["daemon"], c.task, static_cast<int>(c.mppi.u_init.size())));
     }
   }
+}
+
+namespace {
+
+const char* kQuad = R"(task: quadrotor_track
+mppi: {rollouts: 8, horizon: 5, dt: 0.02, lambda: 1, nu: 1, sigma: [1, 1, 1, 1], u_min: [-1, -1, -1, -1],
+       u_max: [1, 1, 1, 1], u_init: [0, 0, 0, 0]}
+)";
+
+// A valid value for row `r` of the optimizer's table that the base file (kQuad) does not
+// give, as YAML text.
+template <class T>
+std::string optimizer_value(const SettingSpec& r, const T&) {
+  if constexpr (std::is_same_v<T, std::vector<float>>) {
+    const std::string name = r.name;
+    const char* v = name == "sigma" ? "0.5" : name == "u_min" ? "-0.5" : name == "u_max" ? "0.5"
+                  : name == "u_init" ? "0.25" : name == "u_nominal" ? "0.125" : nullptr;
+    if (v == nullptr) ADD_FAILURE() << "no test value for the list " << name;
+    const std::string one = v != nullptr ? v : "0";
+    return "[" + one + ", " + one + ", " + one + ", " + one + "]";
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    return "off";
+  } else if constexpr (std::is_same_v<T, Weighting>) {
+    return "trajectory";
+  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+    return "12345";
+  } else if constexpr (std::is_integral_v<T>) {
+    switch (r.rule) {
+      case SettingRule::kOdd: return std::to_string(static_cast<int>(r.lo) + 2);
+      case SettingRule::kDividesNu: return "2";
+      default: return std::to_string(static_cast<int>(r.lo) + 1);
+    }
+  } else {
+    return std::to_string(r.lo + 0.5);
+  }
+}
+
+}  // namespace
+
+// Every row of the optimizer's table (mppi/settings.hpp) is read from the file into its
+// field, and a missing required row is named.
+TEST(SettingsInput, EveryOptimizerKeyRoundTripsFromYaml) {
+  const MppiSettings defaults;
+  int rows = 0;
+  visit_settings(defaults, [&](const SettingSpec& r, const auto& def) {
+    using T = std::decay_t<decltype(def)>;
+    ++rows;
+    const std::string text = optimizer_value(r, def);
+    YAML::Node root = YAML::Load(kQuad);
+    root["mppi"][r.name] = YAML::Load(text);
+    const app::AppConfig c = app::parse_config(root);
+    bool seen = false;
+    visit_settings(c.mppi, [&](const SettingSpec& got, const auto& field) {
+      if (std::string(got.name) != r.name) return;
+      seen = true;
+      if constexpr (std::is_same_v<std::decay_t<decltype(field)>, Weighting>) {
+        EXPECT_EQ(to_string(field), text);
+      } else if constexpr (std::is_same_v<std::decay_t<decltype(field)>, T>) {
+        EXPECT_EQ(field, YAML::Load(text).as<T>()) << r.name << " = " << text;
+      }
+    });
+    EXPECT_TRUE(seen) << r.name;
+    if (r.required) {
+      YAML::Node missing = YAML::Load(kQuad);
+      missing["mppi"].remove(r.name);
+      EXPECT_EQ(config_error(YAML::Dump(missing)), std::string("mppi.") + r.name + ": missing");
+    }
+  });
+  EXPECT_EQ(rows, 20);
 }
