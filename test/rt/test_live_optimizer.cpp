@@ -10,11 +10,13 @@
 #include <cstring>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "fakes.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/settings_table.hpp"
 
@@ -196,6 +198,36 @@ TEST(LiveUpdate, TheLiveKeysAreTheOptimizerTablesLiveRows) {
   EXPECT_EQ(daemon::apply_live_update(&s, "mppi.chunk_rollouts", 8193, 4, lim),
             "mppi.chunk_rollouts: must be <= 8192 (daemon.live.max_rollouts), got 8193");
   EXPECT_EQ(daemon::apply_live_update(&s, "mppi.seed", -1, 4, lim), "mppi.seed: must be an integer in [0, 9007199254740992]");
+}
+
+// The loop's daemon.* keys: the daemon table's live rows are routed to the loop (answered
+// with their own reasons), every other row is refused naming the live rows.
+TEST(LiveUpdate, TheLoopsLiveKeysAreTheDaemonTablesLiveRows) {
+  LiveRig r(LiveOptimizer::Mode::kSynchronous);
+  std::vector<std::pair<std::string, bool>> keys;
+  const daemon::DaemonSettings defaults;
+  daemon::visit_daemon_settings(defaults, [&](const daemon::DaemonKey& k, const auto&) {
+    keys.emplace_back(std::string("daemon.") + k.path, k.live);
+  });
+  std::int64_t seq = 0;
+  for (const auto& [key, is_live] : keys) {
+    r.inbox->offer_param(update(key.c_str(), 0.0, ++seq));
+    if (seq % 32 == 0) r.fresh_cycle();  // the inbox queues 64
+  }
+  r.fresh_cycle();
+  ASSERT_EQ(r.tx.param_results.size(), keys.size());
+  const std::string refusal = ": not tunable at run time (tunable: " + daemon::live_daemon_keys() + ")";
+  EXPECT_EQ(daemon::live_daemon_keys(),
+            "daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify, daemon.restart_estimates");
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    const auto& got = r.tx.param_results[i];
+    EXPECT_STREQ(got.key, keys[i].first.c_str());
+    const std::string reason = got.reason;
+    if (keys[i].second)
+      EXPECT_EQ(reason.find("not tunable"), std::string::npos) << reason;
+    else
+      EXPECT_EQ(reason, (keys[i].first + refusal).substr(0, sizeof(got.reason) - 1));
+  }
 }
 
 TEST(LiveUpdate, ResampleKeepsTheStepsAndFillsWithUInit) {
