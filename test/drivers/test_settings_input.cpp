@@ -5,13 +5,18 @@
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
+#include <cstdint>
+#include <set>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/settings.hpp"
+#include "mppi/settings_table.hpp"
 #include "mppi/simd.hpp"
 
 using namespace mppi;
@@ -218,4 +223,164 @@ TEST(SettingsInput, ShippedCpuTargetsFlyFewerRolloutsOnNarrowerLanes) {
       EXPECT_NO_THROW(daemon::parse_daemon_settings(v->root["daemon"], c.task, static_cast<int>(c.mppi.u_init.size())));
     }
   }
+}
+
+namespace {
+
+const char* kQuad = R"(task: quadrotor_track
+mppi: {rollouts: 8, horizon: 5, dt: 0.02, lambda: 1, nu: 1, sigma: [1, 1, 1, 1], u_min: [-1, -1, -1, -1],
+       u_max: [1, 1, 1, 1], u_init: [0, 0, 0, 0]}
+)";
+
+// A valid value for row `r` of the optimizer's table that the base file (kQuad) does not
+// give, as YAML text.
+template <class T>
+std::string optimizer_value(const SettingSpec& r, const T&) {
+  if constexpr (std::is_same_v<T, std::vector<float>>) {
+    const std::string name = r.name;
+    const char* v = name == "sigma" ? "0.5" : name == "u_min" ? "-0.5" : name == "u_max" ? "0.5"
+                  : name == "u_init" ? "0.25" : name == "u_nominal" ? "0.125" : nullptr;
+    if (v == nullptr) ADD_FAILURE() << "no test value for the list " << name;
+    const std::string one = v != nullptr ? v : "0";
+    return "[" + one + ", " + one + ", " + one + ", " + one + "]";
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    return "off";
+  } else if constexpr (std::is_same_v<T, Weighting>) {
+    return "trajectory";
+  } else if constexpr (std::is_same_v<T, std::uint64_t>) {
+    return "12345";
+  } else if constexpr (std::is_integral_v<T>) {
+    switch (r.rule) {
+      case SettingRule::kOdd: return std::to_string(static_cast<int>(r.lo) + 2);
+      case SettingRule::kDividesNu: return "2";
+      default: return std::to_string(static_cast<int>(r.lo) + 1);
+    }
+  } else {
+    return std::to_string(r.lo + 0.5);
+  }
+}
+
+}  // namespace
+
+// Every row of the optimizer's table (mppi/settings.hpp) is read from the file into its
+// field, and a missing required row is named.
+TEST(SettingsInput, EveryOptimizerKeyRoundTripsFromYaml) {
+  const MppiSettings defaults;
+  int rows = 0;
+  visit_settings(defaults, [&](const SettingSpec& r, const auto& def) {
+    using T = std::decay_t<decltype(def)>;
+    ++rows;
+    const std::string text = optimizer_value(r, def);
+    YAML::Node root = YAML::Load(kQuad);
+    root["mppi"][r.name] = YAML::Load(text);
+    const app::AppConfig c = app::parse_config(root);
+    bool seen = false;
+    visit_settings(c.mppi, [&](const SettingSpec& got, const auto& field) {
+      if (std::string(got.name) != r.name) return;
+      seen = true;
+      if constexpr (std::is_same_v<std::decay_t<decltype(field)>, Weighting>) {
+        EXPECT_EQ(to_string(field), text);
+      } else if constexpr (std::is_same_v<std::decay_t<decltype(field)>, T>) {
+        EXPECT_EQ(field, YAML::Load(text).as<T>()) << r.name << " = " << text;
+      }
+    });
+    EXPECT_TRUE(seen) << r.name;
+    if (r.required) {
+      YAML::Node missing = YAML::Load(kQuad);
+      missing["mppi"].remove(r.name);
+      EXPECT_EQ(config_error(YAML::Dump(missing)), std::string("mppi.") + r.name + ": missing");
+    }
+  });
+  EXPECT_EQ(rows, 20);
+}
+
+namespace {
+
+// The file text of `daemon.<path>: value` ("daemon: {latency: {window: 3}}").
+std::string daemon_yaml(const std::string& path, const std::string& value) {
+  std::string out = "daemon: ", close;
+  std::size_t start = 0;
+  for (auto dot = path.find('.'); dot != std::string::npos; dot = path.find('.', start = dot + 1) ) {
+    out += "{" + path.substr(start, dot - start) + ": ";
+    close += "}";
+  }
+  return out + "{" + path.substr(start) + ": " + value + "}" + close + "\n";
+}
+
+// A value inside row k's range (1 % of the way up: the rows' rules between each other hold
+// with the others' defaults), as YAML text, and what the field then holds.
+struct DaemonValue {
+  const daemon::DaemonKey& k;
+  double hi;
+
+  template <class T>
+  std::pair<std::string, T> operator()(const T& def) const {
+    if constexpr (std::is_same_v<T, bool>) {
+      if (k.choices != nullptr) return {def ? "receive" : "sample", !def};  // state_time: true = sample
+      return {def ? "false" : "true", !def};
+    } else if constexpr (std::is_same_v<T, daemon::Trigger>) {
+      return {"state", daemon::Trigger::kState};
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (k.choices != nullptr) return {"state", "state"};
+      return {"TEST_TEXT", "TEST_TEXT"};
+    } else if constexpr (std::is_same_v<T, std::vector<float>>) {
+      return {"[1, 2, 3, 4]", {1, 2, 3, 4}};
+    } else {
+      const double v = k.lo + 0.01 * (hi - k.lo);
+      const std::string text = std::to_string(v);
+      const double read = std::stod(text);
+      if constexpr (std::is_same_v<T, std::int64_t>) return {text, std::llround(read * k.scale)};
+      return {text, static_cast<T>(read)};
+    }
+  }
+};
+
+}  // namespace
+
+// Every row of the daemon's table (daemon_settings.hpp) is read from the file into its
+// field; every section refuses a key it does not hold, naming it.
+TEST(SettingsInput, EveryDaemonKeyRoundTripsFromYaml) {
+  const daemon::DaemonSettings defaults = daemon::parse_daemon_settings(YAML::Node(), "quadrotor_track", 4);
+  int rows = 0;
+  std::set<std::string> sections{""};
+  daemon::visit_daemon_settings(defaults, [&](const daemon::DaemonKey& k, const auto& def) {
+    using T = std::decay_t<decltype(def)>;
+    if constexpr (!std::is_same_v<T, daemon::DaemonCommand>) {
+      ++rows;
+      const std::string path = k.path;
+      if (path.find('.') != std::string::npos) sections.insert(path.substr(0, path.rfind('.')) + ".");
+      const double hi = k.hi_is == daemon::DaemonHi::kRateHz     ? defaults.loop.rate_hz
+                        : k.hi_is == daemon::DaemonHi::kPeriodMs ? 1000.0 / defaults.loop.rate_hz
+                        : k.hi_is == daemon::DaemonHi::kDelayMaxMs ? defaults.loop.latency.delay_estimate.max_ms
+                                                                    : k.hi;
+      const auto value = DaemonValue{k, hi}(def);
+      const T& want = value.second;
+      const std::string yaml = daemon_yaml(path, value.first);
+      daemon::DaemonSettings d;
+      try {
+        d = daemon::parse_daemon_settings(YAML::Load(yaml)["daemon"], "quadrotor_track", 4);
+      } catch (const app::ConfigError& e) {
+        ADD_FAILURE() << yaml << e.what();
+        return;
+      }
+      daemon::visit_daemon_settings(d, [&](const daemon::DaemonKey& got, const auto& field) {
+        if constexpr (std::is_same_v<std::decay_t<decltype(field)>, T>) {
+          if (std::string(got.path) == path) {
+            EXPECT_EQ(field, want) << yaml;
+          }
+        }
+      });
+    }
+  });
+  EXPECT_EQ(rows, 73);
+  for (const std::string& section : sections) {
+    const std::string path = section + "bogus";
+    try {
+      daemon::parse_daemon_settings(YAML::Load(daemon_yaml(path, "1"))["daemon"], "quadrotor_track", 4);
+      ADD_FAILURE() << path << " accepted";
+    } catch (const app::ConfigError& e) {
+      EXPECT_EQ(std::string(e.what()), "daemon." + path + ": unknown field");
+    }
+  }
+  EXPECT_EQ(sections.size(), 12u);
 }

@@ -10,11 +10,15 @@
 #include <cstring>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "fakes.hpp"
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/settings_table.hpp"
 
 using namespace mppi;
 using daemon::LiveOptimizer;
@@ -157,6 +161,74 @@ TEST(LiveUpdate, ChecksEveryFieldAndNamesItWithTheReason) {
   EXPECT_EQ(s.lambda, before.lambda);
   EXPECT_EQ(s.sigma, before.sigma);
   EXPECT_EQ(s.threads, before.threads);
+}
+
+// The live and fixed keys are the optimizer table's (mppi/settings.hpp): every live row
+// takes a live update (or names a range, never "not tunable"), every fixed row is refused
+// naming it, and an unknown key lists exactly the table's live keys.
+TEST(LiveUpdate, TheLiveKeysAreTheOptimizerTablesLiveRows) {
+  const auto lim = limits();
+  const MppiSettings base = quad_settings();
+  std::vector<std::string> live;
+  int rows = 0;
+  visit_settings(base, [&](const SettingSpec& r, const auto&) {
+    ++rows;
+    MppiSettings s = base;
+    const std::string key = std::string("mppi.") + r.name;
+    const std::string err = daemon::apply_live_update(&s, key, 3, 4, lim);
+    if (r.live == LiveBound::kFixed) {
+      EXPECT_EQ(err.rfind(key + ": not tunable at run time", 0), 0u) << err;
+      return;
+    }
+    live.push_back(r.name);
+    EXPECT_EQ(err.find("not tunable"), std::string::npos) << err;
+    EXPECT_EQ(err.find("unknown field"), std::string::npos) << err;
+  });
+  EXPECT_EQ(rows, 20);
+  EXPECT_EQ(live, (std::vector<std::string>{"rollouts", "horizon", "dt", "substeps", "lambda", "nu",
+                                            "control_cost_scale", "smoothing_window", "threads", "chunk_rollouts",
+                                            "min_rollouts", "sigma", "seed"}));
+  MppiSettings s = base;
+  const std::string unknown = daemon::apply_live_update(&s, "mppi.bogus", 1, 4, lim);
+  EXPECT_EQ(unknown, "mppi.bogus: unknown field (tunable at run time: " + live_setting_names() + ")");
+  for (const std::string& name : live) EXPECT_NE(live_setting_names().find(name), std::string::npos) << name;
+  EXPECT_NE(live_setting_names().find("sigma[j]"), std::string::npos);  // a list row: its channels too
+  EXPECT_EQ(live_setting_names().find("u_min"), std::string::npos);
+  // The row's live bound: the table's constant, daemon.live's limits.
+  EXPECT_EQ(daemon::apply_live_update(&s, "mppi.substeps", 1001, 4, lim), "mppi.substeps: must be <= 1000, got 1001");
+  EXPECT_EQ(daemon::apply_live_update(&s, "mppi.chunk_rollouts", 8193, 4, lim),
+            "mppi.chunk_rollouts: must be <= 8192 (daemon.live.max_rollouts), got 8193");
+  EXPECT_EQ(daemon::apply_live_update(&s, "mppi.seed", -1, 4, lim), "mppi.seed: must be an integer in [0, 9007199254740992]");
+}
+
+// The loop's daemon.* keys: the daemon table's live rows are routed to the loop (answered
+// with their own reasons), every other row is refused naming the live rows.
+TEST(LiveUpdate, TheLoopsLiveKeysAreTheDaemonTablesLiveRows) {
+  LiveRig r(LiveOptimizer::Mode::kSynchronous);
+  std::vector<std::pair<std::string, bool>> keys;
+  const daemon::DaemonSettings defaults;
+  daemon::visit_daemon_settings(defaults, [&](const daemon::DaemonKey& k, const auto&) {
+    keys.emplace_back(std::string("daemon.") + k.path, k.live);
+  });
+  std::int64_t seq = 0;
+  for (const auto& [key, is_live] : keys) {
+    r.inbox->offer_param(update(key.c_str(), 0.0, ++seq));
+    if (seq % 32 == 0) r.fresh_cycle();  // the inbox queues 64
+  }
+  r.fresh_cycle();
+  ASSERT_EQ(r.tx.param_results.size(), keys.size());
+  const std::string refusal = ": not tunable at run time (tunable: " + daemon::live_daemon_keys() + ")";
+  EXPECT_EQ(daemon::live_daemon_keys(),
+            "daemon.state_timeout_ms, daemon.failsafe_timeout_ms, daemon.identify, daemon.restart_estimates");
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    const auto& got = r.tx.param_results[i];
+    EXPECT_STREQ(got.key, keys[i].first.c_str());
+    const std::string reason = got.reason;
+    if (keys[i].second)
+      EXPECT_EQ(reason.find("not tunable"), std::string::npos) << reason;
+    else
+      EXPECT_EQ(reason, (keys[i].first + refusal).substr(0, sizeof(got.reason) - 1));
+  }
 }
 
 TEST(LiveUpdate, ResampleKeepsTheStepsAndFillsWithUInit) {

@@ -4,10 +4,12 @@
 #include <cstdint>
 #include <initializer_list>
 #include <set>
+#include <type_traits>
 #include <utility>
 
 #include "mppi/app/vehicle.hpp"
 #include "mppi/params.hpp"
+#include "mppi/settings_table.hpp"
 #include "mppi/simd.hpp"
 #include "mppi/tasks.hpp"
 
@@ -94,11 +96,6 @@ class Fields {
 
   std::string path(const char* field) const { return section_ + "." + field; }
 
-  void require(std::initializer_list<const char*> fields) const {
-    for (const char* field : fields)
-      if (!node_[field]) fail(path(field), "missing");
-  }
-
   template <class T>
   void read(const char* field, T& out) const {
     if (node_[field]) read_value(node_[field], path(field), out);
@@ -117,35 +114,38 @@ class Fields {
   std::string section_;
 };
 
+// A value of the optimizer's table (mppi/settings.hpp), as the field's type.
+template <class T>
+void read_setting(const YAML::Node& n, const std::string& field, T& out) {
+  out = scalar<T>(n, field);
+}
+void read_setting(const YAML::Node& n, const std::string& field, std::vector<float>& out) { out = floats(n, field); }
+void read_setting(const YAML::Node& n, const std::string& field, Weighting& out) {
+  if (!parse_weighting(scalar<std::string>(n, field), &out)) fail(field, "must be cost_to_go or trajectory");
+}
+
+// The keys of the `mppi:` section: the optimizer's table and the CUDA backend's `cuda:` map.
+const std::set<std::string>& mppi_keys() {
+  static const std::set<std::string> keys = [] {
+    std::set<std::string> k{"cuda"};
+    const MppiSettings defaults;
+    visit_settings(defaults, [&](const SettingSpec& r, const auto&) { k.insert(r.name); });
+    return k;
+  }();
+  return keys;
+}
+
+// The `mppi:` section through the optimizer's table: an unknown key, then a missing one,
+// then a bad value is an error naming it; a key not given keeps its default.
 void read_mppi(const YAML::Node& m, MppiSettings& s) {
   if (!m || !m.IsMap()) fail("mppi", "missing section");
-  static const std::set<std::string> known = {
-      "rollouts", "horizon", "dt", "substeps", "lambda", "nu", "sigma", "u_min", "u_max", "u_init", "u_nominal",
-      "control_cost_scale", "weighting", "smoothing_window", "seed", "threads", "simd", "chunk_rollouts",
-      "min_rollouts", "noise_groups", "cuda"};
-  const Fields f(m, "mppi", known);
-  f.require({"rollouts", "horizon", "dt", "lambda", "nu", "sigma", "u_min", "u_max", "u_init"});
-  f.read("rollouts", s.rollouts);
-  f.read("horizon", s.horizon);
-  f.read("dt", s.dt);
-  f.read("substeps", s.substeps);
-  f.read("lambda", s.lambda);
-  f.read("nu", s.nu);
-  f.read("sigma", s.sigma);
-  f.read("u_min", s.u_min);
-  f.read("u_max", s.u_max);
-  f.read("u_init", s.u_init);
-  f.read("u_nominal", s.u_nominal);
-  f.read("control_cost_scale", s.control_cost_scale);
-  if (m["weighting"] && !parse_weighting(scalar<std::string>(m["weighting"], "mppi.weighting"), &s.weighting))
-    fail("mppi.weighting", "must be cost_to_go or trajectory");
-  f.read("smoothing_window", s.smoothing_window);
-  f.read("seed", s.seed);
-  f.read("threads", s.threads);
-  f.read("simd", s.simd);
-  f.read("chunk_rollouts", s.chunk_rollouts);
-  f.read("min_rollouts", s.min_rollouts);
-  f.read("noise_groups", s.noise_groups);
+  const Fields f(m, "mppi", mppi_keys());
+  visit_settings(s, [&](const SettingSpec& r, const auto&) {
+    if (r.required && !m[r.name]) fail(f.path(r.name), "missing");
+  });
+  visit_settings(s, [&](const SettingSpec& r, auto& field) {
+    if (const YAML::Node n = m[r.name]) read_setting(n, f.path(r.name), field);
+  });
 }
 
 void read_ddp(const YAML::Node& m, DdpSettings& d) {
@@ -336,12 +336,14 @@ void check_against_task(AppConfig& c, const YAML::Node& root, const Source& src)
     using T = typename decltype(tag)::type;
     nu = T::kNu;
     // A team's per-channel lists may be given for one vehicle: every vehicle gets them.
-    for (auto* v : {&c.mppi.sigma, &c.mppi.u_min, &c.mppi.u_max, &c.mppi.u_init, &c.mppi.u_nominal}) {
-      if (T::kVehicles > 1 && static_cast<int>(v->size()) == T::kVehicleNu) {
-        const std::vector<float> one = *v;
-        for (int j = 1; j < T::kVehicles; ++j) v->insert(v->end(), one.begin(), one.end());
+    visit_settings(c.mppi, [](const SettingSpec&, auto& v) {
+      if constexpr (std::is_same_v<std::decay_t<decltype(v)>, std::vector<float>>) {
+        if (T::kVehicles > 1 && static_cast<int>(v.size()) == T::kVehicleNu) {
+          const std::vector<float> one = v;
+          for (int j = 1; j < T::kVehicles; ++j) v.insert(v.end(), one.begin(), one.end());
+        }
       }
-    }
+    });
     typename T::Params p{};
     for (const auto& [key, value] : c.params) {
       const std::string err = set_task_param<T>(p, key, value);
@@ -356,6 +358,36 @@ void check_against_task(AppConfig& c, const YAML::Node& root, const Source& src)
   if (const std::string e = validate(c.ddp, nu); !e.empty()) throw ConfigError(e);
 }
 
+// One variant section (`cuda:`, `cpu_targets.avx2:`) merged into the file and parsed with
+// the overrides `rest`. Errors name the variant: "cuda.sim: unknown section" (its own keys),
+// "cuda: mppi.rollouts: must be >= 1" (the merged settings).
+std::shared_ptr<const AppConfig> parse_variant(const YAML::Node& file, const YAML::Node& section,
+                                               const std::string& name, const std::vector<std::string>& rest,
+                                               const Source& src) {
+  const Source vsrc{src.label + " (" + name + ")", src.dir};
+  if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
+  YAML::Node merged;
+  try {
+    merged = merged_with(file, section);
+  } catch (const ConfigError& e) {
+    throw ConfigError(name + "." + e.what());
+  }
+  try {
+    return std::make_shared<const AppConfig>(parse_impl(merged, rest, true, vsrc));
+  } catch (const ConfigError& e) {
+    throw ConfigError(name + ": " + e.what());
+  }
+}
+
+// The SIMD target an entry of `cpu_targets:` names (by its canonical name), once.
+std::string cpu_target_of(const std::string& target, const AppConfig& c) {
+  simd::Target t{};
+  if (target == "off" || target == "auto" || !simd::parse_setting(target, &t))
+    fail("cpu_targets." + target, "not a SIMD target (scalar, " + simd::target_names() + ")");
+  if (c.cpu_targets.count(simd::name(t))) fail("cpu_targets." + target, "given twice");
+  return simd::name(t);
+}
+
 // The variants (`cuda:`, each entry of `cpu_targets:`): the file with that section (after the
 // overrides: --set cuda.x=... works) merged in, then the other overrides again (so a
 // command-line --set wins over the section). Parsed, and so validated, now, whatever the
@@ -366,34 +398,46 @@ void parse_variants(const YAML::Node& root, const YAML::Node& file, const std::v
   std::vector<std::string> rest;
   for (const auto& o : overrides)
     if (o.rfind("cuda.", 0) != 0 && o.rfind("cpu_targets.", 0) != 0) rest.push_back(o);
-  // Errors name the variant: "cuda.sim: unknown section" (its own keys), "cuda: mppi.rollouts:
-  // must be >= 1" (the merged settings).
-  const auto parse_variant = [&](const YAML::Node& section, const std::string& name) {
-    const Source vsrc{src.label + " (" + name + ")", src.dir};
-    if (!section.IsMap()) fail(name, "expected a map of mppi/model/cost/daemon overrides");
-    YAML::Node merged;
-    try {
-      merged = merged_with(file, section);
-    } catch (const ConfigError& e) {
-      throw ConfigError(name + "." + e.what());
-    }
-    try {
-      return std::make_shared<const AppConfig>(parse_impl(merged, rest, true, vsrc));
-    } catch (const ConfigError& e) {
-      throw ConfigError(name + ": " + e.what());
-    }
-  };
-  if (const YAML::Node section = root["cuda"]; section) c->cuda = parse_variant(section, "cuda");
+  if (const YAML::Node section = root["cuda"]; section) c->cuda = parse_variant(file, section, "cuda", rest, src);
   const YAML::Node targets = root["cpu_targets"];
   if (!targets || targets.IsNull()) return;
   if (!targets.IsMap()) fail("cpu_targets", "expected a map of SIMD target: {mppi/model/cost/daemon overrides}");
   for (const auto& kv : targets) {
     const std::string target = key_name(kv.first, "cpu_targets");
-    simd::Target t{};
-    if (target == "off" || target == "auto" || !simd::parse_setting(target, &t))
-      fail("cpu_targets." + target, "not a SIMD target (scalar, " + simd::target_names() + ")");
-    if (c->cpu_targets.count(simd::name(t))) fail("cpu_targets." + target, "given twice");
-    c->cpu_targets[simd::name(t)] = parse_variant(kv.second, "cpu_targets." + target);
+    const std::string name = cpu_target_of(target, *c);
+    c->cpu_targets[name] = parse_variant(file, kv.second, "cpu_targets." + target, rest, src);
+  }
+}
+
+// Every top-level key a known section.
+void check_sections(const YAML::Node& root) {
+  static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
+                                                 "description", "cuda", "cpu_targets", "controller", "ddp", "vehicle"};
+  for (const auto& kv : root) {
+    const auto name = key_name(kv.first, "(file)");
+    if (!sections.count(name)) fail(name, "unknown section");
+  }
+}
+
+// A text of the top level (task, backend, controller) among its choices ("" if any text).
+void read_text(const YAML::Node& root, const char* field, std::initializer_list<const char*> choices,
+               const char* names, std::string* out) {
+  if (root[field]) *out = scalar<std::string>(root[field], field);
+  if (choices.size() == 0) return;
+  for (const char* c : choices)
+    if (*out == c) return;
+  fail(field, std::string("must be ") + names);
+}
+
+// The optimizers' sections: mppi (with its cuda map) and ddp.
+void read_optimizers(const YAML::Node& root, AppConfig* c) {
+  read_mppi(root["mppi"], c->mppi);
+  const YAML::Node& mppi_section = root["mppi"];
+  c->cuda_launch = read_cuda_settings(mppi_section["cuda"], c->task);
+  read_text(root, "controller", {"mppi", "ddp"}, "mppi or ddp", &c->controller);
+  if (const YAML::Node d = root["ddp"]; d && !d.IsNull()) {
+    read_ddp(d, c->ddp);
+    c->has_ddp = true;
   }
 }
 
@@ -401,30 +445,16 @@ AppConfig parse_impl(YAML::Node root, const std::vector<std::string>& overrides,
   if (!root || !root.IsMap()) fail("(file)", "expected a YAML map at the top level");
   const YAML::Node file = YAML::Clone(root);
   for (const auto& o : overrides) apply_override(root, o);
-  static const std::set<std::string> sections = {"task", "backend", "mppi", "model", "cost", "daemon", "sim", "offline",
-                                                 "description", "cuda", "cpu_targets", "controller", "ddp", "vehicle"};
-  for (const auto& kv : root) {
-    const auto name = key_name(kv.first, "(file)");
-    if (!sections.count(name)) fail(name, "unknown section");
-  }
+  check_sections(root);
   AppConfig c;
   c.root = root;
   if (!root["task"]) fail("task", "missing");
-  c.task = scalar<std::string>(root["task"], "task");
+  read_text(root, "task", {}, "", &c.task);
   c.vehicle = vehicle_of(root, file, src.dir);
   if (c.vehicle) merge_vehicle(*c.vehicle, root, file, c.task, src.label);
   resolve_hover(root, c.task);
-  if (root["backend"]) c.backend = scalar<std::string>(root["backend"], "backend");
-  if (c.backend != "cpu" && c.backend != "cuda" && c.backend != "auto") fail("backend", "must be cpu, cuda or auto");
-  read_mppi(root["mppi"], c.mppi);
-  const YAML::Node& mppi_section = root["mppi"];
-  c.cuda_launch = read_cuda_settings(mppi_section["cuda"], c.task);
-  if (root["controller"]) c.controller = scalar<std::string>(root["controller"], "controller");
-  if (c.controller != "mppi" && c.controller != "ddp") fail("controller", "must be mppi or ddp");
-  if (const YAML::Node d = root["ddp"]; d && !d.IsNull()) {
-    read_ddp(d, c.ddp);
-    c.has_ddp = true;
-  }
+  read_text(root, "backend", {"cpu", "cuda", "auto"}, "cpu, cuda or auto", &c.backend);
+  read_optimizers(root, &c);
   read_params(root, "model", c);
   read_params(root, "cost", c);
   check_against_task(c, root, src);

@@ -16,6 +16,9 @@
 #include <exception>
 #include <stdexcept>
 #include <thread>
+#include <type_traits>
+
+#include "mppi/settings_table.hpp"
 
 namespace mppi::daemon {
 
@@ -43,106 +46,89 @@ struct LiveLimits {
   int max_rollouts, max_horizon, max_threads, nu;
 };
 
-// The optimizer's part of the parameter table (the loop routes mppi.* here, loop_params.cpp):
-// one row per setting a live update may change, {name, check and set}; a name ending in '['
-// is a prefix (sigma[j]); the last row takes the rest.
-struct LiveField {
-  const char* name;
-  std::string (*set)(MppiSettings* n, const std::string& key, double v, const LiveLimits& l);
+// The highest value a live update may give a row's whole number, and what sets it.
+double live_hi(const SettingSpec& r, const LiveLimits& l, std::string* why) {
+  switch (r.live) {
+    case LiveBound::kMaxRollouts:
+      *why = " (daemon.live.max_rollouts)";
+      return l.max_rollouts;
+    case LiveBound::kMaxHorizon:
+      *why = " (daemon.live.max_horizon)";
+      return l.max_horizon;
+    case LiveBound::kCpus:
+      *why = " (the CPUs this process may use)";
+      return l.max_threads;
+    default:
+      return r.live_hi;
+  }
+}
+
+std::string unknown_field(const std::string& key) {
+  return key + ": unknown field (tunable at run time: " + live_setting_names() + ")";
+}
+
+// A row of the optimizer's table (mppi/settings.hpp) set by a live update: a whole number
+// in [lo, the row's live bound]; a float as given (validate() checks the snapshot
+// afterwards); a list: every channel, or channel j (`sigma[j]`).
+struct LiveSet {
+  const std::string& key;
+  double v;
+  const LiveLimits& l;
+
+  std::string operator()(const SettingSpec& r, int& field) const {
+    std::string why;
+    return integer(key, v, r.lo, live_hi(r, l, &why), why, &field);
+  }
+  std::string operator()(const SettingSpec& r, std::uint64_t& field) const {
+    std::string why;
+    const double hi = live_hi(r, l, &why);
+    if (v != std::floor(v) || v < r.lo || v > hi) return key + ": must be an integer in [" + num(r.lo) + ", " + num(hi) + "]";
+    field = static_cast<std::uint64_t>(v);
+    return {};
+  }
+  std::string operator()(const SettingSpec&, float& field) const {
+    field = static_cast<float>(v);
+    return {};
+  }
+  std::string operator()(const SettingSpec&, std::vector<float>& field) const {
+    const std::size_t open = key.find('[');
+    if (open == std::string::npos) {
+      std::fill(field.begin(), field.end(), static_cast<float>(v));
+      return {};
+    }
+    if (key.back() != ']') return unknown_field(key);
+    const std::string index = key.substr(open + 1, key.size() - open - 2);
+    char* end = nullptr;
+    const long j = std::strtol(index.c_str(), &end, 10);
+    if (index.empty() || *end != '\0' || j < 0 || j >= l.nu)
+      return key + ": the channel index must be in [0, " + std::to_string(l.nu - 1) + "]";
+    field[static_cast<std::size_t>(j)] = static_cast<float>(v);
+    return {};
+  }
+  template <class T>
+  std::string operator()(const SettingSpec&, T&) const {  // text and choices: fixed for a run
+    return key + ": not tunable at run time";
+  }
 };
 
-std::string unknown_field(MppiSettings*, const std::string& key, double, const LiveLimits&) {
-  return key + ": unknown field (tunable at run time: rollouts, horizon, dt, substeps, lambda, nu, sigma, "
-               "sigma[j], control_cost_scale, smoothing_window, seed, threads, chunk_rollouts, min_rollouts)";
-}
-
-std::string fixed_for_a_run(MppiSettings*, const std::string& key, double, const LiveLimits&) {
-  return key + ": not tunable at run time (the command limits, the failsafe and the backend are fixed for a "
-               "run; restart with --set)";
-}
-
-std::string sigma_channel(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  if (key.back() != ']') return unknown_field(n, key, v, l);
-  const std::size_t open = key.find('[');
-  const std::string index = key.substr(open + 1, key.size() - open - 2);
-  char* end = nullptr;
-  const long j = std::strtol(index.c_str(), &end, 10);
-  if (index.empty() || *end != '\0' || j < 0 || j >= l.nu)
-    return key + ": the channel index must be in [0, " + std::to_string(l.nu - 1) + "]";
-  n->sigma[static_cast<std::size_t>(j)] = static_cast<float>(v);
-  return {};
-}
-
-std::string seed(MppiSettings* n, const std::string& key, double v, const LiveLimits&) {
-  if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) return key + ": must be an integer in [0, 2^53]";
-  n->seed = static_cast<std::uint64_t>(v);
-  return {};
-}
-
-// A float setting: any finite value here; validate() checks the snapshot afterwards.
-template <float MppiSettings::*field>
-std::string real(MppiSettings* n, const std::string&, double v, const LiveLimits&) {
-  n->*field = static_cast<float>(v);
-  return {};
-}
-
-std::string sigma(MppiSettings* n, const std::string&, double v, const LiveLimits&) {
-  std::fill(n->sigma.begin(), n->sigma.end(), static_cast<float>(v));
-  return {};
-}
-
-// An integer setting in the constant range [lo, hi]; the rows below name the daemon's limits.
-template <int MppiSettings::*field, int lo, int hi>
-std::string whole(MppiSettings* n, const std::string& key, double v, const LiveLimits&) {
-  return integer(key, v, lo, hi, "", &(n->*field));
-}
-std::string rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  return integer(key, v, 1, l.max_rollouts, " (daemon.live.max_rollouts)", &n->rollouts);
-}
-std::string horizon(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  return integer(key, v, 2, l.max_horizon, " (daemon.live.max_horizon)", &n->horizon);
-}
-std::string threads(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  return integer(key, v, 0, l.max_threads, " (the CPUs this process may use)", &n->threads);
-}
-std::string chunk_rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  return integer(key, v, 0, l.max_rollouts, "", &n->chunk_rollouts);
-}
-std::string min_rollouts(MppiSettings* n, const std::string& key, double v, const LiveLimits& l) {
-  return integer(key, v, 0, l.max_rollouts, "", &n->min_rollouts);
-}
-
-const LiveField& live_field(const std::string& name) {
-  using S = MppiSettings;
-  static const LiveField kFields[] = {
-      {"rollouts", &rollouts},
-      {"horizon", &horizon},
-      {"substeps", &whole<&S::substeps, 1, 1000>},
-      {"smoothing_window", &whole<&S::smoothing_window, 1, 1001>},
-      {"threads", &threads},
-      {"chunk_rollouts", &chunk_rollouts},
-      {"min_rollouts", &min_rollouts},
-      {"seed", &seed},
-      {"dt", &real<&S::dt>},
-      {"lambda", &real<&S::lambda>},
-      {"nu", &real<&S::nu>},
-      {"control_cost_scale", &real<&S::control_cost_scale>},
-      {"sigma", &sigma},
-      {"sigma[", &sigma_channel},
-      {"u_min", &fixed_for_a_run},
-      {"u_max", &fixed_for_a_run},
-      {"u_init", &fixed_for_a_run},
-      {"u_nominal", &fixed_for_a_run},
-      {"simd", &fixed_for_a_run},
-      {"weighting", &fixed_for_a_run},
-      {"", &unknown_field},
-  };
-  for (const LiveField& f : kFields) {
-    const std::size_t len = std::strlen(f.name);
-    const bool prefix = len == 0 || f.name[len - 1] == '[';
-    if (prefix ? name.compare(0, len, f.name) == 0 : name == f.name) return f;
-  }
-  return kFields[sizeof(kFields) / sizeof(kFields[0]) - 1];
+// Sets `name` (the key without "mppi.": "rollouts", "sigma[2]") of `n` through the table.
+std::string set_live(MppiSettings* n, const std::string& name, const std::string& key, double v, const LiveLimits& l) {
+  bool found = false;
+  std::string err;
+  visit_settings(*n, [&](const SettingSpec& r, auto& field) {
+    using T = std::decay_t<decltype(field)>;
+    const std::size_t len = std::strlen(r.name);
+    const bool channel = std::is_same_v<T, std::vector<float>> && name.size() > len &&
+                         name.compare(0, len, r.name) == 0 && name[len] == '[';
+    if (found || (name != r.name && !channel)) return;
+    found = true;
+    if (r.live == LiveBound::kFixed)
+      err = key + ": not tunable at run time (the command limits, the failsafe and the backend are fixed for a "
+                  "run; restart with --set)";
+    else
+      err = LiveSet{key, v, l}(r, field);
+  });
+  return found ? err : unknown_field(key);
 }
 
 thread_local bool t_builder = false;
@@ -157,7 +143,7 @@ std::string apply_live_update(MppiSettings* s, const std::string& key, double v,
   const std::string name = key.rfind("mppi.", 0) == 0 ? key.substr(5) : key;
   const LiveLimits limits{lim.max_rollouts, lim.max_horizon, lim.max_threads > 0 ? lim.max_threads : omp_get_num_procs(),
                           nu};
-  const std::string err = live_field(name).set(&n, key, v, limits);
+  const std::string err = set_live(&n, name, key, v, limits);
   if (!err.empty()) return err;
   const std::string invalid = validate(n, nu);
   if (!invalid.empty()) {

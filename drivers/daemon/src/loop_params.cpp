@@ -1,14 +1,17 @@
 // ControlLoop: the parameter table. Every key a parameter update may name is routed by one
 // table of {key, validate, apply}, as Navigation2's ParametersHandler holds its parameters:
-// the loop's own daemon.* keys, the optimizer's mppi.* keys (a live optimizer's builder takes
-// them; without one they are fixed for a run) and the task's model.* and cost.* keys (the
-// controller's field tables, core/include/mppi/params.hpp). A new key is one row.
+// the loop's own daemon.* keys (the live rows of the daemon's settings table,
+// daemon_settings.hpp), the optimizer's mppi.* keys (a live optimizer's builder takes them
+// through the optimizer's table, mppi/settings.hpp; without one they are fixed for a run)
+// and the task's model.* and cost.* keys (the controller's field tables,
+// core/include/mppi/params.hpp). A new key is one row.
 #include <spdlog/spdlog.h>
 
 #include <cmath>
 #include <cstring>
 
 #include "mppi/daemon/control_loop.hpp"
+#include "mppi/daemon/daemon_settings.hpp"
 
 namespace mppi::daemon {
 
@@ -98,9 +101,10 @@ std::string ControlLoop::set_restart_estimates(const std::string&, double) {
   return {};
 }
 
+// The daemon's settings table (daemon_settings.hpp) says which keys are live; each has a row above.
 std::string ControlLoop::refuse_daemon_key(const std::string& key, double) const {
-  return key + ": not tunable at run time (tunable: daemon.state_timeout_ms, daemon.failsafe_timeout_ms, "
-               "daemon.identify, daemon.restart_estimates)";
+  static const std::string tunable = live_daemon_keys();
+  return key + ": not tunable at run time (tunable: " + tunable + ")";
 }
 
 std::string ControlLoop::refuse_optimizer_key(const std::string& key, double) const {
