@@ -10,10 +10,16 @@
 #   /etc/mppid/{mppid,vehicle,mavlink-bridge,mapper}.yaml  the live settings (conffiles)
 #   share/mppid/                            their templates: the link profiles per autopilot and
 #                                           port, tasks, vehicles, missions, autopilot parameters
-#   share/doc/mppid/                        first-flight.md, deploy.md
+#   share/doc/mppid/                        first-flight.md, deploy.md, failsafes.md; copyright (every
+#                                           component's license, cmake/debian/copyright), changelog.gz
+#   share/man/man1/                         the programs' manual pages (help2man from --help: the
+#                                           target mppid-man, which tools/package.sh builds)
 # Not installed: the simulator, the offline tools, the tests, the benchmarks, the live view and
 # lcm-spy (they run on the ground, from a source tree).
 include(GNUInstallDirs)
+# Directories 0755 whatever the umask of the build (files are 0644, programs 0755: CMake's defaults).
+set(CMAKE_INSTALL_DEFAULT_DIRECTORY_PERMISSIONS
+    OWNER_READ OWNER_WRITE OWNER_EXECUTE GROUP_READ GROUP_EXECUTE WORLD_READ WORLD_EXECUTE)
 
 # The units name /usr/bin, /usr/lib/mppid and /etc/mppid: the package installs under /usr
 # (a hand install: `cmake --install build --prefix /usr`). /etc/mppid is /etc/mppid whatever
@@ -74,13 +80,21 @@ set(MPPID_PYTHON_WHEELS "${_wheels}" CACHE STRING "PyPI distributions the packag
 # The board's Python: Debian 12's 3.11 (a Jetson's Ubuntu 22.04 has 3.10: build there, docs/deploy.md).
 set(MPPID_PYTHON_VERSION "3.11" CACHE STRING "The target's python3 version (wheels are chosen for it)")
 set(MPPID_WHEEL_CACHE "$ENV{HOME}/.cache/mppid/wheels" CACHE PATH "Downloaded wheels, kept between builds")
+# Byte-compiled only by an install in place (no DESTDIR): a staged install is a package, whose
+# postinst compiles on the board (cmake/debian/postinst). The wheels' programs and extension
+# modules are stripped with the target's strip (CPack strips only the project's targets).
 install(CODE "
+  set(_compile \"\")
+  if(\"\$ENV{DESTDIR}\" STREQUAL \"\")
+    set(_compile --compile)
+  endif()
   execute_process(COMMAND \"${MPPID_HOST_PYTHON}\" \"${CMAKE_CURRENT_LIST_DIR}/install_python.py\"
       --dest \"\$ENV{DESTDIR}\${CMAKE_INSTALL_PREFIX}/${MPPID_INSTALL_PYTHONDIR}\"
       --final-dir \"\${CMAKE_INSTALL_PREFIX}/${MPPID_INSTALL_PYTHONDIR}\"
       --arch ${CMAKE_SYSTEM_PROCESSOR} --python-version ${MPPID_PYTHON_VERSION}
       --wheel-cache \"${MPPID_WHEEL_CACHE}\"
       --wheels \"${MPPID_PYTHON_WHEELS}\" --packages \"${_py_packages}\"
+      --strip \"${CMAKE_STRIP}\" \${_compile}
     RESULT_VARIABLE _rc)
   if(NOT _rc EQUAL 0)
     message(FATAL_ERROR \"install_python.py failed (\${_rc})\")
@@ -135,3 +149,52 @@ foreach(_ap ardupilot px4)
 endforeach()
 install(FILES ${PROJECT_SOURCE_DIR}/docs/first-flight.md ${PROJECT_SOURCE_DIR}/docs/deploy.md ${PROJECT_SOURCE_DIR}/docs/failsafes.md
         DESTINATION ${CMAKE_INSTALL_DOCDIR})
+
+# ---- copyright, changelog, manual pages ------------------------------------------------
+# The package's version has no Debian revision (it is built from this tree, a native package):
+# its changelog is share/doc/mppid/changelog.gz, gzip -9n (no name, no time: reproducible),
+# and its newest entry must be this version.
+set(_changelog ${PROJECT_SOURCE_DIR}/cmake/debian/changelog)
+set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${_changelog})
+file(STRINGS ${_changelog} _top LIMIT_COUNT 1)
+if(NOT _top MATCHES "^mppid \\(${PROJECT_VERSION}\\) ")
+  message(FATAL_ERROR "cmake/debian/changelog: the newest entry is '${_top}', not mppid (${PROJECT_VERSION}): add an entry")
+endif()
+file(MAKE_DIRECTORY ${CMAKE_BINARY_DIR}/deploy/doc)
+execute_process(COMMAND gzip -9n -c ${_changelog} OUTPUT_FILE ${CMAKE_BINARY_DIR}/deploy/doc/changelog.gz
+                RESULT_VARIABLE _rc)
+if(NOT _rc EQUAL 0)
+  message(FATAL_ERROR "gzip of cmake/debian/changelog failed (${_rc})")
+endif()
+install(FILES ${PROJECT_SOURCE_DIR}/cmake/debian/copyright ${CMAKE_BINARY_DIR}/deploy/doc/changelog.gz
+        DESTINATION ${CMAKE_INSTALL_DOCDIR})
+install(FILES ${PROJECT_SOURCE_DIR}/cmake/debian/lintian-overrides DESTINATION ${CMAKE_INSTALL_DATADIR}/lintian/overrides
+        RENAME mppid)
+
+# The manual pages, from each program's --help (help2man, cmake/debian/man-page.sh): the target
+# mppid-man, built by tools/package.sh (not by `all`); the programs run on this machine (qemu-user
+# in the cross build; the Python ones with the build's Python, whose venv holds their packages).
+find_program(MPPID_HELP2MAN help2man)
+# One page: NAME, its NAME-section line, what it is made from (a target or a file), the command.
+function(mppid_man_page name description dependency)
+  set(_page ${CMAKE_BINARY_DIR}/deploy/man/${name}.1.gz)
+  add_custom_command(OUTPUT ${_page}
+    COMMAND ${PROJECT_SOURCE_DIR}/cmake/debian/man-page.sh ${_page} ${name} ${PROJECT_VERSION} "${description}" ${ARGN}
+    DEPENDS ${dependency} ${PROJECT_SOURCE_DIR}/cmake/debian/man-page.sh
+    COMMENT "help2man: ${name}.1" VERBATIM)
+  set_property(GLOBAL APPEND PROPERTY MPPID_MAN_PAGES ${_page})
+endfunction()
+if(MPPID_HELP2MAN AND TARGET mppid AND TARGET mppid-mapper)
+  file(MAKE_DIRECTORY ${CMAKE_BINARY_DIR}/deploy/man)
+  mppid_man_page(mppid "fixed-rate MPPI quadrotor controller on an LCM bus" mppid
+                 ${CMAKE_CROSSCOMPILING_EMULATOR} $<TARGET_FILE:mppid>)
+  mppid_man_page(mppid-mapper "local occupancy map and distance field from depth camera or LiDAR frames" mppid-mapper
+                 ${CMAKE_CROSSCOMPILING_EMULATOR} $<TARGET_FILE:mppid-mapper>)
+  mppid_man_page(mppid-mavlink-bridge "MAVLink bridge between an autopilot and mppid's LCM bus"
+                 ${PROJECT_SOURCE_DIR}/drivers/mavlink/mppi_mavlink/__main__.py ${MPPID_HOST_PYTHON} -m mppi_mavlink)
+  mppid_man_page(mppid-mission "missions and single legs for mppid to fly"
+                 ${PROJECT_SOURCE_DIR}/drivers/mission/mppi_mission/__main__.py ${MPPID_HOST_PYTHON} -m mppi_mission)
+  get_property(_man_pages GLOBAL PROPERTY MPPID_MAN_PAGES)
+  add_custom_target(mppid-man DEPENDS ${_man_pages})
+  install(FILES ${_man_pages} DESTINATION ${CMAKE_INSTALL_MANDIR}/man1 OPTIONAL)
+endif()

@@ -10,7 +10,11 @@ install time; docs/deploy.md says why a directory on Debian's python3 and not a 
   - the project's packages: a folder with a pyproject.toml through
     `pip install --no-deps --no-build-isolation --target`, a folder without one (a PYTHONPATH
     root) by copying its packages and LCM type files;
-  - byte-compiled with the final path in the code objects, when this Python is the target's.
+  - the wheels' programs and extension modules stripped with the target's strip (--strip), and
+    every file 0644, those in bin/ 0755, whatever the wheel or the build's umask said;
+  - byte-compiled (--compile: an install in place) with the final path in the code objects,
+    when this Python is the target's; the Debian package carries no byte code, its postinst
+    compiles on the board (cmake/debian/postinst).
 """
 from __future__ import annotations
 
@@ -130,6 +134,32 @@ def copy_item(src: Path, dst: Path):
         shutil.copy2(src, dst)
 
 
+def is_elf(path: Path) -> bool:
+    with open(path, "rb") as f:
+        return f.read(4) == b"\x7fELF"
+
+
+def strip_and_set_modes(dest: Path, strip: str):
+    """As dh_strip and dh_fixperms would leave them: ELF files without symbols or .comment and
+    .note (extension modules --strip-unneeded, programs fully), directories 0755, files 0644 but
+    the programs in bin/ 0755."""
+    stripped = 0
+    for path in sorted(dest.rglob("*")):
+        if path.is_symlink():
+            continue
+        if path.is_dir():
+            os.chmod(path, 0o755)
+            continue
+        program = path.parent.name == "bin"
+        os.chmod(path, 0o755 if program else 0o644)
+        if strip and is_elf(path):
+            how = [] if program else ["--strip-unneeded"]
+            subprocess.run([strip, "--remove-section=.comment", "--remove-section=.note", *how, str(path)], check=True)
+            stripped += 1
+    if strip:
+        log(f"{strip}: {stripped} ELF files")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--dest", required=True, type=Path, help="the Python directory (with DESTDIR)")
@@ -139,6 +169,8 @@ def main() -> int:
     ap.add_argument("--wheel-cache", required=True, type=Path)
     ap.add_argument("--wheels", default="", help="';'-separated requirement specs")
     ap.add_argument("--packages", default="", help="';'-separated folders")
+    ap.add_argument("--strip", default="", help="the target's strip (empty: nothing stripped)")
+    ap.add_argument("--compile", action="store_true", help="byte-compile (an install in place)")
     a = ap.parse_args()
     if a.dest.exists():
         shutil.rmtree(a.dest)
@@ -147,7 +179,10 @@ def main() -> int:
     for w in fetch_wheels(specs, a.arch, a.python_version, a.wheel_cache / f"{a.arch}-cp{a.python_version}"):
         unpack_wheel(w, a.dest)
     install_project([Path(p) for p in a.packages.split(";") if p], a.dest)
-    if a.python_version == f"{sys.version_info[0]}.{sys.version_info[1]}":
+    strip_and_set_modes(a.dest, a.strip)
+    if not a.compile:
+        log("not byte-compiled: a staged install (the package's postinst compiles)")
+    elif a.python_version == f"{sys.version_info[0]}.{sys.version_info[1]}":
         ok = compileall.compile_dir(str(a.dest), quiet=1, ddir=a.final_dir or str(a.dest))
         if not ok:
             raise SystemExit("install_python.py: byte-compiling failed")

@@ -1,6 +1,9 @@
 #!/usr/bin/env bash
 # CI's package stage (tools/test.sh, after the aarch64 stage; docs/deploy.md):
-#   1. tools/package.sh: the amd64 .deb from build/, the arm64 .deb from build-aarch64/.
+#   1. tools/package.sh: the amd64 .deb from build/, the arm64 .deb from build-aarch64/; lintian
+#      on each (Debian's checks of a binary package): any error or warning fails the stage (the
+#      warnings the package keeps are overridden in cmake/debian/lintian-overrides, each argued
+#      there and in docs/deploy.md, section "lintian").
 #   2. amd64: a clean Debian 12 root (mmdebstrap, Debian's packages only: the .deb's Depends
 #      and the Essential set; cached as a tarball under ~/.cache/mppid, keyed by the Depends,
 #      so a re-run needs no network), the package installed into it with dpkg, and there,
@@ -9,7 +12,9 @@
 #      from its unit turning a published depth frame of a wall into a local map, and the
 #      missions hover (a PX4 on UDP) and circle_3ms (an ArduPilot on UDP) flown against the
 #      stand-in autopilot (sim/mavlink_vehicle, copied in as the test's fixture), the link
-#      profile installed as the operator would: test/deploy/package_flight.py.
+#      profile installed as the operator would: test/deploy/package_flight.py. Around them: the
+#      postinst's byte code present after the install, and after `dpkg --purge` nothing of the
+#      package left (its byte code, the enabled units' links).
 #   3. arm64: the package unpacked beside the arm64 libraries of this machine (multiarch) and
 #      its programs started under qemu-user (Cortex-A76): `mppid --self-test` with the
 #      installed /etc/mppid, mppid-mapper with the installed /etc/mppid/mapper.yaml (its window
@@ -46,7 +51,7 @@ while (($#)); do
     --ardupilot-bin) ardupilot_bin="$(realpath "$2")"; arm64=0; shift ;;
     --keep) keep="$2"; shift ;;
     --) shift; flight_args=("$@"); break ;;
-    -h|--help) sed -n '2,33s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,38s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "package-test.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -64,6 +69,18 @@ fi
 deb_amd64="$(ls -t "$OUT"/mppid_*_amd64.deb | head -1)"
 deb_arm64=""
 if ((arm64)); then deb_arm64="$(ls -t "$OUT"/mppid_*_arm64.deb | head -1)"; fi
+t1=$(date +%s)
+
+# ---- lintian on both packages --------------------------------------------------------------
+debs=("$deb_amd64")
+[[ -n "$deb_arm64" ]] && debs+=("$deb_arm64")
+for deb in "${debs[@]}"; do
+  log "lintian $(basename "$deb")"
+  # (not --show-overrides: with it, lintian 2.116 fails on the overridden warnings too)
+  lintian --fail-on error,warning --display-level '>=warning' "$deb" ||
+    { log "FAILED: lintian on $(basename "$deb") (docs/deploy.md, section lintian)"; exit 1; }
+done
+t_lintian=$(($(date +%s) - t1))
 t1=$(date +%s)
 
 # ---- amd64: a clean Debian 12 root --------------------------------------------------------
@@ -89,6 +106,9 @@ tar -C "$R" -xf "$tarball"
 cp "$deb_amd64" "$R/tmp/"
 log "dpkg -i $(basename "$deb_amd64") in the clean root"
 chroot "$R" dpkg -i "/tmp/$(basename "$deb_amd64")"
+# The .deb carries no byte code; its postinst compiles (py3compile, as Debian's Python packages).
+[[ -n "$(find "$R/usr/lib/mppid/python/pymavlink" -name '*.pyc' -print -quit)" ]] ||
+  { log "FAILED: the postinst did not byte-compile /usr/lib/mppid/python"; exit 1; }
 for bin in mppid mppid-mapper; do
   if chroot "$R" ldd "/usr/bin/$bin" | grep 'not found'; then
     log "FAILED: $bin's libraries are not all in the package's Depends"; exit 1
@@ -119,11 +139,17 @@ if [[ -n "$keep" ]]; then mkdir -p "$keep" && cp -r "$R/tmp/package-flight/." "$
 if ((status)); then
   for f in "$R"/tmp/package-flight/*.log; do [[ -f "$f" ]] && { echo "--- $f"; tail -n 30 "$f"; }; done
 fi
+# Purge after the flights: the prerm removes the byte code (else /usr/lib/mppid would stay) and
+# the postrm the links of the units the flights enabled (`systemctl enable mppid.target`).
+log "dpkg --purge mppid in the root"
+chroot "$R" dpkg --purge mppid || { log "FAILED: dpkg --purge mppid"; status=1; }
+left="$(cd "$R" && { find etc/systemd/system -name 'mppid*'; [[ ! -e usr/lib/mppid ]] || find usr/lib/mppid | head -3; } | paste -sd' ' -)"
+[[ -z "$left" ]] || { log "FAILED: left after dpkg --purge: $left"; status=1; }
 t3=$(date +%s)
 
 # ---- arm64: the programs under qemu-user beside this machine's arm64 libraries -------------
 if ((!arm64)); then
-  log "times: package $((t1 - t0)) s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s (no arm64)"
+  log "times: package $((t1 - t0 - t_lintian)) s, lintian $t_lintian s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s (no arm64)"
   exit "$status"
 fi
 A="$WORK/arm64"
@@ -153,6 +179,6 @@ t4=$(date +%s)
 
 log "packages: $(for d in "$deb_amd64" "$deb_arm64"; do printf '%s %s KiB (installed %s KiB); ' \
   "$(basename "$d")" "$(du -k "$d" | cut -f1)" "$(dpkg-deb -f "$d" Installed-Size)"; done)"
-log "times: package $((t1 - t0)) s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s, arm64 $((t4 - t3)) s; total $((t4 - t0)) s"
+log "times: package $((t1 - t0 - t_lintian)) s, lintian $t_lintian s, root and install $((t2 - t1)) s, flights $((t3 - t2)) s, arm64 $((t4 - t3)) s; total $((t4 - t0)) s"
 if ((status == 0)); then log "all passed"; else log "FAILED" >&2; fi
 exit "$status"

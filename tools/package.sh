@@ -3,8 +3,9 @@
 # cmake/Packaging.cmake; docs/deploy.md): mppid_<version>_amd64.deb from build/ and
 # mppid_<version>_arm64.deb from the aarch64 cross build, build-aarch64/ (preset `aarch64`,
 # configured here when missing; tools/setup.sh --aarch64 installs what it needs). Only the
-# installed targets are built; the PyPI wheels the package carries are downloaded once into
-# ~/.cache/mppid/wheels (MPPID_WHEEL_CACHE).
+# installed targets are built, and the programs' manual pages (help2man, the target mppid-man);
+# the PyPI wheels the package carries are downloaded once into ~/.cache/mppid/wheels
+# (MPPID_WHEEL_CACHE). tools/package-test.sh runs lintian on what this makes.
 #
 #   tools/package.sh [amd64] [arm64]      (both when none is named)
 #
@@ -16,7 +17,8 @@ ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 OUT="${MPPID_PACKAGE_DIR:-build/packages}"
 jobs="${MPPID_JOBS:-2}"
-TARGETS=(mppid mppid-mapper mppi_lcm_python)
+TARGETS=(mppid mppid-mapper mppi_lcm_python mppid-man)
+umask 022  # the package's directories and files 0755/0644 whatever the caller's umask
 log() { printf "[package] %s\n" "$*" >&2; }
 
 arches=("$@")
@@ -24,10 +26,11 @@ arches=("$@")
 for a in "${arches[@]}"; do
   case "$a" in
     amd64|arm64) ;;
-    -h|--help) sed -n '2,14s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    -h|--help) sed -n '2,15s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "package.sh: unknown architecture '$a' (amd64, arm64)" >&2; exit 2 ;;
   esac
 done
+command -v help2man >/dev/null || { echo "package.sh: help2man is missing (tools/setup.sh installs it)" >&2; exit 1; }
 if command -v ccache >/dev/null; then
   export CCACHE_BASEDIR="$ROOT" CCACHE_NOHASHDIR=true  # another clone of the same tree hits
 fi

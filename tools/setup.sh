@@ -81,6 +81,8 @@ APT_PACKAGES=(
   stress-ng
   # the package stage (tools/package-test.sh): a clean Debian 12 root to install the .deb into
   mmdebstrap
+  # the package's manual pages (help2man from --help) and Debian's check of the .debs (lintian)
+  help2man lintian
   # the live 3D view's test (tools/view, docs/view.md): a real headless browser loads rerun's
   # web viewer (WebGL through SwiftShader, no GPU) and takes a screenshot
   chromium

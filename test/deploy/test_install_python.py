@@ -1,11 +1,14 @@
 """cmake/install_python.py, the package's Python directory: a package folder with a
 pyproject.toml goes through pip (--no-deps --no-build-isolation), one without is copied as a
-PYTHONPATH root, console scripts stay out, everything is byte-compiled for where it will lie,
-and the wheels lose what the board never runs. No network: no wheels are fetched here (the
-package stage fetches and flies them)."""
+PYTHONPATH root, console scripts stay out, an install in place (--compile) is byte-compiled for
+where it will lie and a staged one (the package) carries no byte code, ELF files are stripped and
+modes are Debian's, and the wheels lose what the board never runs. No network: no wheels are
+fetched here (the package stage fetches and flies them)."""
 from __future__ import annotations
 
 import importlib.util
+import shutil
+import stat
 import subprocess
 import sys
 import zipfile
@@ -50,7 +53,8 @@ def test_pyproject_through_pip_plain_roots_copied_and_compiled_for_the_board(tmp
     dest = tmp_path / "stage" / "usr" / "lib" / "mppid" / "python"
     r = subprocess.run([sys.executable, str(SCRIPT), "--dest", str(dest), "--final-dir", "/usr/lib/mppid/python",
                         "--arch", "x86_64", "--python-version", PYVER, "--wheel-cache", str(tmp_path / "cache"),
-                        "--wheels", "", "--packages", f"{proj};{plain}"], capture_output=True, text=True, timeout=300)
+                        "--wheels", "", "--packages", f"{proj};{plain}", "--compile"],
+                       capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (dest / "toypkg" / "__init__.py").is_file()
     assert any(dest.glob("toypkg-0.1.dist-info"))
@@ -91,3 +95,48 @@ def test_wheels_lose_what_the_board_never_runs(tmp_path):
     have = sorted(str(p.relative_to(dest)) for p in dest.rglob("*") if p.is_file())
     assert have == sorted(kept)
     assert (dest / "bin" / "lcm-logger").stat().st_mode & 0o111, "programs stay executable"
+
+
+def test_a_staged_install_carries_no_byte_code(tmp_path):
+    _, plain = make_project(tmp_path)
+    (plain / "plainpkg" / "__pycache__").mkdir()
+    (plain / "plainpkg" / "__pycache__" / "__init__.cpython-311.pyc").write_bytes(b"stale")
+    dest = tmp_path / "stage"
+    r = subprocess.run([sys.executable, str(SCRIPT), "--dest", str(dest), "--arch", "x86_64",
+                        "--python-version", PYVER, "--wheel-cache", str(tmp_path / "c"), "--packages", str(plain)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert (dest / "plainpkg" / "__init__.py").is_file()
+    assert not list(dest.rglob("__pycache__")) and not list(dest.rglob("*.pyc")), "the postinst compiles, not the build"
+
+
+def elf_sections(path: Path) -> str:
+    return subprocess.run(["readelf", "-S", "-W", str(path)], capture_output=True, text=True, check=True).stdout
+
+
+def test_elf_files_stripped_and_modes_debians(tmp_path):
+    cc = shutil.which("cc") or shutil.which("gcc")
+    assert cc and shutil.which("strip") and shutil.which("readelf"), "build-essential (tools/setup.sh)"
+    src = tmp_path / "x.c"
+    src.write_text("int f(int x) { return x + 1; }\nint main(void) { return f(-1); }\n")
+    dest = tmp_path / "d"
+    (dest / "bin").mkdir(parents=True)
+    (dest / "pkg").mkdir()
+    subprocess.run([cc, "-g", "-o", str(dest / "bin" / "prog"), str(src)], check=True)
+    subprocess.run([cc, "-g", "-shared", "-fPIC", "-o", str(dest / "pkg" / "_ext.so"), str(src)], check=True)
+    (dest / "pkg" / "mod.py").write_text("")
+    (dest / "pkg" / "mod.py").chmod(0o664)
+    (dest / "pkg" / "run.py").write_text("#!/usr/bin/python3\n")
+    (dest / "pkg" / "run.py").chmod(0o775)
+    (dest / "pkg").chmod(0o775)
+    (dest / "bin" / "prog").chmod(0o775)
+    for f in ("bin/prog", "pkg/_ext.so"):
+        assert ".debug_info" in elf_sections(dest / f) and ".symtab" in elf_sections(dest / f)
+    install_python.strip_and_set_modes(dest, "strip")
+    for f in ("bin/prog", "pkg/_ext.so"):
+        sections = elf_sections(dest / f)
+        assert ".debug_info" not in sections and ".symtab" not in sections and ".comment" not in sections, f
+    mode = {str(p.relative_to(dest)): stat.S_IMODE(p.stat().st_mode) for p in [dest / "bin", dest / "pkg", *dest.rglob("*")]}
+    assert mode == {"bin": 0o755, "pkg": 0o755, "bin/prog": 0o755, "pkg/_ext.so": 0o644,
+                    "pkg/mod.py": 0o644, "pkg/run.py": 0o644}
+    assert subprocess.run([str(dest / "bin" / "prog")]).returncode == 0, "a stripped program still runs"
