@@ -102,6 +102,15 @@ void parse_sensor(const Context& c, const YAML::Node& n, const std::string& w, b
   }
 }
 
+// The sensors' common bounds: ranges within 1000 m, a rate up to max_rate_hz.
+void check_range_and_rate(const Context& c, const std::string& w, double min_range, double max_range,
+                          double rate_hz, int max_rate_hz) {
+  if (!(min_range >= 0.0 && max_range > min_range && max_range <= 1000.0))
+    c.fail(w, "needs 0 <= min_range < max_range <= 1000");
+  if (!(rate_hz > 0.0 && rate_hz <= max_rate_hz))
+    c.fail(w + ".rate_hz", "must be in (0, " + std::to_string(max_rate_hz) + "]");
+}
+
 void parse_depth_camera(const Context& c, const YAML::Node& n, DepthCameraSpec& d) {
   const std::string w = "sensing.depth_camera";
   parse_sensor(c, n, w, d.enabled,
@@ -113,9 +122,7 @@ void parse_depth_camera(const Context& c, const YAML::Node& n, DepthCameraSpec& 
   if (!(d.hfov_deg > 0.0 && d.hfov_deg < 170.0 && d.vfov_deg > 0.0 && d.vfov_deg < 170.0))
     c.fail(w, "hfov_deg and vfov_deg must be in (0, 170)");
   if (d.width < 1 || d.height < 1 || d.width * d.height > 1 << 20) c.fail(w, "width x height must be 1..1048576");
-  if (!(d.min_range >= 0.0 && d.max_range > d.min_range && d.max_range <= 1000.0))
-    c.fail(w, "needs 0 <= min_range < max_range <= 1000");
-  if (!(d.rate_hz > 0.0 && d.rate_hz <= 500.0)) c.fail(w + ".rate_hz", "must be in (0, 500]");
+  check_range_and_rate(c, w, d.min_range, d.max_range, d.rate_hz, 500);
   if (!(d.noise >= 0.0 && d.dropout >= 0.0 && d.dropout < 1.0 && d.latency >= 0.0 && d.latency < 10.0))
     c.fail(w, "noise >= 0, dropout in [0, 1), latency in [0, 10) s");
 }
@@ -132,9 +139,7 @@ void parse_lidar(const Context& c, const YAML::Node& n, LidarSpec& l) {
     c.fail(w, "beams must be 1..256, azimuth_steps 1..8192");
   if (!(l.min_elevation_deg >= -90.0 && l.max_elevation_deg <= 90.0 && l.min_elevation_deg <= l.max_elevation_deg))
     c.fail(w, "elevations must be ordered, within +-90 deg");
-  if (!(l.min_range >= 0.0 && l.max_range > l.min_range && l.max_range <= 1000.0))
-    c.fail(w, "needs 0 <= min_range < max_range <= 1000");
-  if (!(l.rate_hz > 0.0 && l.rate_hz <= 100.0)) c.fail(w + ".rate_hz", "must be in (0, 100]");
+  check_range_and_rate(c, w, l.min_range, l.max_range, l.rate_hz, 100);
   if (!(l.noise >= 0.0 && l.latency >= 0.0 && l.latency < 10.0)) c.fail(w, "noise >= 0, latency in [0, 10) s");
 }
 
@@ -180,6 +185,30 @@ SensingSpec load_sensing(const std::string& path) {
 }
 
 namespace {
+// plant.params: model parameters by name, numbers.
+void parse_plant_params(const Context& c, const YAML::Node& params, Scenario& s) {
+  if (!params) return;
+  if (!params.IsMap()) c.fail("plant.params", "expected a mapping");
+  for (const auto& kv : params) {
+    const auto key = key_name(c, kv.first, "plant.params");
+    try {
+      s.params[key] = kv.second.as<double>();
+    } catch (const YAML::Exception&) {
+      c.fail("plant.params." + key, "expected a number");
+    }
+  }
+}
+
+// A model the simulator has, and a team only of quadrotors.
+void check_plant_model(const Context& c, const Scenario& s) {
+  if (s.model != "quadrotor" && s.model != "quadrotor_rate" && s.model != "quadrotor_rate_body" &&
+      s.model != "cartpole" && s.model != "racecar")
+    c.fail("plant.model", "unknown model '" + s.model + "'");
+  if (s.vehicles < 1 || s.vehicles > 32) c.fail("plant.vehicles", "must be 1..32");
+  if ((s.model == "cartpole" || s.model == "racecar") && s.vehicles != 1)
+    c.fail("plant.vehicles", "teams are quadrotors only");
+}
+
 void parse_plant(const Context& c, const YAML::Node& plant, Scenario& s) {
   if (!plant) c.fail("plant", "required");
   check_keys(c, plant, "plant",
@@ -195,23 +224,8 @@ void parse_plant(const Context& c, const YAML::Node& plant, Scenario& s) {
   if (!(s.rate_gain > 0.0)) c.fail("plant.rate_gain", "must be > 0");
   read(c, plant, "plant", "thrust_gain", s.thrust_gain);
   if (!(s.thrust_gain > 0.0 && s.thrust_gain <= 10.0)) c.fail("plant.thrust_gain", "must be in (0, 10]");
-  if (plant["params"]) {
-    if (!plant["params"].IsMap()) c.fail("plant.params", "expected a mapping");
-    for (const auto& kv : plant["params"]) {
-      const auto key = key_name(c, kv.first, "plant.params");
-      try {
-        s.params[key] = kv.second.as<double>();
-      } catch (const YAML::Exception&) {
-        c.fail("plant.params." + key, "expected a number");
-      }
-    }
-  }
-  if (s.model != "quadrotor" && s.model != "quadrotor_rate" && s.model != "quadrotor_rate_body" &&
-      s.model != "cartpole" && s.model != "racecar")
-    c.fail("plant.model", "unknown model '" + s.model + "'");
-  if (s.vehicles < 1 || s.vehicles > 32) c.fail("plant.vehicles", "must be 1..32");
-  if ((s.model == "cartpole" || s.model == "racecar") && s.vehicles != 1)
-    c.fail("plant.vehicles", "teams are quadrotors only");
+  parse_plant_params(c, plant["params"], s);
+  check_plant_model(c, s);
 }
 
 void parse_timing(const Context& c, const YAML::Node& timing, Scenario& s) {
@@ -384,51 +398,62 @@ Scenario parse_scenario(const Context& c, const YAML::Node& root, std::uint64_t 
 }
 }  // namespace
 
+namespace {
+
+// A circle of radius r at (x, y) leaves each vehicle's start and goal forest.clear_radius free.
+bool clear_of_ends(const Scenario& s, double x, double y, double r) {
+  for (int v = 0; v < s.vehicles; ++v) {
+    for (const Vec3& p : {s.start_of(v), s.goal_of(v)}) {
+      if (std::hypot(x - p[0], y - p[1]) < s.forest.clear_radius + r) return false;
+    }
+  }
+  return true;
+}
+
+// Jittered hexagonal lattice: neighbours are `spacing` apart before the jitter, so the mean
+// spacing is the scenario's; a seed fixes the jitter, i.e. names the forest.
+void plant_forest(Scenario& s) {
+  Rng rng(s.seed, 1);
+  const double sp = s.forest.spacing;
+  const double row = sp * std::sqrt(3.0) / 2.0;
+  const auto& f = s.forest;
+  int j = 0;
+  for (double y = f.y_min; y <= f.y_max + 1e-9; y += row, ++j) {
+    const double x0 = f.x_min + ((j % 2) != 0 ? 0.5 * sp : 0.0);
+    for (double x = x0; x <= f.x_max + 1e-9; x += sp) {
+      const double px = x + rng.uniform(-0.5, 0.5) * f.jitter * sp;
+      const double py = y + rng.uniform(-0.5, 0.5) * f.jitter * sp;
+      const double r = f.radius + rng.uniform(-1.0, 1.0) * f.radius_jitter;
+      if (r <= 0.05 || !clear_of_ends(s, px, py, r)) continue;
+      bool overlaps = false;
+      for (const auto& o : s.obstacles) overlaps = overlaps || std::hypot(px - o.x, py - o.y) < o.radius + r + 0.5;
+      if (!overlaps) s.obstacles.push_back({px, py, r, 0.0, 0.0, f.height});
+    }
+  }
+}
+
+// moving.count obstacles anywhere in the forest's area, each heading its own way.
+void add_moving_obstacles(Scenario& s) {
+  Rng rng(s.seed, 2);
+  const double x_lo = s.forest.x_min, x_hi = s.forest.x_max;
+  const double y_lo = s.forest.y_min, y_hi = s.forest.y_max;
+  for (int i = 0; i < s.moving.count; ++i) {
+    for (int attempt = 0; attempt < 1000; ++attempt) {
+      const double px = rng.uniform(x_lo, x_hi), py = rng.uniform(y_lo, y_hi);
+      const double a = rng.uniform(0.0, 6.283185307179586);
+      if (!clear_of_ends(s, px, py, s.moving.radius)) continue;
+      s.obstacles.push_back({px, py, s.moving.radius, s.moving.speed * std::cos(a), s.moving.speed * std::sin(a)});
+      break;
+    }
+  }
+}
+
+}  // namespace
+
 void generate_obstacles(Scenario& s) {
   s.obstacles = s.fixed_obstacles;
-  const auto clear_of_ends = [&s](double x, double y, double r) {
-    for (int v = 0; v < s.vehicles; ++v) {
-      for (const Vec3& p : {s.start_of(v), s.goal_of(v)}) {
-        if (std::hypot(x - p[0], y - p[1]) < s.forest.clear_radius + r) return false;
-      }
-    }
-    return true;
-  };
-  if (s.forest.enabled) {
-    // Jittered hexagonal lattice: neighbours are `spacing` apart before the jitter, so the
-    // mean spacing is the scenario's; a seed fixes the jitter, i.e. names the forest.
-    Rng rng(s.seed, 1);
-    const double sp = s.forest.spacing;
-    const double row = sp * std::sqrt(3.0) / 2.0;
-    const auto& f = s.forest;
-    int j = 0;
-    for (double y = f.y_min; y <= f.y_max + 1e-9; y += row, ++j) {
-      const double x0 = f.x_min + ((j % 2) != 0 ? 0.5 * sp : 0.0);
-      for (double x = x0; x <= f.x_max + 1e-9; x += sp) {
-        const double px = x + rng.uniform(-0.5, 0.5) * f.jitter * sp;
-        const double py = y + rng.uniform(-0.5, 0.5) * f.jitter * sp;
-        const double r = f.radius + rng.uniform(-1.0, 1.0) * f.radius_jitter;
-        if (r <= 0.05 || !clear_of_ends(px, py, r)) continue;
-        bool overlaps = false;
-        for (const auto& o : s.obstacles) overlaps = overlaps || std::hypot(px - o.x, py - o.y) < o.radius + r + 0.5;
-        if (!overlaps) s.obstacles.push_back({px, py, r, 0.0, 0.0, f.height});
-      }
-    }
-  }
-  if (s.moving.count > 0) {
-    Rng rng(s.seed, 2);
-    const double x_lo = s.forest.x_min, x_hi = s.forest.x_max;
-    const double y_lo = s.forest.y_min, y_hi = s.forest.y_max;
-    for (int i = 0; i < s.moving.count; ++i) {
-      for (int attempt = 0; attempt < 1000; ++attempt) {
-        const double px = rng.uniform(x_lo, x_hi), py = rng.uniform(y_lo, y_hi);
-        const double a = rng.uniform(0.0, 6.283185307179586);
-        if (!clear_of_ends(px, py, s.moving.radius)) continue;
-        s.obstacles.push_back({px, py, s.moving.radius, s.moving.speed * std::cos(a), s.moving.speed * std::sin(a)});
-        break;
-      }
-    }
-  }
+  if (s.forest.enabled) plant_forest(s);
+  if (s.moving.count > 0) add_moving_obstacles(s);
 }
 
 }  // namespace sim

@@ -23,6 +23,23 @@ std::int64_t system_wall_us() {
       .count();
 }
 
+// The truth's bytes decoded, when their length is the one their own count n gives.
+bool decode_truth(const void* data, std::size_t size, mppi_lcm::vehicle_state_t* m) {
+  std::int32_t n = -1;
+  if (size >= kStateHeader) {
+    const auto* b = static_cast<const std::uint8_t*>(data) + kStateHeader - 4;
+    n = static_cast<std::int32_t>((std::uint32_t{b[0]} << 24) | (std::uint32_t{b[1]} << 16) |
+                                  (std::uint32_t{b[2]} << 8) | std::uint32_t{b[3]});
+  }
+  return n >= 0 && size == kStateHeader + 4 * static_cast<std::size_t>(n) && m->decode(data, 0, static_cast<int>(size)) >= 0;
+}
+
+// The rate quadrotor's states (one or more vehicles).
+bool rate_quadrotor_layout(const mppi_lcm::vehicle_state_t& m) {
+  return m.model == mppi_lcm::vehicle_state_t::MODEL_QUADROTOR_RATE && m.nx == kRateNx && m.vehicle_count >= 1 &&
+         m.n == m.nx * m.vehicle_count;
+}
+
 }  // namespace
 
 SensorNode::SensorNode(const Scenario& s, const SensorNodeSettings& settings, lcm::LCM* in, lcm::LCM* out,
@@ -62,20 +79,12 @@ void SensorNode::on_world(const mppi_lcm::obstacles_t& m) {
 
 bool SensorNode::check_truth(const void* data, std::size_t size, std::int64_t now_us, Pose* pose,
                              std::int64_t* sample_us) {
-  std::int32_t n = -1;
-  if (size >= kStateHeader) {
-    const auto* b = static_cast<const std::uint8_t*>(data) + kStateHeader - 4;
-    n = static_cast<std::int32_t>((std::uint32_t{b[0]} << 24) | (std::uint32_t{b[1]} << 16) |
-                                  (std::uint32_t{b[2]} << 8) | std::uint32_t{b[3]});
-  }
   mppi_lcm::vehicle_state_t m;
-  if (n < 0 || size != kStateHeader + 4 * static_cast<std::size_t>(n) ||
-      m.decode(data, 0, static_cast<int>(size)) < 0) {
+  if (!decode_truth(data, size, &m)) {
     ++n_.undecodable;
     return false;
   }
-  if (m.model != mppi_lcm::vehicle_state_t::MODEL_QUADROTOR_RATE || m.nx != kRateNx || m.vehicle_count < 1 ||
-      m.n != m.nx * m.vehicle_count) {
+  if (!rate_quadrotor_layout(m)) {
     ++n_.layout;
     return false;
   }

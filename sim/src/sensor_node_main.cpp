@@ -1,33 +1,18 @@
 // mppid-sensors: the simulator's sensors for a vehicle flown by an autopilot's SITL (sim/sensor_node.hpp).
-//   mppid-sensors --sensing FILE [--seed S] --lcm-url URL [--sensor-lcm-url URL] [--stats FILE] [--set k=v]
-#include <csignal>
+//   mppid-sensors --sensing FILE [--seed S] --lcm-url URL [--sensor-lcm-url URL] [--stats FILE]
 #include <cstdio>
-#include <cstdlib>
-#include <exception>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
+#include "mppi/cli/program.hpp"
 #include "sim/scenario.hpp"
 #include "sim/sensor_node.hpp"
 
 namespace {
 
-volatile std::sig_atomic_t g_stop = 0;
-void on_signal(int) { g_stop = 1; }
-
-int usage(const char* why) {
-  if (why != nullptr) std::fprintf(stderr, "mppid-sensors: %s\n", why);
-  std::fprintf(stderr,
-               "usage: mppid-sensors --sensing FILE [--seed S] [--lcm-url URL] [--sensor-lcm-url URL]\n"
-               "                     [--tree-height M] [--max-truth-age S] [--stats FILE]\n"
-               "  --sensing FILE       a YAML file whose sensing: block names the sensors (a mission's)\n"
-               "  --lcm-url URL        the world (obstacles_t on MPPI_WORLD) comes on this bus\n"
-               "  --sensor-lcm-url URL the truth (vehicle_state_t on SIM_TRUTH) comes and the frames\n"
-               "                       (point_cloud_t on MPPI_DEPTH, MPPI_LIDAR) go on this one (default: --lcm-url)\n"
-               "  --stats FILE         on exit: the truths taken and refused, the frames, their cost (JSON)\n");
-  return 2;
-}
+constexpr const char* kName = "mppid-sensors";
 
 struct Args {
   std::string sensing, lcm_url, sensor_url, stats;
@@ -35,66 +20,62 @@ struct Args {
   sim::SensorNodeSettings settings;
 };
 
-// 0: parsed; else the exit status.
-int parse(int argc, char** argv, Args* a) {
-  for (int i = 1; i < argc; ++i) {
-    const std::string k = argv[i];
-    if (k == "-h" || k == "--help") return usage(nullptr), 3;
-    if (i + 1 >= argc) return usage((k + " needs a value").c_str());
-    const std::string v = argv[++i];
-    char* end = nullptr;
-    if (k == "--sensing") {
-      a->sensing = v;
-    } else if (k == "--seed") {
-      a->seed = std::strtoull(v.c_str(), &end, 10);
-      if (*end != '\0') return usage("--seed needs a number");
-    } else if (k == "--lcm-url") {
-      a->lcm_url = v;
-    } else if (k == "--sensor-lcm-url") {
-      a->sensor_url = v;
-    } else if (k == "--stats") {
-      a->stats = v;
-    } else if (k == "--tree-height" || k == "--max-truth-age") {
-      const double d = std::strtod(v.c_str(), &end);
-      if (*end != '\0' || !(d > 0.0 && d < 1000.0)) return usage((k + " needs a positive number").c_str());
-      (k == "--tree-height" ? a->settings.tree_height : a->settings.max_truth_age) = d;
-    } else {
-      return usage(("unknown argument " + k).c_str());
-    }
-  }
-  return a->sensing.empty() ? usage("--sensing is required") : 0;
+void add_options(CLI::App& app, Args* a) {
+  app.add_option("--sensing", a->sensing, "A YAML file whose sensing: block names the sensors (a mission's)")
+      ->required();
+  app.add_option("--seed", a->seed, "Seed of the sensors' noise")->capture_default_str();
+  app.add_option("--lcm-url", a->lcm_url, "The world (obstacles_t on MPPI_WORLD) comes on this bus");
+  app.add_option("--sensor-lcm-url", a->sensor_url,
+                 "The truth (vehicle_state_t on SIM_TRUTH) comes and the frames (point_cloud_t on MPPI_DEPTH, "
+                 "MPPI_LIDAR) go on this one (default: --lcm-url)");
+  app.add_option("--tree-height", a->settings.tree_height, "Height of the world's trees, m")
+      ->check(mppi::cli::in_open(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--max-truth-age", a->settings.max_truth_age, "A truth older than this behind the wall clock is stale, s")
+      ->check(mppi::cli::in_open(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--stats", a->stats, "On exit: the truths taken and refused, the frames, their cost (JSON)");
+}
+
+// The mission's sensors, as the simulator would carry them.
+sim::Scenario sensing_scenario(const Args& a) {
+  sim::Scenario s;
+  s.seed = a.seed;
+  s.ground_z = 0.0;
+  s.sensing = sim::load_sensing(a.sensing);
+  if (!s.sensing.depth_camera.enabled && !s.sensing.lidar.enabled)
+    throw std::runtime_error(a.sensing + ": sensing: names no sensor (depth_camera, lidar)");
+  return s;
+}
+
+void write_stats(const sim::SensorNode& node, const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) throw std::runtime_error("cannot write " + path);
+  node.write_stats(f);
+  std::fclose(f);
+}
+
+int run(const Args& a, const volatile std::sig_atomic_t* stop) {
+  const sim::Scenario s = sensing_scenario(a);
+  lcm::LCM in(a.lcm_url);
+  std::unique_ptr<lcm::LCM> sensors = a.sensor_url.empty() ? nullptr : std::make_unique<lcm::LCM>(a.sensor_url);
+  if (!in.good() || (sensors && !sensors->good())) throw std::runtime_error("LCM init failed");
+  sim::SensorNode node(s, a.settings, &in, sensors ? sensors.get() : &in, nullptr);
+  std::printf("{\"event\": \"ready\"}\n");
+  std::fflush(stdout);
+  node.run(stop);
+  if (!a.stats.empty()) write_stats(node, a.stats);
+  return 0;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   Args a;
-  if (const int rc = parse(argc, argv, &a); rc != 0) return rc == 3 ? 0 : rc;
-  std::signal(SIGINT, on_signal);
-  std::signal(SIGTERM, on_signal);
-  try {
-    sim::Scenario s;
-    s.seed = a.seed;
-    s.ground_z = 0.0;
-    s.sensing = sim::load_sensing(a.sensing);
-    if (!s.sensing.depth_camera.enabled && !s.sensing.lidar.enabled)
-      throw std::runtime_error(a.sensing + ": sensing: names no sensor (depth_camera, lidar)");
-    lcm::LCM in(a.lcm_url);
-    std::unique_ptr<lcm::LCM> sensors = a.sensor_url.empty() ? nullptr : std::make_unique<lcm::LCM>(a.sensor_url);
-    if (!in.good() || (sensors && !sensors->good())) throw std::runtime_error("LCM init failed");
-    sim::SensorNode node(s, a.settings, &in, sensors ? sensors.get() : &in, nullptr);
-    std::printf("{\"event\": \"ready\"}\n");
-    std::fflush(stdout);
-    node.run(&g_stop);
-    if (!a.stats.empty()) {
-      std::FILE* f = std::fopen(a.stats.c_str(), "w");
-      if (f == nullptr) throw std::runtime_error("cannot write " + a.stats);
-      node.write_stats(f);
-      std::fclose(f);
-    }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "mppid-sensors: %s\n", e.what());
-    return 1;
-  }
-  return 0;
+  CLI::App app{"mppid-sensors: the simulator's depth camera and LiDAR for a vehicle an autopilot's SITL flies",
+               kName};
+  add_options(app, &a);
+  if (const std::optional<int> rc = mppi::cli::parse(app, argc, argv)) return *rc;
+  const volatile std::sig_atomic_t* stop = mppi::cli::stop_on_signals();
+  return mppi::cli::run_reporting(kName, [&] { return run(a, stop); });
 }

@@ -23,6 +23,13 @@ bool inside_circle(const double* o, const double* d, double t, const Obstacle& c
   return x * x + y * y <= c.radius * c.radius;
 }
 
+// Where a ray from over the cylinder comes down through its top cap (at height `top`), or kInf.
+double ray_cap(const double* o, const double* d, const Obstacle& c, double top, double max_t) {
+  if (d[2] >= 0.0) return kInf;
+  const double t = (top - o[2]) / d[2];
+  return (t <= max_t && inside_circle(o, d, t, c)) ? t : kInf;
+}
+
 }  // namespace
 
 double ray_ground(const double* o, const double* d, double ground_z, double max_t) {
@@ -39,11 +46,7 @@ double ray_cylinder(const double* o, const double* d, const Obstacle& c, double 
   if (cc <= 0.0) {
     // Above (or in) the trunk's circle: inside it, or over its top looking down at the cap.
     if (o[2] >= ground_z && o[2] <= top) return 0.0;
-    if (o[2] > top && d[2] < 0.0) {
-      const double t = (top - o[2]) / d[2];
-      return (t <= max_t && inside_circle(o, d, t, c)) ? t : kInf;
-    }
-    return kInf;
+    return o[2] > top ? ray_cap(o, d, c, top, max_t) : kInf;
   }
   const double a = d[0] * d[0] + d[1] * d[1];
   if (a < 1e-12) return kInf;  // vertical, outside the circle
@@ -55,11 +58,7 @@ double ray_cylinder(const double* o, const double* d, const Obstacle& c, double 
   const double z0 = o[2] + t0 * d[2];
   if (z0 >= ground_z && z0 <= top) return t0;
   // Over the top where it meets the side: it may still come down through the cap.
-  if (z0 > top && d[2] < 0.0) {
-    const double t = (top - o[2]) / d[2];
-    return (t <= max_t && inside_circle(o, d, t, c)) ? t : kInf;
-  }
-  return kInf;
+  return z0 > top ? ray_cap(o, d, c, top, max_t) : kInf;
 }
 
 RayWorld::RayWorld(const std::vector<Obstacle>* obstacles, double ground_z)

@@ -10,6 +10,7 @@
 #include <sys/select.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cerrno>
 #include <chrono>
@@ -18,6 +19,7 @@
 #include <deque>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -96,6 +98,7 @@ class Simulation {
     lcm_.subscribe(o.channels.command, &Simulation::on_command, this);
     nu_total_ = plant_->nu() * plant_->vehicles();
     u_applied_ = plant_->hover();
+    positions_.resize(static_cast<std::size_t>(plant_->vehicles()));
     obstacles_ = s.obstacles;
     for (const auto& ob : obstacles_) any_moving_ = any_moving_ || ob.vx != 0.0 || ob.vy != 0.0;
     arena_[0] = s.forest.x_min;
@@ -107,6 +110,19 @@ class Simulation {
   int run();
 
  private:
+  struct Cadence {
+    double h;                                 // physics step, s
+    std::int64_t per_state, per_world, total;  // physics steps per state, per world; in all
+    double gust_a, gust_b;                    // the gust's decay and drive per step
+  };
+  Cadence cadence() const;
+  std::optional<Outcome> step_once(std::int64_t step, const Cadence& c);
+  std::optional<Outcome> exchange_state(std::int64_t step, const Cadence& c);
+  void follow_wall_clock();
+  void apply_due_commands(double h);
+  std::optional<Outcome> judge(std::int64_t step, std::int64_t total);
+  void advance(std::int64_t step, const Cadence& c);
+  int finish(Outcome outcome);
   void on_command(const lcm::ReceiveBuffer* rb, const std::string&);
   void publish_state(std::int64_t seq, double t, bool republish);
   void publish_world(double t);
@@ -115,6 +131,9 @@ class Simulation {
   int handle_within(std::int64_t us);
   void advance_obstacles(double h);
   void check_collisions(double t);
+  void check_flying_collisions(double t);
+  void check_obstacles(double t, int v, const std::array<double, 3>& p);
+  void collide(double t, int v, const char* with);
   void sense(double t);
   bool at_goal() const;
   void write_world();
@@ -141,6 +160,7 @@ class Simulation {
   mppi_lcm::command_t command_in_;  // decode scratch
   std::vector<float> published_state_;
   std::vector<Obstacle> obstacles_;
+  std::vector<std::array<double, 3>> positions_;  // the vehicles' (collision checks' scratch)
   bool any_moving_ = false;
   double arena_[4] = {0, 0, 0, 0};
   double wind_[3] = {0, 0, 0};
@@ -384,51 +404,61 @@ void Simulation::advance_obstacles(double h) {
   }
 }
 
+// Marks vehicle v as collided (with what) at t: it freezes where it is; once per vehicle.
+void Simulation::collide(double t, int v, const char* with) {
+  if ((plant_->frozen >> v) & 1u) return;
+  collisions_.push_back({t, v, with});
+  plant_->frozen |= 1u << v;
+  if (truth_) std::fprintf(truth_->get(), "{\"event\":\"collision\",\"t\":%.6f,\"vehicle\":%d,\"with\":\"%s\"}\n", t, v, with);
+}
+
 void Simulation::check_collisions(double t) {
-  const int m = plant_->vehicles();
-  const auto hit = [&](int v, const char* with) {
-    if ((plant_->frozen >> v) & 1u) return;
-    collisions_.push_back({t, v, with});
-    plant_->frozen |= 1u << v;
-    if (truth_) {
-      std::fprintf(truth_->get(), "{\"event\":\"collision\",\"t\":%.6f,\"vehicle\":%d,\"with\":\"%s\"}\n", t, v, with);
-    }
-  };
   clearance_now_ = std::numeric_limits<double>::infinity();
   if (plant_->flies()) {
-    std::vector<std::array<double, 3>> pos(static_cast<std::size_t>(m));
-    for (int v = 0; v < m; ++v) plant_->position(v, pos[static_cast<std::size_t>(v)].data());
-    for (int v = 0; v < m; ++v) {
-      const auto& p = pos[static_cast<std::size_t>(v)];
-      if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
-        hit(v, "diverged");
-        continue;
-      }
-      if (p[2] < s_.ground_z) hit(v, "ground");
-      for (const auto& ob : obstacles_) {
-        if (p[2] > s_.ground_z + ob.height + s_.vehicle_radius) continue;  // over its top
-        const double c = std::hypot(p[0] - ob.x, p[1] - ob.y) - ob.radius - s_.vehicle_radius;
-        clearance_now_ = std::min(clearance_now_, c);
-        if (c < 0.0) hit(v, "obstacle");
-      }
-      for (int w = v + 1; w < m; ++w) {
-        const auto& q = pos[static_cast<std::size_t>(w)];
-        const double d = std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) + (p[2] - q[2]) * (p[2] - q[2]));
-        min_separation_ = std::min(min_separation_, d);
-        if (d < 2.0 * s_.vehicle_radius) {
-          hit(v, "vehicle");
-          hit(w, "vehicle");
-        }
-      }
-    }
-    min_clearance_ = std::min(min_clearance_, clearance_now_);
+    check_flying_collisions(t);
   } else if (s_.model == "cartpole") {
     const double x = plant_->state()[0];
-    if (!std::isfinite(x) || (s_.track_limit > 0.0 && std::fabs(x) > s_.track_limit)) hit(0, "track_limit");
+    if (!std::isfinite(x) || (s_.track_limit > 0.0 && std::fabs(x) > s_.track_limit)) collide(t, 0, "track_limit");
   } else if (s_.model == "racecar") {
     const auto& x = plant_->state();
     const double d = std::pow(x[0] / 13.0, 2) + std::pow(x[1] / 6.0, 2) - 1.0;
-    if (!std::isfinite(d) || (s_.off_track > 0.0 && std::fabs(d) > s_.off_track)) hit(0, "off_track");
+    if (!std::isfinite(d) || (s_.off_track > 0.0 && std::fabs(d) > s_.off_track)) collide(t, 0, "off_track");
+  }
+}
+
+// Each flying vehicle against the ground, the obstacles (their clearance kept) and the
+// vehicles after it (their separation kept); a diverged state is a collision of its own.
+void Simulation::check_flying_collisions(double t) {
+  const int m = plant_->vehicles();
+  for (int v = 0; v < m; ++v) plant_->position(v, positions_[static_cast<std::size_t>(v)].data());
+  for (int v = 0; v < m; ++v) {
+    const auto& p = positions_[static_cast<std::size_t>(v)];
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2])) {
+      collide(t, v, "diverged");
+      continue;
+    }
+    if (p[2] < s_.ground_z) collide(t, v, "ground");
+    check_obstacles(t, v, p);
+    for (int w = v + 1; w < m; ++w) {
+      const auto& q = positions_[static_cast<std::size_t>(w)];
+      const double d = std::sqrt((p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]) + (p[2] - q[2]) * (p[2] - q[2]));
+      min_separation_ = std::min(min_separation_, d);
+      if (d < 2.0 * s_.vehicle_radius) {
+        collide(t, v, "vehicle");
+        collide(t, w, "vehicle");
+      }
+    }
+  }
+  min_clearance_ = std::min(min_clearance_, clearance_now_);
+}
+
+// Vehicle v at p against the obstacles it is not above.
+void Simulation::check_obstacles(double t, int v, const std::array<double, 3>& p) {
+  for (const auto& ob : obstacles_) {
+    if (p[2] > s_.ground_z + ob.height + s_.vehicle_radius) continue;  // over its top
+    const double c = std::hypot(p[0] - ob.x, p[1] - ob.y) - ob.radius - s_.vehicle_radius;
+    clearance_now_ = std::min(clearance_now_, c);
+    if (c < 0.0) collide(t, v, "obstacle");
   }
 }
 
@@ -553,91 +583,132 @@ void Simulation::write_summary(Outcome outcome, double t_end) {
   std::fputs("]}\n", f);
 }
 
+// The run's fixed cadence: physics step, states and worlds per step, the steps in all, and
+// the wind's gust (an Ornstein-Uhlenbeck process per axis, exactly discretised).
+Simulation::Cadence Simulation::cadence() const {
+  Cadence c;
+  c.h = 1.0 / s_.physics_hz;
+  c.per_state = static_cast<std::int64_t>(std::llround(s_.physics_hz / s_.state_hz));
+  c.per_world = std::max<std::int64_t>(1, std::llround(s_.state_hz / s_.obstacles_hz)) * c.per_state;
+  c.total = static_cast<std::int64_t>(std::llround(s_.duration * s_.physics_hz));
+  c.gust_a = std::exp(-c.h / s_.wind.gust_tau);
+  c.gust_b = s_.wind.gust_std * std::sqrt(1.0 - c.gust_a * c.gust_a);
+  return c;
+}
+
 int Simulation::run() {
   run_start_ = Clock::now();
   run_start_wall_us_ = wall_utime();
   write_world();
   truth_ = std::make_unique<JsonWriter>(o_.out_dir + "/truth.jsonl");
   ref_t0_ = o_.lockstep ? 0 : wall_utime();
-
-  const double h = 1.0 / s_.physics_hz;
-  const auto per_state = static_cast<std::int64_t>(std::llround(s_.physics_hz / s_.state_hz));
-  const auto per_world = std::max<std::int64_t>(1, std::llround(s_.state_hz / s_.obstacles_hz)) * per_state;
-  const auto total = static_cast<std::int64_t>(std::llround(s_.duration * s_.physics_hz));
-  // Wind: mean plus an Ornstein-Uhlenbeck gust per axis, exact discretisation.
-  const double a = std::exp(-h / s_.wind.gust_tau);
-  const double b = s_.wind.gust_std * std::sqrt(1.0 - a * a);
+  const Cadence c = cadence();
   for (int i = 0; i < 3; ++i) wind_[i] = s_.wind.mean[static_cast<std::size_t>(i)];
 
   Outcome outcome = Outcome::kDuration;
-  std::int64_t step = 0;
   check_collisions(0.0);
-  for (;; ++step) {
-    now_ = static_cast<double>(step) * h;
+  for (std::int64_t step = 0;; ++step) {
+    now_ = static_cast<double>(step) * c.h;
     if (g_stop) {
       outcome = Outcome::kInterrupted;
       break;
     }
-    sense(now_);
-    if (step % per_state == 0) {
-      const std::int64_t seq = step / per_state;
-      if (step % per_world == 0 || any_moving_) publish_world(now_);
-      publish_state(seq, now_, false);
-      if (o_.lockstep && !wait_for_command(seq, now_)) {
-        outcome = g_stop ? Outcome::kInterrupted : Outcome::kControllerTimeout;
-        write_tick(seq, now_);
-        break;
-      }
-    }
-    if (!o_.lockstep) {
-      // Real time: the physics follows the wall clock; commands arrive meanwhile. Fallen
-      // more than 0.1 s behind (stopped, SIGSTOP, or starved of CPU), it does not race the
-      // gap with no controller in the loop: the clock is re-anchored (and the reference's
-      // epoch with it), so the world paused while the simulator did.
-      const auto target = run_start_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(now_));
-      const auto lag = Clock::now() - target;
-      if (lag > std::chrono::milliseconds(100)) {
-        run_start_ += lag;
-        const std::int64_t lag_us = std::chrono::duration_cast<std::chrono::microseconds>(lag).count();
-        ref_t0_ += lag_us;
-        run_start_wall_us_ += lag_us;  // states keep their sample time on the wall clock: now, not before the pause
-        ++realtime_pauses_;
-        realtime_paused_s_ += std::chrono::duration<double>(lag).count();
-      }
-      pump_until(target + (lag > std::chrono::milliseconds(100) ? lag : Clock::duration::zero()));
-    }
-    while (!pending_.empty() && pending_.front().apply_time <= now_ + 0.5 * h) {
-      u_applied_ = std::move(pending_.front().u);
-      applied_mode_ = pending_.front().mode;
-      applied_seq_ = pending_.front().seq;
-      pending_.pop_front();
-      last_command_t_ = now_;
-    }
-    if (s_.command_timeout > 0.0 && now_ - last_command_t_ > s_.command_timeout) {
-      // The autopilot's offboard-loss failsafe, as it were: level and hold, every step.
-      if (applied_mode_ != -2) ++command_timeouts_;
-      applied_mode_ = -2;
-      u_applied_ = plant_->failsafe();
-    }
-    if (step % per_state == 0) write_tick(step / per_state, now_);
-    if (!collisions_.empty() && s_.stop_on_collision) {
-      outcome = Outcome::kCollision;
+    if (const std::optional<Outcome> end = step_once(step, c)) {
+      outcome = *end;
       break;
     }
-    if (at_goal()) {
-      time_to_goal_ = now_;
-      outcome = Outcome::kGoal;
-      break;
-    }
-    if (step >= total) break;
-    plant_->step(u_applied_.data(), wind_, h);
-    advance_obstacles(h);
-    for (int i = 0; i < 3; ++i) {
-      gust_[i] = a * gust_[i] + b * wind_rng_.normal();
-      wind_[i] = s_.wind.mean[static_cast<std::size_t>(i)] + gust_[i];
-    }
-    check_collisions(static_cast<double>(step + 1) * h);
   }
+  return finish(outcome);
+}
+
+// One physics step at now_: sense; at a state's step publish it (and in lock-step wait for
+// its answer); follow the wall clock in real time; apply the commands due; log; judge; step.
+// The outcome when the run ends here.
+std::optional<Outcome> Simulation::step_once(std::int64_t step, const Cadence& c) {
+  sense(now_);
+  const bool state_step = step % c.per_state == 0;
+  if (state_step) {
+    if (const std::optional<Outcome> end = exchange_state(step, c)) return end;
+  }
+  if (!o_.lockstep) follow_wall_clock();
+  apply_due_commands(c.h);
+  if (state_step) write_tick(step / c.per_state, now_);
+  if (const std::optional<Outcome> end = judge(step, c.total)) return end;
+  advance(step, c);
+  return std::nullopt;
+}
+
+// The state out (the world with it when due); in lock-step, its answer awaited: none is a
+// timeout (or the interrupt that cut the wait short).
+std::optional<Outcome> Simulation::exchange_state(std::int64_t step, const Cadence& c) {
+  const std::int64_t seq = step / c.per_state;
+  if (step % c.per_world == 0 || any_moving_) publish_world(now_);
+  publish_state(seq, now_, false);
+  if (!o_.lockstep || wait_for_command(seq, now_)) return std::nullopt;
+  write_tick(seq, now_);
+  return g_stop ? Outcome::kInterrupted : Outcome::kControllerTimeout;
+}
+
+// Real time: the physics follows the wall clock; commands arrive meanwhile. Fallen more than
+// 0.1 s behind (stopped, SIGSTOP, or starved of CPU), it does not race the gap with no
+// controller in the loop: the clock is re-anchored (and the reference's epoch with it), so
+// the world paused while the simulator did.
+void Simulation::follow_wall_clock() {
+  const auto target = run_start_ + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(now_));
+  const auto lag = Clock::now() - target;
+  if (lag > std::chrono::milliseconds(100)) {
+    run_start_ += lag;
+    const std::int64_t lag_us = std::chrono::duration_cast<std::chrono::microseconds>(lag).count();
+    ref_t0_ += lag_us;
+    run_start_wall_us_ += lag_us;  // states keep their sample time on the wall clock: now, not before the pause
+    ++realtime_pauses_;
+    realtime_paused_s_ += std::chrono::duration<double>(lag).count();
+  }
+  pump_until(target + (lag > std::chrono::milliseconds(100) ? lag : Clock::duration::zero()));
+}
+
+// The commands whose time has come (within half a step) replace the applied one; none for
+// longer than timing.command_timeout, the simulator's own failsafe holds.
+void Simulation::apply_due_commands(double h) {
+  while (!pending_.empty() && pending_.front().apply_time <= now_ + 0.5 * h) {
+    u_applied_ = std::move(pending_.front().u);
+    applied_mode_ = pending_.front().mode;
+    applied_seq_ = pending_.front().seq;
+    pending_.pop_front();
+    last_command_t_ = now_;
+  }
+  if (s_.command_timeout > 0.0 && now_ - last_command_t_ > s_.command_timeout) {
+    // The autopilot's offboard-loss failsafe, as it were: level and hold, every step.
+    if (applied_mode_ != -2) ++command_timeouts_;
+    applied_mode_ = -2;
+    u_applied_ = plant_->failsafe();
+  }
+}
+
+// A collision (when it ends runs), the goal, or the last step ends the run.
+std::optional<Outcome> Simulation::judge(std::int64_t step, std::int64_t total) {
+  if (!collisions_.empty() && s_.stop_on_collision) return Outcome::kCollision;
+  if (at_goal()) {
+    time_to_goal_ = now_;
+    return Outcome::kGoal;
+  }
+  if (step >= total) return Outcome::kDuration;
+  return std::nullopt;
+}
+
+// The plant, the obstacles and the wind one step on, and what collided there.
+void Simulation::advance(std::int64_t step, const Cadence& c) {
+  plant_->step(u_applied_.data(), wind_, c.h);
+  advance_obstacles(c.h);
+  for (int i = 0; i < 3; ++i) {
+    gust_[i] = c.gust_a * gust_[i] + c.gust_b * wind_rng_.normal();
+    wind_[i] = s_.wind.mean[static_cast<std::size_t>(i)] + gust_[i];
+  }
+  check_collisions(static_cast<double>(step + 1) * c.h);
+}
+
+// The logs closed and the summary written; the exit status for the outcome.
+int Simulation::finish(Outcome outcome) {
   std::fflush(truth_->get());
   write_summary(outcome, now_);
   if (!o_.quiet)

@@ -137,17 +137,33 @@ void set_path(YAML::Node root, const std::string& key, double value) {
 
 bool same(double a, double b) { return std::fabs(a - b) <= 1e-6 * std::max(1.0, std::max(std::fabs(a), std::fabs(b))); }
 
-}  // namespace
-
-VehicleFile load_vehicle(const std::string& path) {
-  YAML::Node doc;
+YAML::Node load_vehicle_yaml(const std::string& path) {
   try {
-    doc = YAML::LoadFile(path);
+    return YAML::LoadFile(path);
   } catch (const YAML::BadFile&) {
     throw ConfigError("vehicle file " + path + ": cannot open");
   } catch (const YAML::Exception& e) {
     throw ConfigError("vehicle file " + path + ": " + e.what());
   }
+}
+
+// Further model parameters by their names in the model's table (checked by the task).
+void read_params(const VehicleReader& r, const YAML::Node& doc, VehicleFile& v) {
+  const YAML::Node p = doc["params"];
+  if (!p) return;
+  if (!p.IsMap()) r.fail("params", "expected a map of name: number");
+  for (const auto& kv : p) {
+    const std::string name = r.text(kv.first, "params");
+    if (name == "mass" || name == "gravity" || name == "drag" || name.rfind("rate_", 0) == 0)
+      r.fail("params." + name, "has its own field in a vehicle file");
+    v.settings.emplace_back("model." + name, r.number(kv.second, "params." + name, -1e12, 1e12));
+  }
+}
+
+}  // namespace
+
+VehicleFile load_vehicle(const std::string& path) {
+  const YAML::Node doc = load_vehicle_yaml(path);
   const VehicleReader r(path);
   r.known(doc, "", {"description", "name", "model", "mass", "gravity", "hover_thrust", "drag", "limits",
                     "rate_response", "estimate_lag", "params"});
@@ -171,16 +187,7 @@ VehicleFile load_vehicle(const std::string& path) {
   } else {
     r.fail("model", "must be quadrotor_rate or quadrotor, got '" + v.model + "'");
   }
-  // Further model parameters by their names in the model's table (checked by the task).
-  if (const YAML::Node p = doc["params"]) {
-    if (!p.IsMap()) r.fail("params", "expected a map of name: number");
-    for (const auto& kv : p) {
-      const std::string name = r.text(kv.first, "params");
-      if (name == "mass" || name == "gravity" || name == "drag" || name.rfind("rate_", 0) == 0)
-        r.fail("params." + name, "has its own field in a vehicle file");
-      v.settings.emplace_back("model." + name, r.number(kv.second, "params." + name, -1e12, 1e12));
-    }
-  }
+  read_params(r, doc, v);
   return v;
 }
 

@@ -1,6 +1,7 @@
 #include "mppi/transport/inbox.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 
@@ -28,23 +29,64 @@ const char* to_string(Reject r) {
   return "?";
 }
 
+namespace {
+
+// The counter of the states refused for `why`.
+std::atomic<std::int64_t>& state_rejections(InboxCounters& c, Reject why) {
+  switch (why) {
+    case Reject::kShape: return c.rejected_shape;
+    case Reject::kNan: return c.rejected_nan;
+    case Reject::kTime: return c.rejected_time;
+    case Reject::kDuplicate: return c.rejected_duplicate;
+    default: return c.rejected_out_of_order;
+  }
+}
+
+bool finite_reference_scalars(const ReferenceInput& r) {
+  return std::isfinite(r.radius) && std::isfinite(r.speed) && std::isfinite(r.yaw) && std::isfinite(r.phase) &&
+         std::isfinite(r.ramp_s) && r.ramp_s >= 0.0f && std::isfinite(r.end_s) && r.end_s >= 0.0f;
+}
+
+// The centre and each vehicle's goal finite (the count checked before).
+bool finite_reference_points(const ReferenceInput& r) {
+  bool ok = true;
+  for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.center[d]);
+  for (int v = 0; ok && v < r.vehicle_count; ++v)
+    for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.goals[v][d]);
+  return ok;
+}
+
+}  // namespace
+
 Reject Inbox::offer_state() {
   const StateSample& s = state.back();
-  auto reject = [](std::atomic<std::int64_t>& c, Reject r) {
-    c.fetch_add(1, std::memory_order_relaxed);
-    return r;
-  };
+  const Reject why = check_state(s);
+  if (why != Reject::kNone) {
+    state_rejections(counters, why).fetch_add(1, std::memory_order_relaxed);
+    return why;
+  }
+  accept_state(s);
+  return Reject::kNone;
+}
+
+// Why `s` is refused: its shape or model, a non-finite value, its sample time, or its seq
+// against the stream's (a repeat; an older one unless the stream was quiet long enough to
+// be a restart). Reject::kNone: it is taken.
+Reject Inbox::check_state(const StateSample& s) const {
   if (s.nx != expect_.nx || s.vehicle_count != expect_.vehicles || s.n != s.nx * s.vehicle_count ||
       s.n > kMaxStates || (expect_.model != 0 && s.model != expect_.model))
-    return reject(counters.rejected_shape, Reject::kShape);
+    return Reject::kShape;
   for (int i = 0; i < s.n; ++i)
-    if (!std::isfinite(s.x[i])) return reject(counters.rejected_nan, Reject::kNan);
-  if (s.sample_utime < 0 || s.sample_utime > kMaxUtime) return reject(counters.rejected_time, Reject::kTime);
-  if (have_last_) {
-    if (s.seq == last_seq_) return reject(counters.rejected_duplicate, Reject::kDuplicate);
-    if (s.seq < last_seq_ && s.recv_ns - last_recv_ns_ < expect_.restart_after_ns)
-      return reject(counters.rejected_out_of_order, Reject::kOutOfOrder);
-  }
+    if (!std::isfinite(s.x[i])) return Reject::kNan;
+  if (s.sample_utime < 0 || s.sample_utime > kMaxUtime) return Reject::kTime;
+  if (!have_last_) return Reject::kNone;
+  if (s.seq == last_seq_) return Reject::kDuplicate;
+  if (s.seq < last_seq_ && s.recv_ns - last_recv_ns_ < expect_.restart_after_ns) return Reject::kOutOfOrder;
+  return Reject::kNone;
+}
+
+// `s` becomes the stream's newest and goes to the loop (with its wake-up or tick).
+void Inbox::accept_state(const StateSample& s) {
   have_last_ = true;
   if (s.sample_utime > last_sample_utime_.load(std::memory_order_relaxed))
     last_sample_utime_.store(s.sample_utime, std::memory_order_relaxed);
@@ -60,18 +102,12 @@ Reject Inbox::offer_state() {
     t.sim_utime = s.sample_utime;
     offer_tick(t);
   }
-  return Reject::kNone;
 }
 
 void Inbox::offer_reference() {
   const ReferenceInput& r = reference.back();
-  bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && r.t0_utime >= 0 && r.t0_utime <= kMaxUtime &&
-            std::isfinite(r.radius) && std::isfinite(r.speed) && std::isfinite(r.yaw) &&
-            std::isfinite(r.phase) && std::isfinite(r.ramp_s) && r.ramp_s >= 0.0f && std::isfinite(r.end_s) &&
-            r.end_s >= 0.0f;
-  for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.center[d]);
-  for (int v = 0; ok && v < r.vehicle_count; ++v)
-    for (int d = 0; d < 3; ++d) ok = ok && std::isfinite(r.goals[v][d]);
+  const bool ok = r.vehicle_count >= 0 && r.vehicle_count <= kMaxVehicles && r.t0_utime >= 0 &&
+                  r.t0_utime <= kMaxUtime && finite_reference_scalars(r) && finite_reference_points(r);
   if (!ok) return count_bad_input();
   reference.publish();
 }

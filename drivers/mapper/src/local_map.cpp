@@ -52,6 +52,28 @@ void edt_1d(const float* f, int n, float* d, int* v, float* z) {
 
 std::int64_t floor_cell(double x, double res) { return static_cast<std::int64_t>(std::floor(x / res)); }
 
+// A ray's walk through the cells: where it is, and per axis its step, the ray length to the
+// next cell boundary and between boundaries.
+struct Walk {
+  int c[3], step[3];
+  double t_max[3], t_delta[3];
+};
+
+// The walk of the ray origin + s d (window cells) from s0, where it enters the window.
+Walk start_walk(const double* origin, const std::array<int, 3>& n, const double* d, double s0) {
+  Walk w{};
+  for (int i = 0; i < 3; ++i) {
+    const double p0 = origin[i] + s0 * d[i];
+    w.c[i] = std::clamp(static_cast<int>(std::floor(p0)), 0, n[static_cast<std::size_t>(i)] - 1);
+    w.step[i] = d[i] > 0.0 ? 1 : (d[i] < 0.0 ? -1 : 0);
+    w.t_delta[i] = w.step[i] != 0 ? 1.0 / std::fabs(d[i]) : std::numeric_limits<double>::infinity();
+    w.t_max[i] = w.step[i] > 0   ? (w.c[i] + 1 - origin[i]) / d[i]
+                 : w.step[i] < 0 ? (w.c[i] - origin[i]) / d[i]
+                                 : std::numeric_limits<double>::infinity();
+  }
+  return w;
+}
+
 }  // namespace
 
 LocalMap::LocalMap(const MapSettings& s) : s_(s) {
@@ -64,6 +86,15 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
   }
   const auto total = static_cast<std::size_t>(n_[0]) * static_cast<std::size_t>(n_[1]) * static_cast<std::size_t>(n_[2]);
   if (total > (1u << 24)) throw std::invalid_argument("map: at most 2^24 cells");
+  allocate(total);
+  build_distance_tables();
+  const double zero[3] = {0.0, 0.0, 0.0};
+  for (int i = 0; i < 3; ++i) corner_[static_cast<std::size_t>(i)] = -n_[static_cast<std::size_t>(i)] / 2;
+  recentre(zero);
+}
+
+// Every buffer a frame and a transform use, at its full size once (none grows later).
+void LocalMap::allocate(std::size_t total) {
   occ_.assign(total, kUnknown);
   scratch_.assign(total, kUnknown);
   touched_.assign(total, 0);
@@ -79,8 +110,13 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
   line_d_.assign(static_cast<std::size_t>(longest), 0.0f);
   line_z_.assign(static_cast<std::size_t>(longest) + 1, 0.0f);
   line_v_.assign(static_cast<std::size_t>(longest), 0);
+}
+
+// The signed field's mm of each squared distance, and the offsets inside an obstacle
+// (within kInsideRadius cells) nearest first.
+void LocalMap::build_distance_tables() {
   // mm of a squared distance of d2 cells^2 between centres (less half a cell), to saturation.
-  const double res = s.resolution, maxd = s.max_distance;
+  const double res = s_.resolution, maxd = s_.max_distance;
   for (int d2 = 0;; ++d2) {
     const double m = std::min(maxd, std::max(0.0, (std::sqrt(static_cast<double>(d2)) - 0.5) * res));
     mm_of_d2_.push_back(static_cast<std::int16_t>(std::lround(1000.0 * m)));
@@ -93,9 +129,6 @@ LocalMap::LocalMap(const MapSettings& s) : s_(s) {
           inside_offsets_.push_back({x, y, z, x * x + y * y + z * z});
   std::stable_sort(inside_offsets_.begin(), inside_offsets_.end(),
                    [](const auto& a, const auto& b) { return a[3] < b[3]; });
-  const double zero[3] = {0.0, 0.0, 0.0};
-  for (int i = 0; i < 3; ++i) corner_[static_cast<std::size_t>(i)] = -n_[static_cast<std::size_t>(i)] / 2;
-  recentre(zero);
 }
 
 std::array<double, 3> LocalMap::origin() const {
@@ -246,17 +279,11 @@ void LocalMap::end_frame() {
 void LocalMap::walk(const double* d, const int* last, bool clear_end, std::uint16_t weight) {
   double s0, s1;
   if (!clip(origin_, d, &s0, &s1)) return;
-  int c[3], step[3];
-  double t_max[3], t_delta[3];
-  for (int i = 0; i < 3; ++i) {
-    const double p0 = origin_[i] + s0 * d[i];
-    c[i] = std::clamp(static_cast<int>(std::floor(p0)), 0, n_[static_cast<std::size_t>(i)] - 1);
-    step[i] = d[i] > 0.0 ? 1 : (d[i] < 0.0 ? -1 : 0);
-    t_delta[i] = step[i] != 0 ? 1.0 / std::fabs(d[i]) : std::numeric_limits<double>::infinity();
-    t_max[i] = step[i] > 0   ? (c[i] + 1 - origin_[i]) / d[i]
-               : step[i] < 0 ? (c[i] - origin_[i]) / d[i]
-                             : std::numeric_limits<double>::infinity();
-  }
+  Walk w = start_walk(origin_, n_, d, s0);
+  int* c = w.c;
+  const int* step = w.step;
+  double* t_max = w.t_max;
+  const double* t_delta = w.t_delta;
   const int budget = std::abs(last[0] - c[0]) + std::abs(last[1] - c[1]) + std::abs(last[2] - c[2]);
   for (int n = 0; n <= budget; ++n) {
     const bool at_end = c[0] == last[0] && c[1] == last[1] && c[2] == last[2];

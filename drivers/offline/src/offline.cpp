@@ -145,10 +145,49 @@ void score(float dt, double distance, double err2, Result* r) {
   r->success = r->success && !r->nonfinite;
 }
 
+// The cycle's record: its time, state, command and ESS; a non-finite command marks the run.
+void record(float t, const std::vector<float>& x, const std::vector<float>& u, float ess, Result* r) {
+  r->t.push_back(t);
+  r->x.insert(r->x.end(), x.begin(), x.end());
+  r->u.insert(r->u.end(), u.begin(), u.end());
+  r->ess.push_back(ess);
+  for (float v : u) r->nonfinite = r->nonfinite || !std::isfinite(v);
+}
+
+// A quadrotor's position (zeros for the other vehicles).
+template <class T>
+std::array<float, 3> position_of(const std::vector<float>& x) {
+  std::array<float, 3> p = {0, 0, 0};
+  if constexpr (kIsQuad<T>) T::Vehicle::position(x.data(), p.data());
+  return p;
+}
+
+// The way one step covered: a quadrotor's from `before` to x, the car's speed times dt.
+template <class T>
+double covered(const std::array<float, 3>& before, const std::vector<float>& x, float dt) {
+  if constexpr (kIsQuad<T>) {
+    const std::array<float, 3> after = position_of<T>(x);
+    return std::hypot(after[0] - before[0], after[1] - before[1], after[2] - before[2]);
+  } else if constexpr (std::is_same_v<typename T::Vehicle, Racecar>) {
+    return static_cast<double>(std::hypot(x[Racecar::VX], x[Racecar::VY])) * dt;
+  } else {
+    return 0.0;
+  }
+}
+
+// A forest flight ends at the goal (its time kept) or on a collision.
+template <class T>
+bool forest_over(const Scenario& s, const TaskInputs& in, const std::vector<float>& x, float t_next, Result* r) {
+  if (!r->reached && all_at_goal<T>(s, in, x.data())) {
+    r->reached = true;
+    r->time_to_goal = t_next;
+  }
+  return r->collided || r->reached;
+}
+
 template <class T>
 Result fly_typed(Controller& c, const typename T::Params& model, const Scenario& s,
                  const std::vector<std::pair<std::string, double>>& plant) {
-  using Vehicle = typename T::Vehicle;
   const typename T::Params pp = plant_params<T>(model, plant);
   if (static_cast<int>(s.x0.size()) != T::kNx) throw std::invalid_argument("scenario: x0 has the wrong size");
   Result r;
@@ -170,30 +209,14 @@ Result fly_typed(Controller& c, const typename T::Params& model, const Scenario&
     in.reference_time = t;
     c.set_inputs(in);
     const UpdateStats& st = c.iterate(x.data(), u.data());
-    r.t.push_back(t);
-    r.x.insert(r.x.end(), x.begin(), x.end());
-    r.u.insert(r.u.end(), u.begin(), u.end());
-    r.ess.push_back(st.ess);
-    for (float v : u) r.nonfinite = r.nonfinite || !std::isfinite(v);
-
-    float before[3] = {0, 0, 0};
-    if constexpr (kIsQuad<T>) Vehicle::position(x.data(), before);
+    record(t, x, u, st.ess, &r);
+    const std::array<float, 3> before = position_of<T>(x);
     advance_plant<T>(pp, s, t, h, u.data(), x.data(), &r);
     for (float v : x) r.nonfinite = r.nonfinite || !std::isfinite(v);
     if (r.nonfinite) break;
-    if constexpr (kIsQuad<T>) {
-      float after[3];
-      Vehicle::position(x.data(), after);
-      distance += std::hypot(after[0] - before[0], after[1] - before[1], after[2] - before[2]);
-    } else if constexpr (std::is_same_v<Vehicle, Racecar>) {
-      distance += static_cast<double>(std::hypot(x[Racecar::VX], x[Racecar::VY])) * dt;
-    }
+    distance += covered<T>(before, x, dt);
     if constexpr (kIsForest<T>) {
-      if (!r.reached && all_at_goal<T>(s, in, x.data())) {
-        r.reached = true;
-        r.time_to_goal = t + dt;
-      }
-      if (r.collided || r.reached) break;
+      if (forest_over<T>(s, in, x, t + dt, &r)) break;
     }
     if constexpr (kIsTracking<T>) err2 += tracking_error2<T>(in, x.data(), t + dt);
   }

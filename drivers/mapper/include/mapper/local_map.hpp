@@ -81,6 +81,8 @@ class LocalMap {
   const Stats& stats() const { return stats_; }
 
  private:
+  void allocate(std::size_t total);
+  void build_distance_tables();
   void update(std::size_t i, int delta);
   bool clip(const double* a, const double* d, double* s0, double* s1) const;
   int cell_at(const double* p) const;

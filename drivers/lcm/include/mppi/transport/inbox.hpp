@@ -111,6 +111,9 @@ class Inbox {
   const Expect& expect() const { return expect_; }
 
  private:
+  Reject check_state(const StateSample& s) const;
+  void accept_state(const StateSample& s);
+
   Expect expect_;
   std::int64_t last_seq_ = -1;  // states' receive thread only
   std::int64_t last_recv_ns_ = 0;
