@@ -305,6 +305,7 @@ def test_speed_curve_groups_campaigns_by_their_speed_limit(tmp_path):
     from sitl_harness.speed_curve import markdown, rows, speed_limit
     assert speed_limit(["cost.vehicle_radius=0.3", "cost.max_speed=5", "cost.max_speed=7.5"]) == 7.5
     assert speed_limit(["cost.w_speed=2"]) is None and speed_limit(["cost.max_speed=0"]) is None
+    assert speed_limit(["mppi.rollouts=512", "cost.max_speed=5"], "mppi.rollouts") == 512
     run = lambda seed, ok, fs, s2c: {"scenario": "forest_4m_sensed", "seed": seed, "backend": "cpu-avx3",  # noqa: E731
                                      "success": ok, "forest_speed": fs, "peak_speed": fs + 1, "min_clearance": fs / 100,
                                      "state_to_command_ms_p99": s2c, "deadline_misses": 1}

@@ -151,9 +151,11 @@ def _add_report_parsers(sub):
     vs.add_argument("--labels", default=None, help="comma-separated, one per folder (default: the folder names)")
     vs.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
-    sc = sub.add_parser("speed-curve", help="success against speed: campaigns flown at --set cost.max_speed=V (markdown)")
+    sc = sub.add_parser("speed-curve", help="success against a setting: campaigns flown at --set KEY=V, KEY "
+                        "cost.max_speed unless --key says another (markdown)")
     sc.set_defaults(func=cmd_speed_curve)
     sc.add_argument("folders", type=Path, nargs="+")
+    sc.add_argument("--key", default="cost.max_speed", help="the setting the campaigns differ in (e.g. mppi.rollouts)")
     sc.add_argument("--png", type=Path, default=None, help="also draw success against the limit here")
     sc.add_argument("--json", type=Path, default=None, help="also write the rows here")
 
@@ -412,7 +414,7 @@ def cmd_speed_curve(a) -> int:
     from .speed_curve import main
 
     try:
-        print(main(a.folders, a.png, a.json), end="")
+        print(main(a.folders, a.png, a.json, a.key), end="")
     except FileNotFoundError as e:
         raise UsageError(str(e)) from None
     return 0

@@ -1,7 +1,9 @@
-"""`tools/sitl speed-curve`: success against speed, from campaigns flown at speed limits.
+"""`tools/sitl speed-curve`: success against one setting, from campaigns flown at its values.
 
-Each folder is a finished campaign flown with `--set cost.max_speed=V` (ForestCost's speed
-limit; a campaign without one is the row "no limit"). One row per (limit, scenario, backend):
+Each folder is a finished campaign flown with `--set KEY=V`; KEY is cost.max_speed by default
+(ForestCost's speed limit; a campaign without one is the row "no limit"), or any other of
+mppid's settings (`--key mppi.rollouts`: success against the rollout count). One row per
+(value, scenario, backend):
 successes out of runs with the Wilson 95 % interval, the mean speed among the trees
 (score.json's forest_speed) and the peak speed of the successful flights, the closest
 approach of any flight, state -> command p99 (median and worst flight) and deadline misses.
@@ -17,15 +19,15 @@ from .campaign import wilson
 from .results import load_campaign
 from .sidebyside import _median
 
-LIMIT_KEY = "cost.max_speed="
+SPEED_KEY = "cost.max_speed"
 
 
-def speed_limit(sets: list) -> float | None:
-    """The campaign's cost.max_speed (the last --set of it wins, as in mppid), None without one."""
-    limit = None
+def speed_limit(sets: list, key: str = SPEED_KEY) -> float | None:
+    """The campaign's value of `key` (the last --set of it wins, as in mppid), None without one."""
+    limit, prefix = None, key + "="
     for s in sets or []:
-        if s.startswith(LIMIT_KEY):
-            limit = float(s[len(LIMIT_KEY):])
+        if s.startswith(prefix):
+            limit = float(s[len(prefix):])
     return limit if limit else None
 
 
@@ -50,12 +52,12 @@ def _row(limit, scenario: str, runs: list) -> dict:
             "seeds": sorted(r.get("seed") for r in runs)}
 
 
-def rows(folders: list[Path]) -> list[dict]:
-    """One row per (limit, scenario, backend) over the folders, by limit (no limit last)."""
+def rows(folders: list[Path], key: str = SPEED_KEY) -> list[dict]:
+    """One row per (value of key, scenario, backend) over the folders, by value (none last)."""
     groups: dict[tuple, list] = {}
     for folder in folders:
         c = load_campaign(folder)
-        limit = speed_limit(c.summary.get("sets"))
+        limit = speed_limit(c.summary.get("sets"), key)
         for scen, runs in c.by_scenario().items():
             for r in runs:
                 groups.setdefault((limit, scen, r.get("backend", "?")), []).append(r)
@@ -67,13 +69,14 @@ def _f(v, fmt="{:.2f}"):
     return "-" if v is None else fmt.format(v)
 
 
-def markdown(table: list[dict]) -> str:
-    lines = ["| speed limit [m/s] | scenario | backend | success | 95 % CI (Wilson) | speed in the trees [m/s] | "
+def markdown(table: list[dict], key: str = SPEED_KEY) -> str:
+    head = "speed limit [m/s]" if key == SPEED_KEY else key
+    lines = [f"| {head} | scenario | backend | success | 95 % CI (Wilson) | speed in the trees [m/s] | "
              "peak [m/s] | closest [m] | state->command p99 median / worst [ms] | misses |",
              "|---:|---|---|---:|---|---:|---:|---:|---|---:|"]
     for r in table:
         lo, hi = r["wilson95"]
-        lines.append(f"| {_f(r['limit'], '{:g}') if r['limit'] else 'no limit'} | {r['scenario']} | {r['backend']} | "
+        lines.append(f"| {_f(r['limit'], '{:g}') if r['limit'] else ('no limit' if key == SPEED_KEY else 'not set')} | {r['scenario']} | {r['backend']} | "
                      f"{r['successes']}/{r['runs']} | {100 * lo:.0f}-{100 * hi:.0f} % | {_f(r['forest_speed'])} | "
                      f"{_f(r['peak_speed'])} | {_f(r['min_clearance'])} | "
                      f"{_f(r['state_to_command_p99_median'], '{:.1f}')} / {_f(r['state_to_command_p99_worst'], '{:.1f}')} | "
@@ -81,7 +84,7 @@ def markdown(table: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot(table: list[dict], png: Path) -> None:
+def plot(table: list[dict], png: Path, key: str = SPEED_KEY) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -96,9 +99,12 @@ def plot(table: list[dict], png: Path) -> None:
         y = [r["successes"] / r["runs"] for r in rs]
         err = [[p - r["wilson95"][0] for p, r in zip(y, rs)], [r["wilson95"][1] - p for p, r in zip(y, rs)]]
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=f"{scen} ({backend})")
-    ax.hlines(0.8, 7.0, max((r["limit"] for r in table if r["limit"]), default=10.0), colors="grey",
-              linestyles="dashed", label="AERO-MPPI: > 80 % above 7 m/s (LiDAR; arXiv 2509.17340)")
-    ax.set_xlabel("speed limit [m/s]")
+    if key == SPEED_KEY:
+        ax.hlines(0.8, 7.0, max((r["limit"] for r in table if r["limit"]), default=10.0), colors="grey",
+                  linestyles="dashed", label="AERO-MPPI: > 80 % above 7 m/s (LiDAR; arXiv 2509.17340)")
+    else:
+        ax.set_xscale("log", base=2)
+    ax.set_xlabel("speed limit [m/s]" if key == SPEED_KEY else key)
     ax.set_ylabel("success rate (95 % Wilson interval)")
     ax.set_ylim(0, 1.05)
     ax.grid(alpha=0.3)
@@ -108,10 +114,10 @@ def plot(table: list[dict], png: Path) -> None:
     plt.close(fig)
 
 
-def main(folders: list[Path], png: Path | None = None, json_out: Path | None = None) -> str:
-    table = rows(folders)
+def main(folders: list[Path], png: Path | None = None, json_out: Path | None = None, key: str = SPEED_KEY) -> str:
+    table = rows(folders, key)
     if png:
-        plot(table, png)
+        plot(table, png, key)
     if json_out:
         json_out.write_text(json.dumps(table, indent=2))
-    return markdown(table)
+    return markdown(table, key)
