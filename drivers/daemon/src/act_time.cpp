@@ -7,30 +7,14 @@
 
 namespace mppi::daemon {
 
-std::int64_t ControlLoop::state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const {
-  // Lock-step: sample_utime is on the simulator's clock, as is now_state_ns.
-  std::int64_t t = x.sample_utime * rt::kNsPerUs;
-  std::int64_t ahead = 0;
-  if (!lockstep) {
-    // Real time: the loop's timeline is CLOCK_MONOTONIC. The state arrived at recv_ns; it
-    // was (recv_utime - sample_utime) old then, both on this host's wall clock.
-    std::int64_t in_flight = 0;
-    if (s_.latency.use_sample_time && x.recv_utime != 0) in_flight = (x.recv_utime - x.sample_utime) * rt::kNsPerUs;
-    ahead = -in_flight;
-    t = x.recv_ns - std::max<std::int64_t>(0, in_flight);
-  }
-  *future = ahead > s_.latency.future_tolerance_ns;
-  return t;
-}
-
-ControlLoop::CycleState ControlLoop::read_state(std::int64_t now_state_ns, bool lockstep) const {
+ControlLoop::CycleState ControlLoop::read_state(std::int64_t now_state_ns) const {
   CycleState s;
   s.x = &in_->state.front();
   s.have = in_->state.writes() > 0;
   s.now_ns = now_state_ns;
-  // Staleness from the state's sample time (see state_time_ns): a state older than the
+  // Staleness from the state's sample time (on the pacing's timeline): a state older than the
   // timeouts, or stamped in the future, is not predicted from.
-  s.t_state_ns = s.have ? state_time_ns(*s.x, lockstep, &s.future) : 0;
+  s.t_state_ns = s.have ? pacing_->state_time_ns(*s.x, &s.future) : 0;
   s.age_ns = s.have ? std::max<std::int64_t>(0, now_state_ns - s.t_state_ns) : INT64_MAX;
   s.seq = s.have ? s.x->seq : -1;
   s.new_sample = s.seq != last_state_seq_used_;

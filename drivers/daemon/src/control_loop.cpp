@@ -1,5 +1,5 @@
 // ControlLoop: the cycle, its paths and the sends. The rooms around it: what starts a cycle
-// (loop_trigger.cpp), when its command acts (act_time.cpp), the task inputs
+// (Pacing, pacing.cpp), when its command acts (act_time.cpp), the task inputs
 // (task_inputs.cpp), what a state teaches (adaptation.cpp), the status (loop_status.cpp),
 // the parameter table (loop_params.cpp), live optimizer updates (control_loop_live.cpp); the
 // plan's time (PlanTimeline) and the deadline guard (DeadlineGuard) are classes of their own.
@@ -41,6 +41,12 @@ std::int64_t every(double rate_hz, double sub_hz) {
   return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
 }
 
+std::unique_ptr<Pacing> make_pacing(const LoopSettings& s, const PacingContext& ctx, std::int64_t period_ns) {
+  if (s.lockstep) return std::make_unique<LockStepPacing>(ctx, s.lockstep_poll_ns);
+  return std::make_unique<RealTimePacing>(ctx, period_ns, s.trigger == Trigger::kState, s.state_trigger_min_gap,
+                                          s.state_trigger_grace);
+}
+
 GuardSettings guard_settings(const LoopSettings& s, std::int64_t period_ns) {
   GuardSettings g;
   g.period_ns = period_ns;
@@ -63,8 +69,9 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       status_every_(every(s_.rate_hz, s_.status_hz)),
       plan_every_(every(s_.rate_hz, s_.plan_hz)),
       rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
-      schedule_(period_ns_),
       monitor_(period_ns_),
+      pacing_(make_pacing(s_, {clock, inbox, &monitor_, &counters_, {s_.latency.use_sample_time, s_.latency.future_tolerance_ns}},
+                          period_ns_)),
       out_(transport, &counters_, controller->settings().u_min, controller->settings().u_max, nu_,
            s_.command_kind >= 0 ? s_.command_kind : command_kind_for(controller->task())),
       obstacle_order_(transport::kMaxObstaclesIn),
@@ -103,22 +110,48 @@ void ControlLoop::prepare() {
   if (guard_) guard_->start();
 }
 
+void ControlLoop::start() {
+  prepare();
+  pacing_->start(clock_->now_ns());
+  heartbeat_ns_.store(clock_->now_ns(), std::memory_order_relaxed);
+}
+
+void ControlLoop::run(const std::atomic<bool>& stop, std::int64_t max_cycles) {
+  if (!pacing_->started()) start();
+  for (std::int64_t n = 0; (max_cycles < 0 || n < max_cycles) && !stop.load(std::memory_order_relaxed);)
+    if (step(stop)) ++n;
+}
+
+bool ControlLoop::step(const std::atomic<bool>& stop) {
+  if (!pacing_->started()) start();
+  CycleTimes t;
+  switch (pacing_->wait(stop, &t)) {
+    case Pacing::Wait::kCycle: cycle(t); return true;
+    case Pacing::Wait::kResend:  // a lock-step tick answered already: its answer again
+      if (cmd_.seq > 0) out_.resend(cmd_);
+      return false;
+    case Pacing::Wait::kStopped:
+    case Pacing::Wait::kDrop: return false;
+  }
+  return false;
+}
+
 void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
   history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
 }
 
 // One control cycle, as it runs: check the state; optimise from a fresh one; publish what
 // came of it; then the bookkeeping (timing, health, status, plan).
-void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
-  const std::int64_t t0 = lockstep ? clock_->now_ns() : start_ns;
+void ControlLoop::cycle(const CycleTimes& t) {
+  const std::int64_t t0 = pacing_->compute_start(t.start_ns);
   apply_between_cycles();
-  const CycleState s = read_state(now_state_ns, lockstep);
+  const CycleState s = read_state(t.now_state_ns);
 
   Outcome outcome = Outcome::kFailsafe;
   switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
     case StateCheck::kFailsafe: outcome = enter_failsafe(); break;
     case StateCheck::kHold: outcome = hold_stale(s); break;
-    case StateCheck::kFresh: outcome = optimize(s, deadline_ns, lockstep); break;
+    case StateCheck::kFresh: outcome = optimize(s, t.deadline_ns); break;
   }
 
   Mode published = Mode::kHoldPlan;
@@ -143,10 +176,10 @@ void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::in
       plan_.adopt();  // the late update is the plan to fall back on
       break;
     case Outcome::kFresh:
-      published = send_fresh(s, t0, lockstep);
+      published = send_fresh(s, t0);
       break;
   }
-  account(s, start_ns, t0, published, lockstep);
+  account(s, t.start_ns, t0, published);
 }
 
 // No state, or one past the failsafe timeout. On entry the plan is too old to mean anything
@@ -168,10 +201,11 @@ Outcome ControlLoop::hold_stale(const CycleState& s) {
 
 // A fresh state: predict it to when the command acts, run one update (under the deadline
 // guard in real time) and say what came of it.
-Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep) {
+// (Lock-step has no guard, and its deadline is never missed.)
+Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
   const float* x0 = predict_to_act(s);
   monitor_.record_age(s.age_ns);
-  const bool guarded = guard_ != nullptr && guard_->running() && !lockstep;
+  const bool guarded = guard_ != nullptr && guard_->running();
   if (guarded && guard_->anytime()) c_->set_stop_flag(guard_->next_stop_flag());
   if (guarded) guard_->arm(deadline_ns, s.seq, plan_.held());
   const std::int64_t optimize_start = clock_->now_ns();
@@ -179,7 +213,7 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, boo
   const std::int64_t done = clock_->now_ns();
   monitor_.record_optimize(done - optimize_start);
   const int guard_steps = guarded ? guard_->disarm() : 0;
-  const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, !lockstep && done > deadline_ns);
+  const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, done > deadline_ns);
   if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
   else consecutive_bad_updates_ = o == Outcome::kBadUpdate ? consecutive_bad_updates_ + 1 : 0;
   if (o == Outcome::kGuardCovered || o == Outcome::kLate) counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
@@ -241,7 +275,7 @@ Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
   return Mode::kFailsafe;
 }
 
-Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep) {
+Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   manoeuvre_.excite(s.x->x, s.now_ns, u_.data());  // the identification manoeuvre, when asked for
   stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
   const Mode m = publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
@@ -251,7 +285,7 @@ Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep
   // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
   // the run repeats bit for bit). In real time it acts after the measured latency.
   const LatencySettings& ls = s_.latency;
-  remember(lockstep ? s.t_act_ns - ls.transport_ns - ls.actuation_delay_ns : sent, u_.data());
+  history_.add(pacing_->command_acts_ns(s.t_act_ns, sent + ls.transport_ns + ls.actuation_delay_ns), u_.data());
   plan_.adopt();
   // What the estimator learns: this cycle's start to its command out.
   if (!latency_.add(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
@@ -283,15 +317,9 @@ void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std
 
 // ---- after the command: timing, health, status, plan --------------------------------
 
-void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published, bool lockstep) {
+void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published) {
   set_mode(published);
-  const std::int64_t end = clock_->now_ns();
-  if (lockstep) {
-    monitor_.record(start_ns, start_ns + (end - t0), false);
-  } else {
-    const bool missed = schedule_.finish(end);
-    monitor_.record(start_ns, end, missed);
-  }
+  const std::int64_t heartbeat = pacing_->finish(start_ns, t0, clock_->now_ns());
   ++cycle_index_;
 
   const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
@@ -300,7 +328,7 @@ void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64
   snap_cycles_.store(monitor_.cycles(), std::memory_order_relaxed);
   snap_misses_.store(monitor_.misses(), std::memory_order_relaxed);
   snap_consecutive_.store(monitor_.consecutive_misses(), std::memory_order_relaxed);
-  heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
+  heartbeat_ns_.store(heartbeat, std::memory_order_relaxed);
 
   maybe_status(published != last_status_mode_);
   if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);

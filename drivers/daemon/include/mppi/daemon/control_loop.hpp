@@ -26,13 +26,13 @@
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/daemon/loop_counters.hpp"
+#include "mppi/daemon/pacing.hpp"
 #include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/latency_estimator.hpp"
-#include "mppi/rt/schedule.hpp"
 #include "mppi/rt/wakeup.hpp"
 #include "mppi/transport/transport.hpp"
 
@@ -129,11 +129,12 @@ class ControlLoop {
   void prepare();
   // Fixes the first release (real time) at clock now; run() calls it if not done.
   void start();
-  // One real-time cycle: sleeps until its release (trigger clock) or a state that starts it
-  // (trigger state), then runs. False if stopped first.
-  bool step_realtime(const std::atomic<bool>& stop);
-  // One lock-step cycle per tick. False if no tick arrived before stop.
-  bool step_lockstep(const std::atomic<bool>& stop);
+  // One cycle, when the pacing starts it: real time, at its release (trigger clock) or on a
+  // state (trigger state); lock-step, on a tick. False if stopped first (or, lock-step, the
+  // tick was answered already).
+  bool step(const std::atomic<bool>& stop);
+  bool step_realtime(const std::atomic<bool>& stop) { return step(stop); }
+  bool step_lockstep(const std::atomic<bool>& stop) { return step(stop); }
   // The final status (healthy = 0), after the last cycle.
   void publish_final_status();
 
@@ -143,7 +144,7 @@ class ControlLoop {
   std::int64_t latency_estimate_ns() const { return latency_estimate_ns_.load(std::memory_order_relaxed); }
   // The disturbance observer's estimate (loop thread; tests and the final report).
   const float* disturbance_estimate() const { return observer_.estimate(); }
-  std::int64_t skipped_periods() const { return schedule_.skipped_periods(); }
+  std::int64_t skipped_periods() const { return pacing_->skipped_periods(); }
   transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
   // For other threads while the loop runs (the histograms are the loop thread's alone).
   struct Snapshot {
@@ -197,20 +198,18 @@ class ControlLoop {
   };
   static const ParamRoute& route_for(const char* key);
 
-  // The trigger (loop_trigger.cpp).
-  bool step_state_triggered(const std::atomic<bool>& stop);
   // The cycle and its paths (control_loop.cpp): the state check's failsafe (starting over on
   // entry), the stale state's hold and the fresh state's update, each saying what the cycle
   // publishes; then the sends, and the bookkeeping after the command.
-  void cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep);
+  void cycle(const CycleTimes& t);
   Outcome enter_failsafe();
   Outcome hold_stale(const CycleState& s);
-  Outcome optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep);
+  Outcome optimize(const CycleState& s, std::int64_t deadline_ns);
   bool run_optimizer(const float* x0);
   void take_back_from_guard(int steps, bool good, std::int64_t deadline_ns);
   transport::Mode send_failsafe(const CycleState& s, std::int64_t t0);
   transport::Mode send_held(const CycleState& s, std::int64_t t0);
-  transport::Mode send_fresh(const CycleState& s, std::int64_t t0, bool lockstep);
+  transport::Mode send_fresh(const CycleState& s, std::int64_t t0);
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
   bool publish_failsafe(std::int64_t state_seq);
   // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
@@ -218,15 +217,12 @@ class ControlLoop {
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void remember(std::int64_t sent_ns, const float* u);
-  void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published, bool lockstep);
+  void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published);
   void apply_between_cycles();
 
   // The act-time prediction (act_time.cpp): the newest state on the loop's timeline and
   // when this cycle's command acts; the state predicted to then.
-  CycleState read_state(std::int64_t now_state_ns, bool lockstep) const;
-  // The state's sample time on the loop's timeline, and whether it lies further in the
-  // future than the tolerance.
-  std::int64_t state_time_ns(const transport::StateSample& x, bool lockstep, bool* future) const;
+  CycleState read_state(std::int64_t now_state_ns) const;
   const float* predict_to_act(const CycleState& s);
   void catch_up_estimate(std::int64_t t_state_ns);
 
@@ -279,10 +275,9 @@ class ControlLoop {
   RolloutPublisher rollouts_;
   LoopCounters counters_;
 
-  rt::PeriodicSchedule schedule_;
   rt::DeadlineMonitor monitor_;
+  std::unique_ptr<Pacing> pacing_;  // real time or lock-step: what starts a cycle, the timeline
   CommandOut out_;  // the gate, the sequence and the transport: shared with the guard
-  bool started_ = false;
 
   TaskInputs inputs_;
   transport::ObstacleInput obstacles_all_;  // last full set, nearest kept in inputs_
@@ -306,9 +301,6 @@ class ControlLoop {
   std::int64_t cycle_index_ = 0;
   std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
-  std::int64_t last_tick_seq_ = -1;
-  std::int64_t trigger_recv_ns_ = INT64_MIN;  // recv_ns of the state that started the last cycle
-  bool grace_started_ = false;                // trigger state: the last cycle started without a state
 
   // Latency compensation (loop thread only).
   rt::LatencyEstimator latency_;
