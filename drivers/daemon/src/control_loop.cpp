@@ -79,25 +79,16 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       plan_(controller),
       u_(static_cast<std::size_t>(nu_)),
       failsafe_(s_.failsafe_u.empty() ? controller->settings().u_init : s_.failsafe_u),
-      latency_(s_.latency.estimator),
-      history_(nu_, controller->settings().u_init),
-      x_pred_(static_cast<std::size_t>(controller->nx())),
-      x_lag_(static_cast<std::size_t>(controller->nx())),
-      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
-      delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
+      act_(s_.latency, *controller),
+      estimators_(s_.disturbance, s_.latency.delay_estimate, *controller, actuator_states(s_, *controller)),
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
   s_.command_kind = out_.kind();
-  configured_delay_ns_ = s_.latency.actuation_delay_ns;
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
   inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();
   status_.rollouts = c_->settings().rollouts;
   status_.horizon = c_->horizon();
-  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
-  // Only models with an external acceleration (the quadrotors) take the observer's estimate.
-  const float zero[3] = {0.0f, 0.0f, 0.0f};
-  observe_ = s_.disturbance.estimate && c_->set_external_accel(zero);
   if (s_.deadline_guard && !s_.lockstep)
     guard_ = std::make_unique<DeadlineGuard>(guard_settings(s_, period_ns_),
                                              guard_clock != nullptr ? guard_clock : &own_guard_clock_, &out_,
@@ -136,16 +127,13 @@ bool ControlLoop::step(const std::atomic<bool>& stop) {
   return false;
 }
 
-void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
-  history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
-}
 
 // One control cycle, as it runs: check the state; optimise from a fresh one; publish what
 // came of it; then the bookkeeping (timing, health, status, plan).
 void ControlLoop::cycle(const CycleTimes& t) {
   const std::int64_t t0 = pacing_->compute_start(t.start_ns);
   apply_between_cycles();
-  const CycleState s = read_state(t.now_state_ns);
+  const CycleState s = act_.read(*in_, *pacing_, t.now_state_ns, last_state_seq_used_);
 
   Outcome outcome = Outcome::kFailsafe;
   switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
@@ -194,7 +182,7 @@ Outcome ControlLoop::enter_failsafe() {
 Outcome ControlLoop::hold_stale(const CycleState& s) {
   counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
   if (s.future) counters_.future_states.fetch_add(1, std::memory_order_relaxed);
-  if (s_.latency.compensate) counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
+  if (act_.compensate()) counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
   plan_.advance();  // keep the warm start aligned with time
   return Outcome::kStale;
 }
@@ -248,16 +236,62 @@ bool ControlLoop::run_optimizer(const float* x0) {
 // this late result is not published. The command history and the held plan follow what
 // went out; a good update still becomes the plan to fall back on.
 void ControlLoop::take_back_from_guard(int steps, bool good, std::int64_t deadline_ns) {
-  for (int i = 0; i < steps; ++i) remember(deadline_ns + i * period_ns_, guard_->step(i));
+  for (int i = 0; i < steps; ++i) act_.remember_sent(deadline_ns + i * period_ns_, guard_->step(i));
   consecutive_bad_updates_ = good ? 0 : consecutive_bad_updates_ + 1;
   plan_.take_back(steps, good);
+}
+
+// The state to optimise from. A new sample first teaches the loop what the last prediction
+// missed (adapt_to). Latency compensation: the state as it will be when this command acts,
+// predicted through the commands already sent.
+const float* ControlLoop::predict_to_act(const CycleState& s) {
+  if (s.new_sample) adapt_to(s);
+  if (!act_.compensate()) {
+    plan_.detach();
+    return s.x->x;
+  }
+  counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
+  const float* x = act_.predict(*c_, s);
+  monitor_.record_lead(s.lead_ns);
+  // A moving reference is compared with the predicted state at the predicted state's time:
+  // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
+  if (have_reference_ && inputs_.reference.kind != Reference::kHold) {
+    inputs_.reference_time = static_cast<float>(static_cast<double>(s.x->sample_utime - reference_t0_utime_) * 1e-6 +
+                                                static_cast<double>(s.lead_ns) * 1e-9);
+    c_->set_inputs(inputs_);
+  }
+  return x;
+}
+
+// What the new state teaches: the disturbance and mass estimates, the actuation delay.
+void ControlLoop::adapt_to(const CycleState& s) {
+  if (estimators_.learn(*c_, act_.history(), s.x->x, s.t_state_ns, act_.actuation_delay_ns())) {
+    act_.set_actuation_delay_ns(estimators_.delay_ns());
+    counters_.actuation_delay_ns.store(estimators_.delay_ns(), std::memory_order_relaxed);
+  }
+}
+
+// What the commands sent so far taught: the command history they are predicted through, the
+// disturbance and mass estimates, the delay estimate's window (its delay stays).
+void ControlLoop::forget_estimates() {
+  act_.forget_commands();
+  estimators_.forget(*c_);
+}
+
+// The commands sent so far were not flown (an autopilot flew its own take-off until the bridge
+// engaged: it asks for this then). What the estimates learnt from them goes: the disturbance,
+// the mass, the delay (back to the settings'), and the command history they predict through.
+void ControlLoop::restart_estimates() {
+  forget_estimates();
+  act_.set_actuation_delay_ns(act_.configured_actuation_delay_ns());
+  counters_.actuation_delay_ns.store(act_.configured_actuation_delay_ns(), std::memory_order_relaxed);
 }
 
 // ---- the sends: stamp the timing, publish, remember what went out (the command history) --
 
 Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
   stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
-  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  if (publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), failsafe_.data());
   return Mode::kFailsafe;
 }
 
@@ -268,10 +302,10 @@ Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
   stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
   std::copy_n(plan_.due(), nu_, u_.data());
   if (publish(Mode::kHoldPlan, u_.data(), s.seq)) {
-    remember(sent_ns(s.now_ns, t0), u_.data());
+    act_.remember_sent(sent_ns(s.now_ns, t0), u_.data());
     return Mode::kHoldPlan;
   }
-  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  if (publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), failsafe_.data());
   return Mode::kFailsafe;
 }
 
@@ -284,12 +318,10 @@ Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   // simulator charges its latency: the command acts when the controller expected it
   // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
   // the run repeats bit for bit). In real time it acts after the measured latency.
-  const LatencySettings& ls = s_.latency;
-  history_.add(pacing_->command_acts_ns(s.t_act_ns, sent + ls.transport_ns + ls.actuation_delay_ns), u_.data());
+  act_.record(pacing_->command_acts_ns(s.t_act_ns, act_.acts_after_sent(sent)), u_.data());
   plan_.adopt();
   // What the estimator learns: this cycle's start to its command out.
-  if (!latency_.add(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
-  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
+  if (!act_.learn(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
   if (s.new_sample) monitor_.record_latency(sent - s.t_state_ns);
   return m;
 }

@@ -45,12 +45,12 @@ void ControlLoop::maybe_status(bool force) {
   status_.consecutive_misses = w.consecutive_misses;
   status_.state_to_command_ms_p99 = f(w.latency.p99_ms);
   status_.state_age_ms_p99 = f(w.age.p99_ms);
-  status_.latency_expected_ms = f(static_cast<double>(latency_.estimate_ns()) * 1e-6);
+  status_.latency_expected_ms = f(static_cast<double>(act_.estimate_ns()) * 1e-6);
   status_.lead_ms_mean = f(w.lead.mean_ms);
   status_.lead_ms_p99 = f(w.lead.p99_ms);
-  std::copy_n(observer_.estimate(), 3, status_.disturbance_accel);
+  std::copy_n(estimators_.disturbance(), 3, status_.disturbance_accel);
   status_.model_mass = c_->mass();
-  status_.actuation_delay_ms = static_cast<float>(static_cast<double>(s_.latency.actuation_delay_ns) * 1e-6);
+  status_.actuation_delay_ms = static_cast<float>(static_cast<double>(act_.actuation_delay_ns()) * 1e-6);
   status_.ess = last_stats_.ess;
   status_.min_cost = last_stats_.min_cost;
   const auto& ic = in_->counters;

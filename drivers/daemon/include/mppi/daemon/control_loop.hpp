@@ -18,10 +18,11 @@
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/act_time.hpp"
+#include "mppi/daemon/adaptation.hpp"
 #include "mppi/daemon/command_out.hpp"
 #include "mppi/daemon/cycle_outcome.hpp"
 #include "mppi/daemon/deadline_guard.hpp"
-#include "mppi/daemon/delay_estimator.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
@@ -29,37 +30,12 @@
 #include "mppi/daemon/pacing.hpp"
 #include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
-#include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
-#include "mppi/rt/latency_estimator.hpp"
 #include "mppi/rt/wakeup.hpp"
 #include "mppi/transport/transport.hpp"
 
 namespace mppi::daemon {
-
-// Latency compensation: each fresh cycle optimises from the state predicted to the time
-// its command will act, t_act = cycle start + expected latency + transport + actuation
-// delay, through the commands already sent (they act meanwhile), and the plan is shifted
-// by the control steps that really elapsed (skipped cycles, older states).
-struct LatencySettings {
-  bool compensate = true;
-  rt::LatencyEstimatorSettings estimator;   // expected cycle start -> command sent
-  std::int64_t transport_ns = 200'000;      // command sent -> the plant has it
-  std::int64_t actuation_delay_ns = 0;      // the plant has it -> it acts (ESCs, autopilot)
-  // How far the autopilot's position and velocity estimate trails the vehicle (its EKF's
-  // delay; the vehicle file's estimate_lag): they are predicted from that much before the
-  // sample time, the attitude and rates (the gyro's, current) from the sample time. Quadrotor
-  // states only (position, velocity first).
-  std::int64_t estimate_lag_ns = 0;
-  // The state's age from its sample_utime, stamped on this host's wall clock (the
-  // simulator and the MAVLink bridge do); false: from its receipt (a publisher whose clock
-  // is not ours; the transport delay is then not seen).
-  bool use_sample_time = true;
-  std::int64_t future_tolerance_ns = 2'000'000;  // a sample time further ahead is refused
-  // The actuation delay estimated in flight (delay_estimator.hpp): replaces actuation_delay_ns.
-  DelayEstimateSettings delay_estimate;
-};
 
 // Real time: what starts a cycle.
 //   kClock  the fixed-rate grid at rate_hz; a state waits up to a period for its cycle.
@@ -141,9 +117,9 @@ class ControlLoop {
   const LoopCounters& counters() const { return counters_; }
   rt::TimingSummary timing_total() const { return monitor_.total(); }
   rt::TimingSummary timing_window() const { return monitor_.window(); }
-  std::int64_t latency_estimate_ns() const { return latency_estimate_ns_.load(std::memory_order_relaxed); }
+  std::int64_t latency_estimate_ns() const { return act_.published_estimate_ns(); }
   // The disturbance observer's estimate (loop thread; tests and the final report).
-  const float* disturbance_estimate() const { return observer_.estimate(); }
+  const float* disturbance_estimate() const { return estimators_.disturbance(); }
   std::int64_t skipped_periods() const { return pacing_->skipped_periods(); }
   transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
   // For other threads while the loop runs (the histograms are the loop thread's alone).
@@ -171,22 +147,9 @@ class ControlLoop {
   std::int64_t cycle_index() const { return cycle_index_; }
   // Replay: the next cycles' expected latency (ns) instead of the estimator's; < 0: the
   // estimator's.
-  void set_expected_latency(std::int64_t ns) { expected_override_ns_ = ns; }
+  void set_expected_latency(std::int64_t ns) { act_.set_expected_latency(ns); }
 
  private:
-  // What a cycle knows of the newest state, on the loop's timeline (now_state_ns's).
-  struct CycleState {
-    const transport::StateSample* x = nullptr;
-    bool have = false;           // a state has arrived
-    bool future = false;         // stamped further ahead than the tolerance
-    bool new_sample = false;     // not the one the last fresh cycle optimised from
-    std::int64_t seq = -1;
-    std::int64_t now_ns = 0;      // the cycle's start
-    std::int64_t t_state_ns = 0;  // the sample time
-    std::int64_t age_ns = 0;
-    std::int64_t t_act_ns = 0;    // when this cycle's command acts
-    std::int64_t lead_ns = 0;     // t_act - sample time, with latency compensation; else 0
-  };
   // One row of the parameter table (loop_params.cpp): the key (a prefix when it ends in
   // '.'; "" matches every key), whether a live optimizer's builder takes it instead, the
   // check (nullptr: none) and the change (nullptr: none); each returns "" or "key: why".
@@ -216,19 +179,13 @@ class ControlLoop {
   void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
-  void remember(std::int64_t sent_ns, const float* u);
   void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published);
   void apply_between_cycles();
 
-  // The act-time prediction (act_time.cpp): the newest state on the loop's timeline and
-  // when this cycle's command acts; the state predicted to then.
-  CycleState read_state(std::int64_t now_state_ns) const;
+  // The state predicted to when this cycle's command acts (ActTime), after what it teaches
+  // (Estimators).
   const float* predict_to_act(const CycleState& s);
-  void catch_up_estimate(std::int64_t t_state_ns);
-
-  // The adaptation (adaptation.cpp): what a new state teaches the loop (the external
-  // acceleration and the mass through the disturbance observer, the actuation delay).
-  void adapt_to(const float* x, std::int64_t t_state_ns);
+  void adapt_to(const CycleState& s);
   void forget_estimates();   // on failsafe and on restart_estimates
   void restart_estimates();  // daemon.restart_estimates
 
@@ -302,17 +259,9 @@ class ControlLoop {
   std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
 
-  // Latency compensation (loop thread only).
-  rt::LatencyEstimator latency_;
-  CommandHistory history_;
-  std::vector<float> x_pred_;
-  std::vector<float> x_lag_;  // the estimate's position and velocity caught up (estimate_lag_ns)
-  DisturbanceObserver observer_;
-  DelayEstimator delays_;
-  std::int64_t configured_delay_ns_ = 0;  // the settings' actuation delay (restart_estimates)
+  ActTime act_;              // latency compensation: the latency estimate, the command history
+  Estimators estimators_;    // the disturbance, mass and actuation delay estimates
   IdentificationManoeuvre manoeuvre_;
-  bool observe_ = false;  // the model takes an external acceleration and estimation is on
-  std::atomic<std::int64_t> latency_estimate_ns_{0};
 
   rt::MonotonicClock own_guard_clock_;  // the guard's clock unless one is given
   std::unique_ptr<DeadlineGuard> guard_;  // real time with deadline_guard on; else null
@@ -325,7 +274,6 @@ class ControlLoop {
   std::atomic<double> snap_rate_{0.0};
 
   LiveOptimizer* live_ = nullptr;
-  std::int64_t expected_override_ns_ = -1;
 };
 
 }  // namespace mppi::daemon
