@@ -74,8 +74,7 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
                           period_ns_)),
       out_(transport, &counters_, controller->settings().u_min, controller->settings().u_max, nu_,
            s_.command_kind >= 0 ? s_.command_kind : command_kind_for(controller->task())),
-      obstacle_order_(transport::kMaxObstaclesIn),
-      distances_(transport::kMaxObstaclesIn),
+      feed_(controller->vehicles(), s_.map_timeout_ns),
       plan_(controller),
       u_(static_cast<std::size_t>(nu_)),
       failsafe_(s_.failsafe_u.empty() ? controller->settings().u_init : s_.failsafe_u),
@@ -84,7 +83,6 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
   s_.command_kind = out_.kind();
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
-  inputs_.vehicle_count = controller->vehicles();
   status_.backend = c_->backend();
   status_.task = c_->task().c_str();
   status_.rollouts = c_->settings().rollouts;
@@ -255,11 +253,7 @@ const float* ControlLoop::predict_to_act(const CycleState& s) {
   monitor_.record_lead(s.lead_ns);
   // A moving reference is compared with the predicted state at the predicted state's time:
   // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
-  if (have_reference_ && inputs_.reference.kind != Reference::kHold) {
-    inputs_.reference_time = static_cast<float>(static_cast<double>(s.x->sample_utime - reference_t0_utime_) * 1e-6 +
-                                                static_cast<double>(s.lead_ns) * 1e-9);
-    c_->set_inputs(inputs_);
-  }
+  feed_.reference_at_lead(*c_, *s.x, s.lead_ns);
   return x;
 }
 
@@ -386,8 +380,8 @@ void ControlLoop::apply_between_cycles() {
   const bool new_ref = in_->reference.update();
   const bool new_obs = in_->obstacles.update();
   const bool new_map = in_->map != nullptr && in_->map->update();
-  if (new_state || new_ref || new_obs || new_map) update_inputs(in_->state.front(), new_ref, new_obs, new_map);
-  note_map_age();
+  if (new_state || new_ref || new_obs || new_map) feed_.update(*in_, *c_, counters_, {new_ref, new_obs, new_map});
+  feed_.note_map_age(*in_, counters_);
 }
 
 }  // namespace mppi::daemon

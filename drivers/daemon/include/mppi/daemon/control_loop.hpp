@@ -30,6 +30,7 @@
 #include "mppi/daemon/pacing.hpp"
 #include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
+#include "mppi/daemon/task_inputs.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/wakeup.hpp"
@@ -189,12 +190,6 @@ class ControlLoop {
   void forget_estimates();   // on failsafe and on restart_estimates
   void restart_estimates();  // daemon.restart_estimates
 
-  // The task inputs (task_inputs.cpp): reference, goals and the nearest obstacles.
-  void update_inputs(const transport::StateSample& x, bool reference_changed, bool obstacles_changed, bool map_changed);
-  void note_map_age();
-  void hold_where_the_state_is(const transport::StateSample& x);
-  void select_obstacles(const transport::StateSample& x);
-
   // The status publishing (loop_status.cpp): mode changes, status, the display plan.
   void set_mode(transport::Mode m);
   void maybe_status(bool force);
@@ -236,17 +231,7 @@ class ControlLoop {
   std::unique_ptr<Pacing> pacing_;  // real time or lock-step: what starts a cycle, the timeline
   CommandOut out_;  // the gate, the sequence and the transport: shared with the guard
 
-  TaskInputs inputs_;
-  transport::ObstacleInput obstacles_all_;  // last full set, nearest kept in inputs_
-  std::vector<int> obstacle_order_;
-  std::vector<float> distances_;
-  std::int64_t reference_t0_utime_ = 0;
-  bool have_reference_ = false;
-  bool holding_ = false;  // goals set from the first state (no goal or reference yet)
-  bool have_obstacles_ = false;
-  bool have_map_ = false;           // inputs_.field points at the inbox's front map
-  std::uint64_t map_stamp_ = 0;     // +1 per map taken (the CUDA backend's copy follows it)
-  std::int64_t map_utime_ = 0;      // the map in use
+  TaskInputFeed feed_;  // reference, goals, the nearest obstacles, the local map
 
   PlanTimeline plan_;           // the held plan, the warm start and when their step 0 acts
   std::vector<float> u_;        // this cycle's command
