@@ -36,9 +36,15 @@ std::vector<int> actuator_states(const LoopSettings& s, const Controller& c) {
   return out;
 }
 
-std::int64_t every(double rate_hz, double sub_hz) {
-  if (sub_hz <= 0.0) return 0;
-  return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
+OutputSettings output_settings(const LoopSettings& s, const Controller& c) {
+  OutputSettings o;
+  o.rate_hz = s.rate_hz;
+  o.status_hz = s.status_hz;
+  o.plan_hz = s.plan_hz;
+  o.command_kind = s.command_kind >= 0 ? s.command_kind : command_kind_for(c.task());
+  o.failsafe_u = s.failsafe_u;
+  o.rollouts = s.rollouts;
+  return o;
 }
 
 std::unique_ptr<Pacing> make_pacing(const LoopSettings& s, const PacingContext& ctx, std::int64_t period_ns) {
@@ -64,33 +70,23 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       tx_(transport),
       in_(inbox),
       s_(std::move(settings)),
-      nu_(controller->nu()),
       period_ns_(std::llround(1e9 / s_.rate_hz)),
-      status_every_(every(s_.rate_hz, s_.status_hz)),
-      plan_every_(every(s_.rate_hz, s_.plan_hz)),
-      rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
       monitor_(period_ns_),
       pacing_(make_pacing(s_, {clock, inbox, &monitor_, &counters_, {s_.latency.use_sample_time, s_.latency.future_tolerance_ns}},
                           period_ns_)),
-      out_(transport, &counters_, controller->settings().u_min, controller->settings().u_max, nu_,
-           s_.command_kind >= 0 ? s_.command_kind : command_kind_for(controller->task())),
+      outputs_(transport, &counters_, *controller, output_settings(s_, *controller)),
       feed_(controller->vehicles(), s_.map_timeout_ns),
       plan_(controller),
-      u_(static_cast<std::size_t>(nu_)),
-      failsafe_(s_.failsafe_u.empty() ? controller->settings().u_init : s_.failsafe_u),
+      u_(static_cast<std::size_t>(controller->nu())),
       act_(s_.latency, *controller),
       estimators_(s_.disturbance, s_.latency.delay_estimate, *controller, actuator_states(s_, *controller)),
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
-  s_.command_kind = out_.kind();
+  s_.command_kind = outputs_.kind();
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
-  status_.backend = c_->backend();
-  status_.task = c_->task().c_str();
-  status_.rollouts = c_->settings().rollouts;
-  status_.horizon = c_->horizon();
   if (s_.deadline_guard && !s_.lockstep)
     guard_ = std::make_unique<DeadlineGuard>(guard_settings(s_, period_ns_),
-                                             guard_clock != nullptr ? guard_clock : &own_guard_clock_, &out_,
-                                             &counters_, plan_.held(), failsafe_);
+                                             guard_clock != nullptr ? guard_clock : &own_guard_clock_,
+                                             outputs_.command_out(), &counters_, plan_.held(), outputs_.failsafe());
 }
 
 ControlLoop::~ControlLoop() = default;
@@ -102,7 +98,7 @@ void ControlLoop::prepare() {
 void ControlLoop::start() {
   prepare();
   pacing_->start(clock_->now_ns());
-  heartbeat_ns_.store(clock_->now_ns(), std::memory_order_relaxed);
+  outputs_.set_heartbeat(clock_->now_ns());
 }
 
 void ControlLoop::run(const std::atomic<bool>& stop, std::int64_t max_cycles) {
@@ -117,7 +113,7 @@ bool ControlLoop::step(const std::atomic<bool>& stop) {
   switch (pacing_->wait(stop, &t)) {
     case Pacing::Wait::kCycle: cycle(t); return true;
     case Pacing::Wait::kResend:  // a lock-step tick answered already: its answer again
-      if (cmd_.seq > 0) out_.resend(cmd_);
+      outputs_.resend_last();
       return false;
     case Pacing::Wait::kStopped:
     case Pacing::Wait::kDrop: return false;
@@ -171,7 +167,7 @@ void ControlLoop::cycle(const CycleTimes& t) {
 // No state, or one past the failsafe timeout. On entry the plan is too old to mean anything
 // when the state comes back: start over.
 Outcome ControlLoop::enter_failsafe() {
-  if (mode_.load(std::memory_order_relaxed) == Mode::kFailsafe) return Outcome::kFailsafe;
+  if (outputs_.mode() == Mode::kFailsafe) return Outcome::kFailsafe;
   plan_.restart();
   forget_estimates();
   return Outcome::kFailsafe;
@@ -218,7 +214,7 @@ bool ControlLoop::run_optimizer(const float* x0) {
       counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
-    if (!out_.passes(u_.data())) {
+    if (!outputs_.passes(u_.data())) {
       counters_.gate_rejects.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
@@ -284,8 +280,8 @@ void ControlLoop::restart_estimates() {
 // ---- the sends: stamp the timing, publish, remember what went out (the command history) --
 
 Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
-  stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
-  if (publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), failsafe_.data());
+  outputs_.stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
+  if (outputs_.publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), outputs_.failsafe().data());
   return Mode::kFailsafe;
 }
 
@@ -293,20 +289,20 @@ Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
 // published: the failsafe if the held step fails the gate. The command history records what
 // went out: the failsafe then, not the refused step (nothing, if the failsafe was blocked too).
 Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
-  stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
-  std::copy_n(plan_.due(), nu_, u_.data());
-  if (publish(Mode::kHoldPlan, u_.data(), s.seq)) {
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
+  std::copy_n(plan_.due(), u_.size(), u_.data());
+  if (outputs_.publish(Mode::kHoldPlan, u_.data(), s.seq)) {
     act_.remember_sent(sent_ns(s.now_ns, t0), u_.data());
     return Mode::kHoldPlan;
   }
-  if (publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), failsafe_.data());
+  if (outputs_.publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), outputs_.failsafe().data());
   return Mode::kFailsafe;
 }
 
 Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   manoeuvre_.excite(s.x->x, s.now_ns, u_.data());  // the identification manoeuvre, when asked for
-  stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
-  const Mode m = publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
+  const Mode m = outputs_.publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
   const std::int64_t sent = sent_ns(s.now_ns, t0);
   // In lock-step the plant's clock stands still while the controller computes, and the
   // simulator charges its latency: the command acts when the controller expected it
@@ -320,45 +316,31 @@ Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   return m;
 }
 
-bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
-  if (!out_.passes(u)) return false;
-  out_.send(&cmd_, mode, u, state_seq);
-  return true;
-}
-
-bool ControlLoop::publish_failsafe(std::int64_t state_seq) {
-  if (publish(Mode::kFailsafe, failsafe_.data(), state_seq)) return true;
-  counters_.commands_blocked.fetch_add(1, std::memory_order_relaxed);
-  return false;
-}
-
-void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns) {
-  auto us = [](std::int64_t ns) {
-    return static_cast<std::int32_t>(std::clamp<std::int64_t>(ns / rt::kNsPerUs, 0, INT32_MAX));
-  };
-  cmd_.age_us = us(age_ns);
-  cmd_.compute_us = us(compute_ns);
-  cmd_.lead_us = us(lead_ns);
-}
-
 // ---- after the command: timing, health, status, plan --------------------------------
 
 void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published) {
-  set_mode(published);
+  outputs_.set_mode(published);
   const std::int64_t heartbeat = pacing_->finish(start_ns, t0, clock_->now_ns());
   ++cycle_index_;
-
   const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
                        consecutive_bad_updates_ < s_.watchdog_max_optimizer_errors;
-  loop_healthy_.store(loop_ok, std::memory_order_relaxed);
-  snap_cycles_.store(monitor_.cycles(), std::memory_order_relaxed);
-  snap_misses_.store(monitor_.misses(), std::memory_order_relaxed);
-  snap_consecutive_.store(monitor_.consecutive_misses(), std::memory_order_relaxed);
-  heartbeat_ns_.store(heartbeat, std::memory_order_relaxed);
+  outputs_.note_cycle(monitor_, loop_ok, heartbeat);
+  maybe_status(false);
+  outputs_.maybe_plan(*c_, cycle_index_, published, plan_.held(), s.seq, s.x->x);
+  outputs_.after_cycle_rollouts(*c_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
+}
 
-  maybe_status(published != last_status_mode_);
-  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);
-  rollouts_.after_cycle(*c_, *tx_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
+void ControlLoop::maybe_status(bool force) {
+  if (!outputs_.status_due(cycle_index_, force)) return;
+  outputs_.publish_status({monitor_.window(), act_.estimate_ns(), estimators_.disturbance(), c_->mass(),
+                           act_.actuation_delay_ns(), last_stats_, in_->counters});
+  monitor_.reset_window();
+}
+
+void ControlLoop::publish_final_status() {
+  // The forced status reports the mode; the final one is unhealthy.
+  outputs_.set_unhealthy();
+  maybe_status(true);
 }
 
 void ControlLoop::apply_between_cycles() {

@@ -20,16 +20,15 @@
 #include "mppi/controller.hpp"
 #include "mppi/daemon/act_time.hpp"
 #include "mppi/daemon/adaptation.hpp"
-#include "mppi/daemon/command_out.hpp"
 #include "mppi/daemon/cycle_outcome.hpp"
 #include "mppi/daemon/deadline_guard.hpp"
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/daemon/loop_counters.hpp"
+#include "mppi/daemon/loop_outputs.hpp"
 #include "mppi/daemon/pacing.hpp"
 #include "mppi/daemon/plan_timeline.hpp"
-#include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/task_inputs.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
@@ -122,20 +121,19 @@ class ControlLoop {
   // The disturbance observer's estimate (loop thread; tests and the final report).
   const float* disturbance_estimate() const { return estimators_.disturbance(); }
   std::int64_t skipped_periods() const { return pacing_->skipped_periods(); }
-  transport::Mode mode() const { return mode_.load(std::memory_order_relaxed); }
+  transport::Mode mode() const { return outputs_.mode(); }
   // For other threads while the loop runs (the histograms are the loop thread's alone).
   struct Snapshot {
     std::int64_t cycles, misses, consecutive_misses;
     double rate_hz;  // measured over the last status window
   };
   Snapshot snapshot() const {
-    return {snap_cycles_.load(std::memory_order_relaxed), snap_misses_.load(std::memory_order_relaxed),
-            snap_consecutive_.load(std::memory_order_relaxed), snap_rate_.load(std::memory_order_relaxed)};
+    return {outputs_.snap_cycles(), outputs_.snap_misses(), outputs_.snap_consecutive(), outputs_.snap_rate()};
   }
   // For the watchdog: monotonic time of the last completed cycle, and whether the loop
   // itself is well (cycling, not stuck in misses or optimizer failures).
-  std::int64_t heartbeat_ns() const { return heartbeat_ns_.load(std::memory_order_relaxed); }
-  bool loop_healthy() const { return loop_healthy_.load(std::memory_order_relaxed); }
+  std::int64_t heartbeat_ns() const { return outputs_.heartbeat_ns(); }
+  bool loop_healthy() const { return outputs_.loop_healthy(); }
   const LoopSettings& settings() const { return s_; }
 
   // Live optimizer updates (control_loop_live.cpp): with `live` set (before the first
@@ -174,10 +172,6 @@ class ControlLoop {
   transport::Mode send_failsafe(const CycleState& s, std::int64_t t0);
   transport::Mode send_held(const CycleState& s, std::int64_t t0);
   transport::Mode send_fresh(const CycleState& s, std::int64_t t0);
-  bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
-  bool publish_failsafe(std::int64_t state_seq);
-  // Timing fields of the next command the loop sends (command_t age_us, compute_us, lead_us).
-  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
   // The cycle's elapsed time on the loop's timeline when a command leaves.
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published);
@@ -190,10 +184,8 @@ class ControlLoop {
   void forget_estimates();   // on failsafe and on restart_estimates
   void restart_estimates();  // daemon.restart_estimates
 
-  // The status publishing (loop_status.cpp): mode changes, status, the display plan.
-  void set_mode(transport::Mode m);
+  // The status, when due (LoopOutputs), from the loop's owners.
   void maybe_status(bool force);
-  void maybe_plan(std::int64_t state_seq, const float* x0);
 
   // Parameters (loop_params.cpp): the table's checks and changes.
   std::string apply_param(const transport::ParamUpdate& p);
@@ -220,28 +212,20 @@ class ControlLoop {
   transport::Transport* tx_;
   transport::Inbox* in_;
   LoopSettings s_;
-  int nu_;
   std::int64_t period_ns_;
-  std::int64_t status_every_;
-  std::int64_t plan_every_;
-  RolloutPublisher rollouts_;
   LoopCounters counters_;
 
   rt::DeadlineMonitor monitor_;
   std::unique_ptr<Pacing> pacing_;  // real time or lock-step: what starts a cycle, the timeline
-  CommandOut out_;  // the gate, the sequence and the transport: shared with the guard
+  LoopOutputs outputs_;  // commands (CommandOut, shared with the guard), mode, status, displays, snapshot
 
   TaskInputFeed feed_;  // reference, goals, the nearest obstacles, the local map
 
   PlanTimeline plan_;           // the held plan, the warm start and when their step 0 acts
   std::vector<float> u_;        // this cycle's command
-  std::vector<float> failsafe_;
-  transport::Command cmd_;
-  transport::StatusReport status_;
   UpdateStats last_stats_;
   std::int64_t last_state_seq_used_ = -1;
   std::int64_t cycle_index_ = 0;
-  std::vector<float> plan_pos_ = std::vector<float>(3 * transport::kMaxPlanPositions);  // predicted path, xyz
   int consecutive_bad_updates_ = 0;
 
   ActTime act_;              // latency compensation: the latency estimate, the command history
@@ -250,13 +234,6 @@ class ControlLoop {
 
   rt::MonotonicClock own_guard_clock_;  // the guard's clock unless one is given
   std::unique_ptr<DeadlineGuard> guard_;  // real time with deadline_guard on; else null
-
-  std::atomic<transport::Mode> mode_{transport::Mode::kFailsafe};
-  transport::Mode last_status_mode_ = transport::Mode::kFailsafe;
-  std::atomic<std::int64_t> heartbeat_ns_{0};
-  std::atomic<bool> loop_healthy_{true};
-  std::atomic<std::int64_t> snap_cycles_{0}, snap_misses_{0}, snap_consecutive_{0};
-  std::atomic<double> snap_rate_{0.0};
 
   LiveOptimizer* live_ = nullptr;
 };
