@@ -122,46 +122,42 @@ bool ControlLoop::step(const std::atomic<bool>& stop) {
 }
 
 
-// One control cycle, as it runs: check the state; optimise from a fresh one; publish what
-// came of it; then the bookkeeping (timing, health, status, plan).
+// One control cycle, as it runs: take what arrived and the newest state; decide (failsafe,
+// hold the plan, or optimise from a fresh state); publish what came of it; settle the plan
+// on it; then the bookkeeping (timing, health, status, displays).
 void ControlLoop::cycle(const CycleTimes& t) {
   const std::int64_t t0 = pacing_->compute_start(t.start_ns);
   apply_between_cycles();
   const CycleState s = act_.read(*in_, *pacing_, t.now_state_ns, last_state_seq_used_);
+  const Outcome outcome = decide(s, t.deadline_ns);
+  const Mode published = send(outcome, s, t0);
+  plan_.settle(outcome);
+  account(s, t.start_ns, t0, published);
+}
 
-  Outcome outcome = Outcome::kFailsafe;
+Outcome ControlLoop::decide(const CycleState& s, std::int64_t deadline_ns) {
   switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
-    case StateCheck::kFailsafe: outcome = enter_failsafe(); break;
-    case StateCheck::kHold: outcome = hold_stale(s); break;
-    case StateCheck::kFresh: outcome = optimize(s, t.deadline_ns); break;
+    case StateCheck::kFailsafe: return enter_failsafe();
+    case StateCheck::kHold: return hold_stale(s);
+    case StateCheck::kFresh: return optimize(s, deadline_ns);
   }
+  return enter_failsafe();
+}
 
-  Mode published = Mode::kHoldPlan;
+// What goes out: the failsafe; the held plan's step due now (a stale state, a bad, missing
+// or late update: the optimizer's output is never published then); nothing, when the guard
+// published the held plan through a stall; or the update's command.
+Mode ControlLoop::send(Outcome outcome, const CycleState& s, std::int64_t t0) {
   switch (outcome) {
-    case Outcome::kFailsafe:
-      published = send_failsafe(s, t0);
-      break;
-    case Outcome::kStale:  // the plan moved a step on (hold_stale)
-      published = send_held(s, t0);
-      break;
-    case Outcome::kGuardCovered:
-      break;  // the guard published the held plan, one step per period
+    case Outcome::kFailsafe: return send_failsafe(s, t0);
+    case Outcome::kGuardCovered: return Mode::kHoldPlan;
+    case Outcome::kStale:
     case Outcome::kBadUpdate:
     case Outcome::kAnytimeHold:
-      // The optimizer's plan may hold NaN (or is not updated): it restarts from the held
-      // plan, the last good one shifted in step with what went out.
-      published = send_held(s, t0);
-      plan_.revert();
-      break;
-    case Outcome::kLate:
-      published = send_held(s, t0);
-      plan_.adopt();  // the late update is the plan to fall back on
-      break;
-    case Outcome::kFresh:
-      published = send_fresh(s, t0);
-      break;
+    case Outcome::kLate: return send_held(s, t0);
+    case Outcome::kFresh: return send_fresh(s, t0);
   }
-  account(s, t.start_ns, t0, published);
+  return send_failsafe(s, t0);
 }
 
 // No state, or one past the failsafe timeout. On entry the plan is too old to mean anything
@@ -195,7 +191,7 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
   const std::int64_t done = clock_->now_ns();
   monitor_.record_optimize(done - optimize_start);
   const int guard_steps = guarded ? guard_->disarm() : 0;
-  const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, done > deadline_ns);
+  const Outcome o = choose_outcome(guard_steps > 0, good, plan_.last_stats().updated, done > deadline_ns);
   if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
   else consecutive_bad_updates_ = o == Outcome::kBadUpdate ? consecutive_bad_updates_ + 1 : 0;
   if (o == Outcome::kGuardCovered || o == Outcome::kLate) counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
@@ -208,9 +204,9 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
 // inside the limits (the command gate).
 bool ControlLoop::run_optimizer(const float* x0) {
   try {
-    last_stats_ = plan_.iterate(x0, u_.data());
-    if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
-    if (!last_stats_.finite) {
+    const UpdateStats& stats = plan_.iterate(x0, u_.data());
+    if (stats.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
+    if (!stats.finite) {
       counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
@@ -309,7 +305,6 @@ Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
   // the run repeats bit for bit). In real time it acts after the measured latency.
   act_.record(pacing_->command_acts_ns(s.t_act_ns, act_.acts_after_sent(sent)), u_.data());
-  plan_.adopt();
   // What the estimator learns: this cycle's start to its command out.
   if (!act_.learn(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
   if (s.new_sample) monitor_.record_latency(sent - s.t_state_ns);
@@ -333,7 +328,7 @@ void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64
 void ControlLoop::maybe_status(bool force) {
   if (!outputs_.status_due(cycle_index_, force)) return;
   outputs_.publish_status({monitor_.window(), act_.estimate_ns(), estimators_.disturbance(), c_->mass(),
-                           act_.actuation_delay_ns(), last_stats_, in_->counters});
+                           act_.actuation_delay_ns(), plan_.last_stats(), in_->counters});
   monitor_.reset_window();
 }
 

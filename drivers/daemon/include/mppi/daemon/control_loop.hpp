@@ -160,10 +160,13 @@ class ControlLoop {
   };
   static const ParamRoute& route_for(const char* key);
 
-  // The cycle and its paths (control_loop.cpp): the state check's failsafe (starting over on
-  // entry), the stale state's hold and the fresh state's update, each saying what the cycle
-  // publishes; then the sends, and the bookkeeping after the command.
+  // The cycle and its paths (control_loop.cpp): decide (the state check's failsafe, starting
+  // over on entry; the stale state's hold; the fresh state's update), each saying what the
+  // cycle publishes; then the sends, the plan settled on the outcome (PlanTimeline), and the
+  // bookkeeping after the command.
   void cycle(const CycleTimes& t);
+  Outcome decide(const CycleState& s, std::int64_t deadline_ns);
+  transport::Mode send(Outcome outcome, const CycleState& s, std::int64_t t0);
   Outcome enter_failsafe();
   Outcome hold_stale(const CycleState& s);
   Outcome optimize(const CycleState& s, std::int64_t deadline_ns);
@@ -223,7 +226,6 @@ class ControlLoop {
 
   PlanTimeline plan_;           // the held plan, the warm start and when their step 0 acts
   std::vector<float> u_;        // this cycle's command
-  UpdateStats last_stats_;
   std::int64_t last_state_seq_used_ = -1;
   std::int64_t cycle_index_ = 0;
   int consecutive_bad_updates_ = 0;
