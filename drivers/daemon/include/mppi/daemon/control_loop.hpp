@@ -8,6 +8,14 @@
 // plan (MODE_HOLD_PLAN); a stale state holds the plan, and a state older than the second
 // timeout publishes the failsafe command (MODE_FAILSAFE). Nothing that fails the command
 // gate (finite, inside limits) ever leaves the process.
+//
+// The loop orchestrates collaborators that each own their state: Pacing (what starts a
+// cycle, real time or lock-step), ActTime (latency compensation: when the command acts, the
+// command history, the state predicted to then), Estimators (disturbance, mass, actuation
+// delay), IdentificationManoeuvre, TaskInputFeed (reference, goals, obstacles, the map),
+// PlanTimeline (the held plan and the warm start), LoopOutputs (commands, mode, status,
+// displays, the snapshot for other threads) and the DeadlineGuard. Another collaborator is one
+// more member, called from the step of the cycle it belongs to (README: "A cycle").
 #pragma once
 
 #include <atomic>
