@@ -1,8 +1,6 @@
-// ControlLoop: the cycle, its paths and the sends. The rooms around it: what starts a cycle
-// (Pacing, pacing.cpp), when its command acts (act_time.cpp), the task inputs
-// (task_inputs.cpp), what a state teaches (adaptation.cpp), the status (loop_status.cpp),
-// the parameter table (loop_params.cpp), live optimizer updates (control_loop_live.cpp); the
-// plan's time (PlanTimeline) and the deadline guard (DeadlineGuard) are classes of their own.
+// ControlLoop: the cycle, its paths and the sends, and the glue between the collaborators
+// that own the state (control_loop.hpp lists them). The parameter table is in
+// loop_params.cpp, live optimizer updates in control_loop_live.cpp.
 #include "mppi/daemon/control_loop.hpp"
 
 #include "mppi/daemon/daemon_settings.hpp"
