@@ -1,8 +1,6 @@
-// ControlLoop: the cycle, its paths and the sends. The rooms around it: what starts a cycle
-// (loop_trigger.cpp), when its command acts (act_time.cpp), the task inputs
-// (task_inputs.cpp), what a state teaches (adaptation.cpp), the status (loop_status.cpp),
-// the parameter table (loop_params.cpp), live optimizer updates (control_loop_live.cpp); the
-// plan's time (PlanTimeline) and the deadline guard (DeadlineGuard) are classes of their own.
+// ControlLoop: the cycle, its paths and the sends, and the glue between the collaborators
+// that own the state (control_loop.hpp lists them). The parameter table is in
+// loop_params.cpp, live optimizer updates in control_loop_live.cpp.
 #include "mppi/daemon/control_loop.hpp"
 
 #include "mppi/daemon/daemon_settings.hpp"
@@ -36,9 +34,21 @@ std::vector<int> actuator_states(const LoopSettings& s, const Controller& c) {
   return out;
 }
 
-std::int64_t every(double rate_hz, double sub_hz) {
-  if (sub_hz <= 0.0) return 0;
-  return std::max<std::int64_t>(1, std::llround(rate_hz / sub_hz));
+OutputSettings output_settings(const LoopSettings& s, const Controller& c) {
+  OutputSettings o;
+  o.rate_hz = s.rate_hz;
+  o.status_hz = s.status_hz;
+  o.plan_hz = s.plan_hz;
+  o.command_kind = s.command_kind >= 0 ? s.command_kind : command_kind_for(c.task());
+  o.failsafe_u = s.failsafe_u;
+  o.rollouts = s.rollouts;
+  return o;
+}
+
+std::unique_ptr<Pacing> make_pacing(const LoopSettings& s, const PacingContext& ctx, std::int64_t period_ns) {
+  if (s.lockstep) return std::make_unique<LockStepPacing>(ctx, s.lockstep_poll_ns);
+  return std::make_unique<RealTimePacing>(ctx, period_ns, s.trigger == Trigger::kState, s.state_trigger_min_gap,
+                                          s.state_trigger_grace);
 }
 
 GuardSettings guard_settings(const LoopSettings& s, std::int64_t period_ns) {
@@ -58,43 +68,23 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       tx_(transport),
       in_(inbox),
       s_(std::move(settings)),
-      nu_(controller->nu()),
       period_ns_(std::llround(1e9 / s_.rate_hz)),
-      status_every_(every(s_.rate_hz, s_.status_hz)),
-      plan_every_(every(s_.rate_hz, s_.plan_hz)),
-      rollouts_(s_.rollouts, s_.rate_hz, c_->vehicles(), c_->horizon()),
-      schedule_(period_ns_),
       monitor_(period_ns_),
-      out_(transport, &counters_, controller->settings().u_min, controller->settings().u_max, nu_,
-           s_.command_kind >= 0 ? s_.command_kind : command_kind_for(controller->task())),
-      obstacle_order_(transport::kMaxObstaclesIn),
-      distances_(transport::kMaxObstaclesIn),
+      pacing_(make_pacing(s_, {clock, inbox, &monitor_, &counters_, {s_.latency.use_sample_time, s_.latency.future_tolerance_ns}},
+                          period_ns_)),
+      outputs_(transport, &counters_, *controller, output_settings(s_, *controller)),
+      feed_(controller->vehicles(), s_.map_timeout_ns),
       plan_(controller),
-      u_(static_cast<std::size_t>(nu_)),
-      failsafe_(s_.failsafe_u.empty() ? controller->settings().u_init : s_.failsafe_u),
-      latency_(s_.latency.estimator),
-      history_(nu_, controller->settings().u_init),
-      x_pred_(static_cast<std::size_t>(controller->nx())),
-      x_lag_(static_cast<std::size_t>(controller->nx())),
-      observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
-      delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
+      u_(static_cast<std::size_t>(controller->nu())),
+      act_(s_.latency, *controller),
+      estimators_(s_.disturbance, s_.latency.delay_estimate, *controller, actuator_states(s_, *controller)),
       manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
-  s_.command_kind = out_.kind();
-  configured_delay_ns_ = s_.latency.actuation_delay_ns;
+  s_.command_kind = outputs_.kind();
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
-  inputs_.vehicle_count = controller->vehicles();
-  status_.backend = c_->backend();
-  status_.task = c_->task().c_str();
-  status_.rollouts = c_->settings().rollouts;
-  status_.horizon = c_->horizon();
-  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
-  // Only models with an external acceleration (the quadrotors) take the observer's estimate.
-  const float zero[3] = {0.0f, 0.0f, 0.0f};
-  observe_ = s_.disturbance.estimate && c_->set_external_accel(zero);
   if (s_.deadline_guard && !s_.lockstep)
     guard_ = std::make_unique<DeadlineGuard>(guard_settings(s_, period_ns_),
-                                             guard_clock != nullptr ? guard_clock : &own_guard_clock_, &out_,
-                                             &counters_, plan_.held(), failsafe_);
+                                             guard_clock != nullptr ? guard_clock : &own_guard_clock_,
+                                             outputs_.command_out(), &counters_, plan_.held(), outputs_.failsafe());
 }
 
 ControlLoop::~ControlLoop() = default;
@@ -103,56 +93,75 @@ void ControlLoop::prepare() {
   if (guard_) guard_->start();
 }
 
-void ControlLoop::remember(std::int64_t sent_ns, const float* u) {
-  history_.add(sent_ns + s_.latency.transport_ns + s_.latency.actuation_delay_ns, u);
+void ControlLoop::start() {
+  prepare();
+  pacing_->start(clock_->now_ns());
+  outputs_.set_heartbeat(clock_->now_ns());
 }
 
-// One control cycle, as it runs: check the state; optimise from a fresh one; publish what
-// came of it; then the bookkeeping (timing, health, status, plan).
-void ControlLoop::cycle(std::int64_t start_ns, std::int64_t deadline_ns, std::int64_t now_state_ns, bool lockstep) {
-  const std::int64_t t0 = lockstep ? clock_->now_ns() : start_ns;
-  apply_between_cycles();
-  const CycleState s = read_state(now_state_ns, lockstep);
+void ControlLoop::run(const std::atomic<bool>& stop, std::int64_t max_cycles) {
+  if (!pacing_->started()) start();
+  for (std::int64_t n = 0; (max_cycles < 0 || n < max_cycles) && !stop.load(std::memory_order_relaxed);)
+    if (step(stop)) ++n;
+}
 
-  Outcome outcome = Outcome::kFailsafe;
-  switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
-    case StateCheck::kFailsafe: outcome = enter_failsafe(); break;
-    case StateCheck::kHold: outcome = hold_stale(s); break;
-    case StateCheck::kFresh: outcome = optimize(s, deadline_ns, lockstep); break;
+bool ControlLoop::step(const std::atomic<bool>& stop) {
+  if (!pacing_->started()) start();
+  CycleTimes t;
+  switch (pacing_->wait(stop, &t)) {
+    case Pacing::Wait::kCycle: cycle(t); return true;
+    case Pacing::Wait::kResend:  // a lock-step tick answered already: its answer again
+      outputs_.resend_last();
+      return false;
+    case Pacing::Wait::kStopped:
+    case Pacing::Wait::kDrop: return false;
   }
+  return false;
+}
 
-  Mode published = Mode::kHoldPlan;
+
+// One control cycle, as it runs: take what arrived and the newest state; decide (failsafe,
+// hold the plan, or optimise from a fresh state); publish what came of it; settle the plan
+// on it; then the bookkeeping (timing, health, status, displays).
+void ControlLoop::cycle(const CycleTimes& t) {
+  const std::int64_t t0 = pacing_->compute_start(t.start_ns);
+  apply_between_cycles();
+  const CycleState s = act_.read(*in_, *pacing_, t.now_state_ns, last_state_seq_used_);
+  const Outcome outcome = decide(s, t.deadline_ns);
+  const Mode published = send(outcome, s, t0);
+  plan_.settle(outcome);
+  account(s, t.start_ns, t0, published);
+}
+
+Outcome ControlLoop::decide(const CycleState& s, std::int64_t deadline_ns) {
+  switch (check_state(s.have, s.age_ns, s.future, s_.state_timeout_ns, s_.failsafe_timeout_ns)) {
+    case StateCheck::kFailsafe: return enter_failsafe();
+    case StateCheck::kHold: return hold_stale(s);
+    case StateCheck::kFresh: return optimize(s, deadline_ns);
+  }
+  return enter_failsafe();
+}
+
+// What goes out: the failsafe; the held plan's step due now (a stale state, a bad, missing
+// or late update: the optimizer's output is never published then); nothing, when the guard
+// published the held plan through a stall; or the update's command.
+Mode ControlLoop::send(Outcome outcome, const CycleState& s, std::int64_t t0) {
   switch (outcome) {
-    case Outcome::kFailsafe:
-      published = send_failsafe(s, t0);
-      break;
-    case Outcome::kStale:  // the plan moved a step on (hold_stale)
-      published = send_held(s, t0);
-      break;
-    case Outcome::kGuardCovered:
-      break;  // the guard published the held plan, one step per period
+    case Outcome::kFailsafe: return send_failsafe(s, t0);
+    case Outcome::kGuardCovered: return Mode::kHoldPlan;
+    case Outcome::kStale:
     case Outcome::kBadUpdate:
     case Outcome::kAnytimeHold:
-      // The optimizer's plan may hold NaN (or is not updated): it restarts from the held
-      // plan, the last good one shifted in step with what went out.
-      published = send_held(s, t0);
-      plan_.revert();
-      break;
-    case Outcome::kLate:
-      published = send_held(s, t0);
-      plan_.adopt();  // the late update is the plan to fall back on
-      break;
-    case Outcome::kFresh:
-      published = send_fresh(s, t0, lockstep);
-      break;
+    case Outcome::kLate: return send_held(s, t0);
+    case Outcome::kFresh: return send_fresh(s, t0);
   }
-  account(s, start_ns, t0, published, lockstep);
+  return send_failsafe(s, t0);
 }
 
 // No state, or one past the failsafe timeout. On entry the plan is too old to mean anything
 // when the state comes back: start over.
 Outcome ControlLoop::enter_failsafe() {
-  if (mode_.load(std::memory_order_relaxed) == Mode::kFailsafe) return Outcome::kFailsafe;
+  if (outputs_.mode() == Mode::kFailsafe) return Outcome::kFailsafe;
   plan_.restart();
   forget_estimates();
   return Outcome::kFailsafe;
@@ -161,17 +170,18 @@ Outcome ControlLoop::enter_failsafe() {
 Outcome ControlLoop::hold_stale(const CycleState& s) {
   counters_.stale_cycles.fetch_add(1, std::memory_order_relaxed);
   if (s.future) counters_.future_states.fetch_add(1, std::memory_order_relaxed);
-  if (s_.latency.compensate) counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
+  if (act_.compensate()) counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
   plan_.advance();  // keep the warm start aligned with time
   return Outcome::kStale;
 }
 
 // A fresh state: predict it to when the command acts, run one update (under the deadline
 // guard in real time) and say what came of it.
-Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep) {
+// (Lock-step has no guard, and its deadline is never missed.)
+Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
   const float* x0 = predict_to_act(s);
   monitor_.record_age(s.age_ns);
-  const bool guarded = guard_ != nullptr && guard_->running() && !lockstep;
+  const bool guarded = guard_ != nullptr && guard_->running();
   if (guarded && guard_->anytime()) c_->set_stop_flag(guard_->next_stop_flag());
   if (guarded) guard_->arm(deadline_ns, s.seq, plan_.held());
   const std::int64_t optimize_start = clock_->now_ns();
@@ -179,7 +189,7 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, boo
   const std::int64_t done = clock_->now_ns();
   monitor_.record_optimize(done - optimize_start);
   const int guard_steps = guarded ? guard_->disarm() : 0;
-  const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, !lockstep && done > deadline_ns);
+  const Outcome o = choose_outcome(guard_steps > 0, good, plan_.last_stats().updated, done > deadline_ns);
   if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
   else consecutive_bad_updates_ = o == Outcome::kBadUpdate ? consecutive_bad_updates_ + 1 : 0;
   if (o == Outcome::kGuardCovered || o == Outcome::kLate) counters_.late_holds.fetch_add(1, std::memory_order_relaxed);
@@ -192,13 +202,13 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, boo
 // inside the limits (the command gate).
 bool ControlLoop::run_optimizer(const float* x0) {
   try {
-    last_stats_ = plan_.iterate(x0, u_.data());
-    if (last_stats_.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
-    if (!last_stats_.finite) {
+    const UpdateStats& stats = plan_.iterate(x0, u_.data());
+    if (stats.partial) counters_.partial_updates.fetch_add(1, std::memory_order_relaxed);
+    if (!stats.finite) {
       counters_.optimizer_nonfinite.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
-    if (!out_.passes(u_.data())) {
+    if (!outputs_.passes(u_.data())) {
       counters_.gate_rejects.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
@@ -214,16 +224,58 @@ bool ControlLoop::run_optimizer(const float* x0) {
 // this late result is not published. The command history and the held plan follow what
 // went out; a good update still becomes the plan to fall back on.
 void ControlLoop::take_back_from_guard(int steps, bool good, std::int64_t deadline_ns) {
-  for (int i = 0; i < steps; ++i) remember(deadline_ns + i * period_ns_, guard_->step(i));
+  for (int i = 0; i < steps; ++i) act_.remember_sent(deadline_ns + i * period_ns_, guard_->step(i));
   consecutive_bad_updates_ = good ? 0 : consecutive_bad_updates_ + 1;
   plan_.take_back(steps, good);
+}
+
+// The state to optimise from. A new sample first teaches the loop what the last prediction
+// missed (adapt_to). Latency compensation: the state as it will be when this command acts,
+// predicted through the commands already sent.
+const float* ControlLoop::predict_to_act(const CycleState& s) {
+  if (s.new_sample) adapt_to(s);
+  if (!act_.compensate()) {
+    plan_.detach();
+    return s.x->x;
+  }
+  counters_.plan_skips.fetch_add(plan_.align(s.t_act_ns), std::memory_order_relaxed);
+  const float* x = act_.predict(*c_, s);
+  monitor_.record_lead(s.lead_ns);
+  // A moving reference is compared with the predicted state at the predicted state's time:
+  // the reference at t_act, not at the sample time (else a lag of `lead` at its speed).
+  feed_.reference_at_lead(*c_, *s.x, s.lead_ns);
+  return x;
+}
+
+// What the new state teaches: the disturbance and mass estimates, the actuation delay.
+void ControlLoop::adapt_to(const CycleState& s) {
+  if (estimators_.learn(*c_, act_.history(), s.x->x, s.t_state_ns, act_.actuation_delay_ns())) {
+    act_.set_actuation_delay_ns(estimators_.delay_ns());
+    counters_.actuation_delay_ns.store(estimators_.delay_ns(), std::memory_order_relaxed);
+  }
+}
+
+// What the commands sent so far taught: the command history they are predicted through, the
+// disturbance and mass estimates, the delay estimate's window (its delay stays).
+void ControlLoop::forget_estimates() {
+  act_.forget_commands();
+  estimators_.forget(*c_);
+}
+
+// The commands sent so far were not flown (an autopilot flew its own take-off until the bridge
+// engaged: it asks for this then). What the estimates learnt from them goes: the disturbance,
+// the mass, the delay (back to the settings'), and the command history they predict through.
+void ControlLoop::restart_estimates() {
+  forget_estimates();
+  act_.set_actuation_delay_ns(act_.configured_actuation_delay_ns());
+  counters_.actuation_delay_ns.store(act_.configured_actuation_delay_ns(), std::memory_order_relaxed);
 }
 
 // ---- the sends: stamp the timing, publish, remember what went out (the command history) --
 
 Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
-  stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
-  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  outputs_.stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
+  if (outputs_.publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), outputs_.failsafe().data());
   return Mode::kFailsafe;
 }
 
@@ -231,80 +283,57 @@ Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
 // published: the failsafe if the held step fails the gate. The command history records what
 // went out: the failsafe then, not the refused step (nothing, if the failsafe was blocked too).
 Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
-  stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
-  std::copy_n(plan_.due(), nu_, u_.data());
-  if (publish(Mode::kHoldPlan, u_.data(), s.seq)) {
-    remember(sent_ns(s.now_ns, t0), u_.data());
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
+  std::copy_n(plan_.due(), u_.size(), u_.data());
+  if (outputs_.publish(Mode::kHoldPlan, u_.data(), s.seq)) {
+    act_.remember_sent(sent_ns(s.now_ns, t0), u_.data());
     return Mode::kHoldPlan;
   }
-  if (publish_failsafe(s.seq)) remember(sent_ns(s.now_ns, t0), failsafe_.data());
+  if (outputs_.publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), outputs_.failsafe().data());
   return Mode::kFailsafe;
 }
 
-Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0, bool lockstep) {
+Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   manoeuvre_.excite(s.x->x, s.now_ns, u_.data());  // the identification manoeuvre, when asked for
-  stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
-  const Mode m = publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
+  const Mode m = outputs_.publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
   const std::int64_t sent = sent_ns(s.now_ns, t0);
   // In lock-step the plant's clock stands still while the controller computes, and the
   // simulator charges its latency: the command acts when the controller expected it
   // to (exactly, when the latency charged is fixed and the estimator pinned to it, so
   // the run repeats bit for bit). In real time it acts after the measured latency.
-  const LatencySettings& ls = s_.latency;
-  remember(lockstep ? s.t_act_ns - ls.transport_ns - ls.actuation_delay_ns : sent, u_.data());
-  plan_.adopt();
+  act_.record(pacing_->command_acts_ns(s.t_act_ns, act_.acts_after_sent(sent)), u_.data());
   // What the estimator learns: this cycle's start to its command out.
-  if (!latency_.add(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
-  latency_estimate_ns_.store(latency_.estimate_ns(), std::memory_order_relaxed);
+  if (!act_.learn(sent - s.now_ns)) counters_.latency_rejected.fetch_add(1, std::memory_order_relaxed);
   if (s.new_sample) monitor_.record_latency(sent - s.t_state_ns);
   return m;
 }
 
-bool ControlLoop::publish(Mode mode, const float* u, std::int64_t state_seq) {
-  if (!out_.passes(u)) return false;
-  out_.send(&cmd_, mode, u, state_seq);
-  return true;
-}
-
-bool ControlLoop::publish_failsafe(std::int64_t state_seq) {
-  if (publish(Mode::kFailsafe, failsafe_.data(), state_seq)) return true;
-  counters_.commands_blocked.fetch_add(1, std::memory_order_relaxed);
-  return false;
-}
-
-void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns) {
-  auto us = [](std::int64_t ns) {
-    return static_cast<std::int32_t>(std::clamp<std::int64_t>(ns / rt::kNsPerUs, 0, INT32_MAX));
-  };
-  cmd_.age_us = us(age_ns);
-  cmd_.compute_us = us(compute_ns);
-  cmd_.lead_us = us(lead_ns);
-}
-
 // ---- after the command: timing, health, status, plan --------------------------------
 
-void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published, bool lockstep) {
-  set_mode(published);
-  const std::int64_t end = clock_->now_ns();
-  if (lockstep) {
-    monitor_.record(start_ns, start_ns + (end - t0), false);
-  } else {
-    const bool missed = schedule_.finish(end);
-    monitor_.record(start_ns, end, missed);
-  }
+void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, Mode published) {
+  outputs_.set_mode(published);
+  const std::int64_t heartbeat = pacing_->finish(start_ns, t0, clock_->now_ns());
   ++cycle_index_;
-
   const bool loop_ok = monitor_.consecutive_misses() < s_.watchdog_max_consecutive_misses &&
                        consecutive_bad_updates_ < s_.watchdog_max_optimizer_errors;
-  loop_healthy_.store(loop_ok, std::memory_order_relaxed);
-  snap_cycles_.store(monitor_.cycles(), std::memory_order_relaxed);
-  snap_misses_.store(monitor_.misses(), std::memory_order_relaxed);
-  snap_consecutive_.store(monitor_.consecutive_misses(), std::memory_order_relaxed);
-  heartbeat_ns_.store(lockstep ? clock_->now_ns() : end, std::memory_order_relaxed);
+  outputs_.note_cycle(monitor_, loop_ok, heartbeat);
+  maybe_status(false);
+  outputs_.maybe_plan(*c_, cycle_index_, published, plan_.held(), s.seq, s.x->x);
+  outputs_.after_cycle_rollouts(*c_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
+}
 
-  maybe_status(published != last_status_mode_);
-  if (plan_every_ > 0 && cycle_index_ % plan_every_ == 0 && published == Mode::kNormal) maybe_plan(s.seq, s.x->x);
-  rollouts_.after_cycle(*c_, *tx_, cycle_index_ - 1, s.seq, published == Mode::kNormal);
+void ControlLoop::maybe_status(bool force) {
+  if (!outputs_.status_due(cycle_index_, force)) return;
+  outputs_.publish_status({monitor_.window(), act_.estimate_ns(), estimators_.disturbance(), c_->mass(),
+                           act_.actuation_delay_ns(), plan_.last_stats(), in_->counters});
+  monitor_.reset_window();
+}
+
+void ControlLoop::publish_final_status() {
+  // The forced status reports the mode; the final one is unhealthy.
+  outputs_.set_unhealthy();
+  maybe_status(true);
 }
 
 void ControlLoop::apply_between_cycles() {
@@ -326,8 +355,8 @@ void ControlLoop::apply_between_cycles() {
   const bool new_ref = in_->reference.update();
   const bool new_obs = in_->obstacles.update();
   const bool new_map = in_->map != nullptr && in_->map->update();
-  if (new_state || new_ref || new_obs || new_map) update_inputs(in_->state.front(), new_ref, new_obs, new_map);
-  note_map_age();
+  if (new_state || new_ref || new_obs || new_map) feed_.update(*in_, *c_, counters_, {new_ref, new_obs, new_map});
+  feed_.note_map_age(*in_, counters_);
 }
 
 }  // namespace mppi::daemon

@@ -50,10 +50,7 @@ void ControlLoop::swap_in(OptimizerBundle* b) {
   // a live update that is not a pointer swap; only when mppi.threads changed).
   if (live_->current_threads() != threads_before && std::strncmp(c_->backend(), "cpu", 3) == 0)
     resize_worker_team(live_->current_threads());
-  status_.rollouts = c_->settings().rollouts;
-  status_.horizon = c_->horizon();
-  status_.backend = c_->backend();
-  status_.task = c_->task().c_str();
+  outputs_.describe(*c_);
   for (int i = 0; i < b->count; ++i) {
     counters_.params_applied.fetch_add(1, std::memory_order_relaxed);
     spdlog::info("parameter {} = {} applied (update seq {}, cycle {})", b->updates[i].key, b->updates[i].value,

@@ -117,36 +117,51 @@ void DisturbanceObserver::integrate(const double r[3], double dt) {
 }
 
 // One Kalman step over s = (theta, a_x, a_y, a_z), each a random walk, measuring the residual
-// acceleration r = H (s_true - s) + noise with H = [j | I]. The process noise is set so that,
-// alone, each would follow a step with its time constant (gain dt / tau per state).
+// acceleration r = H (s_true - s) + noise with H = [j | I].
 void DisturbanceObserver::kalman(const double r[3], const double j[3], double dt) {
   const double noise = s_.mass.accel_noise * s_.mass.accel_noise;
+  add_process_noise(noise, dt);
+  double ph[4][3], gain[4][3];
+  if (!kalman_gain(j, noise, ph, gain)) return;
+  double step[4];
+  for (int i = 0; i < 4; ++i) step[i] = gain[i][0] * r[0] + gain[i][1] * r[1] + gain[i][2] * r[2];
+  update_covariance(gain, ph);
+  const double lo = 1.0 / (1.0 + s_.mass.max_change), hi = 1.0 / std::max(1e-3, 1.0 - s_.mass.max_change);
+  theta_ = std::clamp(theta_ + step[0], lo, hi);
+  const double limit = s_.limit;
+  for (int d = 0; d < 3; ++d) est_[d] = static_cast<float>(std::clamp(est_[d] + step[d + 1], -limit, limit));
+}
+
+// The process noise is set so that, alone, each state would follow a step with its time
+// constant (gain dt / tau per state).
+void DisturbanceObserver::add_process_noise(double noise, double dt) {
   const double k_theta = dt / std::max(1e-3, s_.mass.time_constant_s) / kGravity;
   const double k_accel = dt / std::max(1e-3, s_.time_constant_s);
   cov_[0][0] += noise * k_theta * k_theta;
   for (int i = 1; i < 4; ++i) cov_[i][i] += noise * k_accel * k_accel;
-  // PH' (4x3) and S = H P H' + R (3x3).
-  double ph[4][3], hph[3][3], s_inv[3][3];
+}
+
+// PH' (4x3) into ph, and the gain K = PH' S^-1 with S = H P H' + R (3x3); false when S is
+// singular.
+bool DisturbanceObserver::kalman_gain(const double j[3], double noise, double ph[4][3], double gain[4][3]) const {
+  double hph[3][3], s_inv[3][3];
   for (int i = 0; i < 4; ++i)
     for (int m = 0; m < 3; ++m) ph[i][m] = cov_[i][0] * j[m] + cov_[i][m + 1];
   for (int a = 0; a < 3; ++a)
     for (int b = 0; b < 3; ++b) hph[a][b] = j[a] * ph[0][b] + ph[a + 1][b] + (a == b ? noise : 0.0);
-  if (!invert3(hph, s_inv)) return;
-  double gain[4][3];
+  if (!invert3(hph, s_inv)) return false;
   for (int i = 0; i < 4; ++i)
     for (int m = 0; m < 3; ++m) gain[i][m] = ph[i][0] * s_inv[0][m] + ph[i][1] * s_inv[1][m] + ph[i][2] * s_inv[2][m];
-  double step[4];
-  for (int i = 0; i < 4; ++i) step[i] = gain[i][0] * r[0] + gain[i][1] * r[1] + gain[i][2] * r[2];
-  // P <- P - K (H P) with H P = (P H')'.
+  return true;
+}
+
+// P <- P - K (H P) with H P = (P H')', kept symmetric.
+void DisturbanceObserver::update_covariance(const double gain[4][3], const double ph[4][3]) {
   double next[4][4];
   for (int a = 0; a < 4; ++a)
     for (int b = 0; b < 4; ++b) next[a][b] = cov_[a][b] - (gain[a][0] * ph[b][0] + gain[a][1] * ph[b][1] + gain[a][2] * ph[b][2]);
   for (int a = 0; a < 4; ++a)
     for (int b = 0; b < 4; ++b) cov_[a][b] = 0.5 * (next[a][b] + next[b][a]);
-  const double lo = 1.0 / (1.0 + s_.mass.max_change), hi = 1.0 / std::max(1e-3, 1.0 - s_.mass.max_change);
-  theta_ = std::clamp(theta_ + step[0], lo, hi);
-  const double limit = s_.limit;
-  for (int d = 0; d < 3; ++d) est_[d] = static_cast<float>(std::clamp(est_[d] + step[d + 1], -limit, limit));
 }
 
 }  // namespace mppi::daemon

@@ -46,6 +46,29 @@ std::string map_receive_buffer_warning(const std::string& url, long rmem_max) {
          std::to_string(bytes) + ")";
 }
 
+namespace {
+// udpm/mpudpm: a ttl above 0 sends the datagrams past this host.
+std::string udpm_leaves_host(const std::string& opts) {
+  const std::string ttl = option(opts, "ttl");
+  if (ttl.empty()) return {};  // LCM's default ttl is 0
+  char* end = nullptr;
+  const long v = std::strtol(ttl.c_str(), &end, 10);
+  if (end == ttl.c_str() || *end != '\0' || v < 0) return "ttl=" + ttl + " is not a number: cannot tell";
+  if (v == 0) return {};
+  return "ttl=" + ttl + ": multicast datagrams leave this host (routers forward them up to " + ttl +
+         " hops); every state and command is on the network. Use ttl=0 to keep the bus on the host";
+}
+
+// tcpq: a host other than the loopback is another machine.
+std::string tcpq_leaves_host(const std::string& address) {
+  const std::size_t colon = address.rfind(':');
+  const std::string host = colon == std::string::npos ? address : address.substr(0, colon);
+  if (loopback_host(host)) return {};
+  return "tcpq to " + (host.empty() ? std::string("(no host)") : host) +
+         ": the bus goes over the network to another machine";
+}
+}  // namespace
+
 std::string lcm_url_leaves_host(const std::string& url) {
   const std::size_t sep = url.find("://");
   if (sep == std::string::npos) return "not provider://address: cannot tell where it sends";
@@ -57,23 +80,8 @@ std::string lcm_url_leaves_host(const std::string& url) {
 
   if (provider == "memq") return {};  // inside this process
   if (provider == "file") return {};  // a log file
-  if (provider == "udpm" || provider == "mpudpm") {
-    const std::string ttl = option(opts, "ttl");
-    if (ttl.empty()) return {};  // LCM's default ttl is 0
-    char* end = nullptr;
-    const long v = std::strtol(ttl.c_str(), &end, 10);
-    if (end == ttl.c_str() || *end != '\0' || v < 0) return "ttl=" + ttl + " is not a number: cannot tell";
-    if (v == 0) return {};
-    return "ttl=" + ttl + ": multicast datagrams leave this host (routers forward them up to " + ttl +
-           " hops); every state and command is on the network. Use ttl=0 to keep the bus on the host";
-  }
-  if (provider == "tcpq") {
-    const std::size_t colon = address.rfind(':');
-    const std::string host = colon == std::string::npos ? address : address.substr(0, colon);
-    if (loopback_host(host)) return {};
-    return "tcpq to " + (host.empty() ? std::string("(no host)") : host) +
-           ": the bus goes over the network to another machine";
-  }
+  if (provider == "udpm" || provider == "mpudpm") return udpm_leaves_host(opts);
+  if (provider == "tcpq") return tcpq_leaves_host(address);
   return "unknown LCM provider '" + provider + "': cannot tell whether traffic leaves this host";
 }
 

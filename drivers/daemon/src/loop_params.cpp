@@ -114,10 +114,7 @@ std::string ControlLoop::refuse_optimizer_key(const std::string& key, double) co
 std::string ControlLoop::set_task_param(const std::string& key, double v) {
   std::string err = c_->set_param(key, v);
   // A new model.mass is the mass estimate's new nominal (else the next estimate overwrites it).
-  if (err.empty() && key == "model.mass" && observer_.estimates_mass()) {
-    observer_.set_nominal_mass(static_cast<float>(v));
-    observer_.apply(*c_);
-  }
+  if (err.empty() && key == "model.mass") estimators_.set_nominal_mass(*c_, static_cast<float>(v));
   return err;
 }
 

@@ -50,7 +50,20 @@ void PlanTimeline::advance() {
 
 const UpdateStats& PlanTimeline::iterate(const float* x0, float* u_out) {
   step_on();
-  return c_->iterate(x0, u_out);
+  stats_ = c_->iterate(x0, u_out);
+  return stats_;
+}
+
+void PlanTimeline::settle(Outcome o) {
+  switch (o) {
+    case Outcome::kFresh:
+    case Outcome::kLate: adopt(); break;  // a late update is the plan to fall back on
+    case Outcome::kBadUpdate:
+    case Outcome::kAnytimeHold: revert(); break;  // it may hold NaN, or was not updated
+    case Outcome::kFailsafe:
+    case Outcome::kStale:
+    case Outcome::kGuardCovered: break;  // restart(), advance(), take_back() moved them
+  }
 }
 
 void PlanTimeline::take_back(int steps, bool good) {

@@ -337,6 +337,37 @@ class Replay {
   std::size_t checked_ = 0;  // tx_.out entries compared so far
 };
 
+// The flight's events, the daemon's settings, the log's index (which points into `events`)
+// and the backend it was flown with; "" or why not.
+std::string load_flight(const Options& o, std::vector<Event>* events, mppi::app::AppConfig* cfg,
+                        mppi::daemon::DaemonSettings* ds, Recorded* rec) {
+  bool readable = false;
+  *events = read_log(o.log_path, &readable);
+  if (!readable) return "cannot read " + o.log_path;
+  if (std::string err = load_settings(o, cfg, ds); !err.empty()) return err;
+  *rec = index_log(*events, ds->channels);
+  if (rec->commands.empty()) return "no commands on " + ds->channels.command + " in " + o.log_path;
+  return pin_backend(o, rec->backend, cfg);
+}
+
+// The log's events through the replay, to the end, --max-cycles or the first divergence;
+// the exit code (0: every command compared was identical, and there was one).
+int replay_flight(const Options& o, const std::vector<Event>& events, const Recorded& rec, Replay& replay) {
+  for (const Event& e : events) {
+    if (o.max_cycles >= 0 && replay.cycles() >= o.max_cycles) break;
+    if (!replay.feed(e)) return 1;
+  }
+  std::int64_t unreplayed = 0;
+  for (const auto& [seq, c] : rec.commands)
+    if (seq > replay.cycles()) ++unreplayed;
+  std::printf("replay: %" PRId64 " cycles, %" PRId64 " commands identical bit for bit (state_seq, mode, kind, u, "
+              "age_us, lead_us) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
+              replay.cycles(), replay.compared(), replay.backend(), unreplayed,
+              o.max_cycles >= 0 ? " (--max-cycles)" : "");
+  std::fflush(stdout);
+  return replay.compared() == 0 ? 1 : 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -351,24 +382,11 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   spdlog::set_level(o.verbose ? spdlog::level::info : spdlog::level::err);
 
-  bool readable = false;
-  const std::vector<Event> events = read_log(o.log_path, &readable);
-  if (!readable) {
-    std::fprintf(stderr, "replay: cannot read %s\n", o.log_path.c_str());
-    return 2;
-  }
+  std::vector<Event> events;
   mppi::app::AppConfig cfg;
   mppi::daemon::DaemonSettings ds;
-  if (const std::string err = load_settings(o, &cfg, &ds); !err.empty()) {
-    std::fprintf(stderr, "replay: %s\n", err.c_str());
-    return 2;
-  }
-  const Recorded rec = index_log(events, ds.channels);
-  if (rec.commands.empty()) {
-    std::fprintf(stderr, "replay: no commands on %s in %s\n", ds.channels.command.c_str(), o.log_path.c_str());
-    return 2;
-  }
-  if (const std::string err = pin_backend(o, rec.backend, &cfg); !err.empty()) {
+  Recorded rec;
+  if (const std::string err = load_flight(o, &events, &cfg, &ds, &rec); !err.empty()) {
     std::fprintf(stderr, "replay: %s\n", err.c_str());
     return 2;
   }
@@ -379,19 +397,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "replay: cannot build the controller: %s\n", e.what());
     return 2;
   }
-  bool same = true;
-  for (const Event& e : events) {
-    if (o.max_cycles >= 0 && replay->cycles() >= o.max_cycles) break;
-    if (!(same = replay->feed(e))) break;
-  }
-  if (!same) return 1;
-  std::int64_t unreplayed = 0;
-  for (const auto& [seq, c] : rec.commands)
-    if (seq > replay->cycles()) ++unreplayed;
-  std::printf("replay: %" PRId64 " cycles, %" PRId64 " commands identical bit for bit (state_seq, mode, kind, u, "
-              "age_us, lead_us) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
-              replay->cycles(), replay->compared(), replay->backend(), unreplayed,
-              o.max_cycles >= 0 ? " (--max-cycles)" : "");
-  std::fflush(stdout);
-  return replay->compared() == 0 ? 1 : 0;
+  return replay_flight(o, events, rec, *replay);
 }

@@ -66,6 +66,9 @@ class DisturbanceObserver {
  private:
   void integrate(const double r[3], double dt);
   void kalman(const double r[3], const double j_theta[3], double dt);
+  void add_process_noise(double noise, double dt);
+  bool kalman_gain(const double j[3], double noise, double ph[4][3], double gain[4][3]) const;
+  void update_covariance(const double gain[4][3], const double ph[4][3]);
   void mean_velocity_change(const float* from, const float* to, double dt, double out[3]) const;
 
   DisturbanceSettings s_;

@@ -13,18 +13,22 @@
 //                    so does the held plan, whose step for the old t0 is kept as due()
 //   adopt()          the update is the plan to fall back on: held = warm start
 //   revert()         the update is not trusted: the warm start restarts from the held plan
+//   settle(outcome)  the cycle's outcome decides between the two: adopt() what was published
+//                    or is good but late, revert() a bad or missing update
 //   take_back(n, ok) the deadline guard flew n held steps through a stall: adopt() a good
 //                    update, else drop those steps and restart the optimizer; untimed
 //   restart()        start over (failsafe): the optimizer reset, held = its plan; untimed
 //   rebase(...)      a live update swapped in another controller: both plans resampled
-// Unit-tested on its own in test/rt/test_plan_timeline.cpp. Loop thread only; allocates
-// nothing after construction.
+// The loop reaches either plan only through this class (the guard gets a copy of the held
+// plan when armed). Unit-tested on its own in test/rt/test_plan_timeline.cpp. Loop thread
+// only; allocates nothing after construction.
 #pragma once
 
 #include <cstdint>
 #include <vector>
 
 #include "mppi/controller.hpp"
+#include "mppi/daemon/cycle_outcome.hpp"
 #include "mppi/held_plan.hpp"
 
 namespace mppi::daemon {
@@ -43,10 +47,12 @@ class PlanTimeline {
   // plans then start a step later (the warm start through Controller::fallback).
   void advance();
   // One optimizer update into u_out (may throw: the held plan and t0 have moved on already,
-  // and the caller revert()s). due() is the held step for the t0 before it.
+  // and the caller revert()s). due() is the held step for the t0 before it. The update's
+  // statistics stay as last_stats() (an update that threw leaves the last ones).
   const UpdateStats& iterate(const float* x0, float* u_out);
   void adopt() { held_.assign(c_->plan()); }
   void revert() { c_->set_plan(held_.data()); }
+  void settle(Outcome o);
   // `steps` (>= 1) held steps went out from the guard's copy of the plan held before
   // iterate(); `good`: the update was good.
   void take_back(int steps, bool good);
@@ -63,6 +69,7 @@ class PlanTimeline {
   bool timed() const { return timed_; }
   std::int64_t t0_ns() const { return t0_ns_; }
   std::int64_t dt_ns() const { return dt_ns_; }
+  const UpdateStats& last_stats() const { return stats_; }
 
  private:
   void step_on();  // due_ = held step 0; the held plan shifts by one; t0 += dt (timed)
@@ -74,6 +81,7 @@ class PlanTimeline {
   std::int64_t t0_ns_ = 0;
   bool timed_ = false;
   std::int64_t dt_ns_;
+  UpdateStats stats_;
 };
 
 }  // namespace mppi::daemon
