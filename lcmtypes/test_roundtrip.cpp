@@ -272,11 +272,13 @@ TEST(LcmTypes, ParamUpdate) {
   p.seq = 62;
   p.key = "mppi.lambda";
   p.value = 0.125;
+  p.apply_utime = 63;
   const auto d = roundtrip(p);
   EXPECT_EQ(d.utime, 61);
   EXPECT_EQ(d.seq, 62);
   EXPECT_EQ(d.key, "mppi.lambda");
   EXPECT_EQ(d.value, 0.125);
+  EXPECT_EQ(d.apply_utime, 63);
 }
 
 TEST(LcmTypes, SimClock) {

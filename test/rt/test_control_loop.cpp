@@ -535,6 +535,39 @@ TEST(ControlLoop, ParameterUpdatesApplyBetweenCyclesAndBadOnesAreReported) {
   EXPECT_EQ(r.tx.statuses.back().rejected_params, 5);
 }
 
+// An update naming a state time (param_update_t.apply_utime) waits for the first cycle whose
+// state was sampled at or after it, whenever it arrived; those due together go in arrival order.
+TEST(ControlLoop, ParameterUpdatesWaitForTheStateTimeTheyName) {
+  Rig r;
+  auto push = [&](const char* key, double v, std::int64_t at_us) {
+    transport::ParamUpdate p;
+    std::strncpy(p.key, key, sizeof(p.key) - 1);
+    p.value = v;
+    p.apply_utime = at_us;
+    r.inbox.offer_param(p);
+  };
+  r.fresh_cycle();
+  const std::int64_t t0 = r.inbox.state.front().sample_utime;
+  push("cost.w_xy", 3.0, t0 + 60'000);   // three periods on
+  push("cost.w_xy", 4.0, t0 + 40'000);   // two periods on: first
+  push("cost.w_xy", 5.0, t0 + 60'000);   // due with the first, after it
+  push("cost.w_xy", 2.0, 0);             // at once
+  r.fresh_cycle();                       // state at t0 + 20 ms
+  ASSERT_EQ(r.ctl.params_set.size(), 1u);
+  EXPECT_EQ(r.ctl.params_set[0].second, 2.0);
+  r.fresh_cycle();                       // t0 + 40 ms
+  ASSERT_EQ(r.ctl.params_set.size(), 2u);
+  EXPECT_EQ(r.ctl.params_set[1].second, 4.0);
+  r.state(++r.seq, 1.0f, t0 + 50'000);   // an older sample than the update asks: it waits
+  r.cycle();
+  EXPECT_EQ(r.ctl.params_set.size(), 2u);
+  r.fresh_cycle();
+  ASSERT_EQ(r.ctl.params_set.size(), 4u);
+  EXPECT_EQ(r.ctl.params_set[2].second, 3.0);
+  EXPECT_EQ(r.ctl.params_set[3].second, 5.0);
+  EXPECT_EQ(r.loop.counters().params_applied.load(), 4);
+}
+
 // The parameter table (loop_params.cpp): every kind of key, routed to its row, answered
 // with the row's message. One row per update, in order (a row may depend on the one before).
 TEST(ControlLoop, ParameterTableRoutesEachKeyAndAnswersWithItsReason) {

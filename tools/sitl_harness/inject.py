@@ -1,10 +1,11 @@
 """Parameter updates at set times of a flight (`tools/sitl run --param T:KEY=VALUE`).
 
 Runs inside the flight's network namespace: follows the state stream (T is seconds of
-sample time since the first state, so a lock-step flight gets its updates at the same
-simulated times however fast it runs), publishes each update on MPPI_PARAMS when its time
-comes, and prints one JSON line per update sent and per answer (MPPI_PARAM_RESULT), until
-SIGTERM.
+sample time since the first state) and, once the first state is in, publishes every update on
+MPPI_PARAMS with its apply_utime (the first state's sample time + T): mppid holds each until
+the state of that time, so a lock-step flight applies its updates on the same cycles however
+fast it runs, and a replay finds them there. Prints one JSON line per update sent and per
+answer (MPPI_PARAM_RESULT), until SIGTERM.
 """
 from __future__ import annotations
 
@@ -80,12 +81,14 @@ class Injector:
               applied=r.status == param_result_t.STATUS_APPLIED, cycle=r.cycle, reason=r.reason)
 
     def send_due(self):
-        """Publishes every update whose time has come."""
-        while self.schedule and self.first is not None and self.now >= self.schedule[0][0]:
+        """Publishes every update, each with the state time it applies at, once the first state
+        (the flight's time origin) is in."""
+        while self.schedule and self.first is not None:
             when, key, value = self.schedule.pop(0)
             self.seq += 1
             p = self.types[1]()
             p.utime, p.seq, p.key, p.value = int(time.time() * 1e6), self.seq, key, value
+            p.apply_utime = self.first + round(when * 1e6)
             self.lc.publish("MPPI_PARAMS", p.encode())
             _emit(event="sent", seq=self.seq, key=key, value=value, at_s=when, state_time_s=self.now)
 

@@ -337,8 +337,26 @@ void ControlLoop::publish_final_status() {
 }
 
 void ControlLoop::apply_between_cycles() {
+  const bool new_state = in_->state.update();
+  apply_due_params();
+  if (live_ != nullptr) service_live();
+  const bool new_ref = in_->reference.update();
+  const bool new_obs = in_->obstacles.update();
+  const bool new_map = in_->map != nullptr && in_->map->update();
+  if (new_state || new_ref || new_obs || new_map) feed_.update(*in_, *c_, counters_, {new_ref, new_obs, new_map});
+  feed_.note_map_age(*in_, counters_);
+}
+
+// The updates that arrived are held until the state time they name (0: none); those due at the
+// newest state are applied, in the order they came.
+void ControlLoop::apply_due_params() {
   transport::ParamUpdate p;
   while (in_->params.pop(&p)) {
+    if (params_.hold(p)) continue;
+    counters_.params_rejected.fetch_add(1, std::memory_order_relaxed);
+    answer_param(p, false, std::string(p.key) + ": too many updates waiting for their time");
+  }
+  while (params_.pop_due(in_->state.front().sample_utime, &p)) {
     if (forward_live_param(p)) continue;  // the builder answers
     const std::string err = apply_param(p);
     if (err.empty()) {
@@ -350,13 +368,6 @@ void ControlLoop::apply_between_cycles() {
     }
     answer_param(p, err.empty(), err);
   }
-  if (live_ != nullptr) service_live();
-  const bool new_state = in_->state.update();
-  const bool new_ref = in_->reference.update();
-  const bool new_obs = in_->obstacles.update();
-  const bool new_map = in_->map != nullptr && in_->map->update();
-  if (new_state || new_ref || new_obs || new_map) feed_.update(*in_, *c_, counters_, {new_ref, new_obs, new_map});
-  feed_.note_map_age(*in_, counters_);
 }
 
 }  // namespace mppi::daemon

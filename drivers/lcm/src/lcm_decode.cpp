@@ -182,6 +182,7 @@ void LcmDecoder::param(const void* data, std::size_t size, Inbox* inbox) {
   ParamUpdate p;
   p.seq = param_in_.seq;
   p.value = param_in_.value;
+  p.apply_utime = param_in_.apply_utime;
   if (param_in_.key.size() >= sizeof(p.key)) {
     // Too long for any known key: let the loop reject it by name (truncated, marked).
     std::memcpy(p.key, param_in_.key.data(), sizeof(p.key) - 4);

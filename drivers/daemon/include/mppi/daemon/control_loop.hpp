@@ -33,6 +33,7 @@
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "mppi/daemon/param_schedule.hpp"
 #include "mppi/daemon/loop_counters.hpp"
 #include "mppi/daemon/loop_outputs.hpp"
 #include "mppi/daemon/pacing.hpp"
@@ -187,6 +188,7 @@ class ControlLoop {
   std::int64_t sent_ns(std::int64_t now_state_ns, std::int64_t t0) { return now_state_ns + (clock_->now_ns() - t0); }
   void account(const CycleState& s, std::int64_t start_ns, std::int64_t t0, transport::Mode published);
   void apply_between_cycles();
+  void apply_due_params();
 
   // The state predicted to when this cycle's command acts (ActTime), after what it teaches
   // (Estimators).
@@ -246,6 +248,7 @@ class ControlLoop {
   std::unique_ptr<DeadlineGuard> guard_;  // real time with deadline_guard on; else null
 
   LiveOptimizer* live_ = nullptr;
+  ParamSchedule params_;  // updates held until the state time they name
 };
 
 }  // namespace mppi::daemon

@@ -80,6 +80,7 @@ struct ParamUpdate {
   std::int64_t seq = 0;
   char key[64] = {};
   double value = 0.0;
+  std::int64_t apply_utime = 0;  // the sample time of the first state it applies at; 0: at once
 };
 
 // The answer to one ParamUpdate (mppi_lcm::param_result_t).
