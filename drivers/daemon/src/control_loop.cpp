@@ -78,7 +78,8 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       x_lag_(static_cast<std::size_t>(controller->nx())),
       observer_(s_.disturbance, controller->vehicles(), controller->nx() / controller->vehicles(), controller->mass()),
       delays_(s_.latency.delay_estimate, controller->nx(), actuator_states(s_, *controller)),
-      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
+      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max),
+      work_(s_.work, period_ns_) {
   s_.command_kind = out_.kind();
   configured_delay_ns_ = s_.latency.actuation_delay_ns;
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
@@ -171,6 +172,7 @@ Outcome ControlLoop::hold_stale(const CycleState& s) {
 Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, bool lockstep) {
   const float* x0 = predict_to_act(s);
   monitor_.record_age(s.age_ns);
+  work_.before_update(*c_);  // the rollout count this update runs
   const bool guarded = guard_ != nullptr && guard_->running() && !lockstep;
   if (guarded && guard_->anytime()) c_->set_stop_flag(guard_->next_stop_flag());
   if (guarded) guard_->arm(deadline_ns, s.seq, plan_.held());
@@ -178,6 +180,7 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns, boo
   const bool good = run_optimizer(x0);
   const std::int64_t done = clock_->now_ns();
   monitor_.record_optimize(done - optimize_start);
+  work_.after_update(done - optimize_start);
   const int guard_steps = guarded ? guard_->disarm() : 0;
   const Outcome o = choose_outcome(guard_steps > 0, good, last_stats_.updated, !lockstep && done > deadline_ns);
   if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
@@ -279,6 +282,7 @@ void ControlLoop::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std
   cmd_.age_us = us(age_ns);
   cmd_.compute_us = us(compute_ns);
   cmd_.lead_us = us(lead_ns);
+  cmd_.rollouts = c_->active_rollouts();
 }
 
 // ---- after the command: timing, health, status, plan --------------------------------

@@ -263,6 +263,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.loop.command_kind = command_kind_for(task);
   d.loop.deadline_guard = true;
   d.loop.anytime_margin_ns = 3 * rt::kNsPerMs;
+  d.loop.work.enabled = true;  // the rollout count sized to the computer (daemon.work)
   d.expect_model = state_model_for(task);
   d.local_map = task.find("forest") != std::string::npos;
   if (!section || section.IsNull()) return d;
@@ -272,7 +273,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
                "receive_timeout_ms", "lockstep", "lockstep_trigger", "channels", "realtime", "warmup_iterations",
                "watchdog_max_consecutive_misses", "watchdog_max_optimizer_errors", "failsafe_u", "deadline_guard",
                "latency", "disturbance", "anytime_margin_ms", "live", "trigger", "state_trigger", "rollouts",
-               "spin", "identification", "map"});
+               "spin", "identification", "map", "work"});
   parse_timing(section, &d.loop);
   parse_triggers(section, &d);
   d.spin = flag(section, "spin", d.spin);
@@ -307,6 +308,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   if (const YAML::Node r = subsection(section, "realtime", {"priority", "cpu", "lock_memory"}))
     parse_realtime(r, &d.realtime);
   if (const YAML::Node m = subsection(section, "map", {"enabled", "timeout_ms"})) parse_map(m, &d);
+  if (const YAML::Node w = section["work"]) parse_work_settings(w, &d.loop.work);
   return d;
 }
 

@@ -68,6 +68,8 @@ void ControlLoop::maybe_status(bool force) {
   status_.map_stale_cycles = ld(counters_.map_stale_cycles);
   status_.partial_updates = ld(counters_.partial_updates);
   status_.anytime_holds = ld(counters_.anytime_holds);
+  status_.rollouts_active = c_->active_rollouts();
+  status_.work_size_changes = work_.changes();
   status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);
   tx_->publish_status(status_);
   counters_.status_published.fetch_add(1, std::memory_order_relaxed);

@@ -29,6 +29,7 @@
 #include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/rollout_publisher.hpp"
 #include "mppi/daemon/state_predictor.hpp"
+#include "mppi/daemon/work_sizer.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/latency_estimator.hpp"
@@ -108,6 +109,8 @@ struct LoopSettings {
   // keeps it and its cycles are counted (map_stale_cycles): the trees it holds are still
   // there, while a map dropped would leave the cost blind to them (docs/sensing.md).
   std::int64_t map_timeout_ns = 500 * rt::kNsPerMs;
+  // The rollout count sized to the computer (work_sizer.hpp); off: mppi.rollouts, pinned.
+  WorkSizerSettings work;
 };
 
 class ControlLoop {
@@ -171,6 +174,10 @@ class ControlLoop {
   // Replay: the next cycles' expected latency (ns) instead of the estimator's; < 0: the
   // estimator's.
   void set_expected_latency(std::int64_t ns) { expected_override_ns_ = ns; }
+  // Replay: the next cycles' rollout count (command_t.rollouts) instead of the sizer's; <= 0:
+  // the sizer's.
+  void set_work_size(int rollouts) { work_.pin(rollouts); }
+  const WorkSizer& work_sizer() const { return work_; }
 
  private:
   // What a cycle knows of the newest state, on the loop's timeline (now_state_ns's).
@@ -334,6 +341,7 @@ class ControlLoop {
 
   LiveOptimizer* live_ = nullptr;
   std::int64_t expected_override_ns_ = -1;
+  WorkSizer work_;  // the rollout count (loop thread)
 };
 
 }  // namespace mppi::daemon
