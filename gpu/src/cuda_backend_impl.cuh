@@ -79,7 +79,7 @@ class CudaBackend final : public RolloutBackend<T> {
   static constexpr bool kTeam = T::kVehicles > 1;
 
   CudaBackend(const MppiSettings& s, const CudaSettings& cuda)
-      : k_(s.rollouts), t_(s.horizon), dt_(s.dt), substeps_(s.substeps), seed_(s.seed) {
+      : k_(s.rollouts), t_(s.horizon), active_(s.rollouts), dt_(s.dt), substeps_(s.substeps), seed_(s.seed) {
     // Settings first: the sampler constants index every per-channel vector.
     std::string err = validate(s, kNu);
     if (const std::string e = validate(cuda, T::kVehicles); err.empty() && !e.empty()) err = "mppi.cuda." + e;
@@ -98,10 +98,26 @@ class CudaBackend final : public RolloutBackend<T> {
     log_cuda_launch(std::string(T::Vehicle::kName) + " x" + std::to_string(T::kVehicles) + " K=" + std::to_string(k_) +
                     " T=" + std::to_string(t_) + " on " + device_name_ + ": " + mppi::describe(plan_, task_shape()) +
                     "; mppi.cuda: " + mppi::describe(cuda));
+    run_ = plan_;
     if (plan_.graph) capture_graph();
   }
 
   const char* name() const override { return "cuda"; }
+
+  // The rollouts an update runs: the launch at K with its counts for n (resize_launch: the
+  // same kernels, blocks and weighting chunks, fewer of them; the buffers are K's), the graph
+  // captured again. Rare (the daemon's work sizer), never per cycle.
+  int set_active_rollouts(int n) override {
+    n = std::clamp(n, 1, k_);
+    if (n == active_) return n;
+    active_ = n;
+    run_ = resize_launch(plan_, task_shape(), n);
+    if (plan_.graph) capture_graph();
+    return n;
+  }
+  int active_rollouts() const override { return active_; }
+  // A block of the chunked kernel (32 rollouts; a team's: 32 / vehicles of them, fewer).
+  int rollout_quantum() const override { return 32; }
   bool prepares_params() const override { return plan_.device_grid; }
 
   // The kernels take the sampler constants by value: the graph holds them, so it is captured
@@ -182,8 +198,9 @@ class CudaBackend final : public RolloutBackend<T> {
     }
   }
 
+  // S~(tau_0,k) of the active rollouts of the last update.
   std::vector<float> rollout_costs() const override {
-    std::vector<float> out(static_cast<std::size_t>(k_));
+    std::vector<float> out(static_cast<std::size_t>(active_));
     check(cudaMemcpy(out.data(), d_cost_.as<float>(), out.size() * sizeof(float), cudaMemcpyDeviceToHost),
           what("cudaMemcpy of the rollout costs"));
     return out;
@@ -192,7 +209,7 @@ class CudaBackend final : public RolloutBackend<T> {
   // Row 0 of the cost-to-go through a pinned staging buffer, only when asked (the display
   // sample of the cycle's rollouts): K floats, one copy on the update's stream.
   void step0_costs(float* out) const override {
-    const std::size_t bytes = static_cast<std::size_t>(k_) * sizeof(float);
+    const std::size_t bytes = static_cast<std::size_t>(active_) * sizeof(float);
     cudaError_t e = cudaMemcpyAsync(h_costs_.as<void>(), d_cost_.as<void>(), bytes, cudaMemcpyDeviceToHost, stream_.get());
     if (e == cudaSuccess) e = cudaStreamSynchronize(stream_.get());
     if (e != cudaSuccess) fail(e, what("the copy of the step-0 costs"));
@@ -426,8 +443,8 @@ class CudaBackend final : public RolloutBackend<T> {
 
   // The noise pre-pass: every (rollout, step)'s perturbed control and control cost.
   void enqueue_prepass(cudaStream_t st) {
-    const dim3 sgrid(static_cast<unsigned>((k_ + kSampleBlock - 1) / kSampleBlock), static_cast<unsigned>(t_));
-    sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_input(), d_plan_in(), k_, d_u_.as<float>(), d_cc_.as<float>(), c_);
+    const dim3 sgrid(static_cast<unsigned>((active_ + kSampleBlock - 1) / kSampleBlock), static_cast<unsigned>(t_));
+    sample<T><<<sgrid, kSampleBlock, 0, st>>>(d_input(), d_plan_in(), active_, d_u_.as<float>(), d_cc_.as<float>(), c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the noise pre-pass"); });
   }
 
@@ -437,44 +454,44 @@ class CudaBackend final : public RolloutBackend<T> {
   void enqueue_chunked(cudaStream_t st) {
     const int threads = 32 * plan_.chunk_warps;
     cudaLaunchAttribute attr;
-    const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(plan_.chunk_blocks)),
+    const cudaLaunchConfig_t cfg = launch_config(dim3(static_cast<unsigned>(run_.chunk_blocks)),
                                                  dim3(static_cast<unsigned>(threads)), plan_.chunk_smem, st,
                                                  plan_.pdl && plan_.device_grid, &attr);
     float* u_keep = plan_.keep_controls ? d_u_.as<float>() : nullptr;
     lazy_check(cudaLaunchKernelEx(&cfg, chunked_kernel(), d_input(), d_plan_in(), d_cost_.as<float>(),
                                   d_crashed_.as<unsigned char>(), d_pmin_.as<float>(), d_part_.as<float>(),
-                                  d_stats_part_.as<StatsPart>(), u_keep, k_, t_, plan_.chunk_steps, dt_, substeps_,
+                                  d_stats_part_.as<StatsPart>(), u_keep, active_, t_, plan_.chunk_steps, dt_, substeps_,
                                   inv_lambda_, trajectory_ ? 1 : 0, c_),
                [&] { return what("launching the chunked rollout kernel"); });
     lazy_check(cudaGetLastError(), [&] {
-      return what("launching the chunked rollout kernel (" + std::to_string(plan_.chunk_blocks) + " blocks of " +
+      return what("launching the chunked rollout kernel (" + std::to_string(run_.chunk_blocks) + " blocks of " +
                   std::to_string(threads) + " threads, " + std::to_string(plan_.chunk_smem) + " bytes shared)");
     });
-    launch_finalize(st, static_cast<int>(plan_.chunk_blocks), d_out_.as<float>(), d_stats());
+    launch_finalize(st, static_cast<int>(run_.chunk_blocks), d_out_.as<float>(), d_stats());
   }
 
   // The lane kernel, then weigh_local over chunks of rollouts, then the chunks combined.
   void enqueue_lanes(cudaStream_t st) {
     RolloutIo<kNu> io{nullptr, nullptr};
     if (plan_.prepass) io = RolloutIo<kNu>{d_u_.as<float>(), d_cc_.as<float>()};
-    const dim3 rgrid(static_cast<unsigned>(plan_.rollout_grid));
+    const dim3 rgrid(static_cast<unsigned>(run_.rollout_grid));
     float* u_keep = plan_.keep_controls && !kTeam ? d_u_.as<float>() : nullptr;
     with_rollout_kernel([&](auto kernel) {
       kernel<<<rgrid, plan_.rollout_block, plan_.rollout_smem, st>>>(d_input(), d_plan_in(), io, d_cost_.as<float>(),
-                                                                     d_crashed_.as<unsigned char>(), u_keep, k_, t_,
+                                                                     d_crashed_.as<unsigned char>(), u_keep, active_, t_,
                                                                      dt_, substeps_, c_);
     });
     lazy_check(cudaGetLastError(), [&] {
-      return what("launching the rollout kernel (" + std::to_string(plan_.rollout_grid) + " blocks of " +
+      return what("launching the rollout kernel (" + std::to_string(run_.rollout_grid) + " blocks of " +
                   std::to_string(plan_.rollout_block) + " threads, " + std::to_string(plan_.rollout_smem) +
                   " bytes shared)");
     });
     const float* u_stored = plan_.prepass || (plan_.keep_controls && !kTeam) ? d_u_.as<float>() : nullptr;
-    weigh_local<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(plan_.weigh_chunks)), kReduceBlock, 0, st>>>(
-        d_input(), d_plan_in(), u_stored, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), k_, plan_.weigh_chunk,
+    weigh_local<T><<<dim3(static_cast<unsigned>(t_), static_cast<unsigned>(run_.weigh_chunks)), kReduceBlock, 0, st>>>(
+        d_input(), d_plan_in(), u_stored, d_cost_.as<float>(), d_crashed_.as<unsigned char>(), active_, run_.weigh_chunk,
         inv_lambda_, trajectory_ ? 1 : 0, d_pmin_.as<float>(), d_part_.as<float>(), d_stats_part_.as<StatsPart>(), c_);
     lazy_check(cudaGetLastError(), [&] { return what("launching the weighting kernel"); });
-    launch_finalize(st, plan_.weigh_chunks, d_out_.as<float>(), d_stats());
+    launch_finalize(st, run_.weigh_chunks, d_out_.as<float>(), d_stats());
   }
 
   void summarise(UpdateStats* stats, const float* plan) const {
@@ -485,7 +502,7 @@ class CudaBackend final : public RolloutBackend<T> {
     // 1 / sum (w / sum w)^2 = (sum w)^2 / sum w^2
     stats->ess = d.sum_w2 > 0.0f ? d.sum_w * d.sum_w / d.sum_w2 : 0.0f;
     stats->crashed = d.crashed;
-    stats->rollouts = k_;
+    stats->rollouts = active_;
     stats->partial = false;
     stats->updated = true;
     bool ok = ffinite(stats->ess);
@@ -494,6 +511,7 @@ class CudaBackend final : public RolloutBackend<T> {
   }
 
   int k_, t_;
+  int active_ = 0;  // the rollouts an update runs (set_active_rollouts), at most k_
   float dt_;
   int substeps_;
   std::uint64_t seed_;
@@ -504,7 +522,8 @@ class CudaBackend final : public RolloutBackend<T> {
   int device_ = 0;
   std::string device_name_;
 
-  CudaLaunchPlan plan_;
+  CudaLaunchPlan plan_;  // at K: the buffers are sized by it
+  CudaLaunchPlan run_;   // at the active count: what is launched
   std::size_t in_bytes_ = 0, out_bytes_ = 0;
   DeviceBuffer d_cost_, d_crashed_, d_u_, d_cc_, d_pmin_, d_part_, d_stats_part_, d_in_, d_out_;
   std::size_t layout_offset_ = 0;  // of the grid's layout in the per-cycle input

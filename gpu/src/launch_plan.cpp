@@ -171,6 +171,18 @@ CudaLaunchPlan plan_launch(const MppiSettings& s, const CudaTaskShape& task, con
   return p;
 }
 
+CudaLaunchPlan resize_launch(const CudaLaunchPlan& at_k, const CudaTaskShape& task, long long rollouts) {
+  CudaLaunchPlan p = at_k;
+  const long long n = std::max(1LL, rollouts);
+  p.chunk_blocks = ceil_div(n, std::max(1, task.chunk_rollouts));
+  if (task.vehicles > 1)
+    p.rollout_grid = ceil_div(n, static_cast<long long>(std::max(1, task.team_rollouts_per_warp)) * p.warps_per_block);
+  else
+    p.rollout_grid = ceil_div(n * p.lanes, std::max(1, p.rollout_block));
+  if (p.weigh_chunk > 0) p.weigh_chunks = static_cast<int>(ceil_div(n, p.weigh_chunk));
+  return p;
+}
+
 const char* CudaLaunchPlan::kernel_name(const CudaTaskShape& task) const {
   if (task.vehicles > 1) return chunked ? "rollout_chunked_team" : "rollout_team";
   return chunked ? "rollout_chunked" : "rollout_single";

@@ -110,6 +110,40 @@ TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
   }
 }
 
+// The work sizer's changes (Controller::set_active_rollouts) between cycles, with and without
+// the anytime stop flag, and the rollout fan of a cycle run at fewer than K.
+TEST(NoAlloc, ChangingTheActiveRolloutsAllocatesNothing) {
+  for (const std::string simd : {"off", "auto"}) {
+    MppiSettings s = forest_settings();
+    s.simd = simd;
+    TaskController<QuadrotorForest> c("quadrotor_forest", s, QuadrotorForest::Params{},
+                                      std::make_unique<CpuBackend<QuadrotorForest>>(s));
+    c.set_inputs(forest_inputs());
+    RolloutFan fan;
+    fan.reserve(32, 1, s.horizon);
+    Quadrotor::Params model;
+    std::vector<float> x(Quadrotor::kNx, 0.0f), u(Quadrotor::kNu, 0.0f);
+    x[Quadrotor::PZ] = 2.0f;
+    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
+    c.iterate(x.data(), u.data());
+    std::atomic<bool> stop{false};
+    const int counts[] = {128, 64, 256, 96, 16, 256};
+    int ran = 0;
+    const std::size_t before = testing::allocation_count();
+    for (int n = 0; n < 60; ++n) {
+      if (n == 30) c.set_stop_flag(&stop);
+      c.set_active_rollouts(counts[n % 6]);
+      if (n % 4 == 0) c.keep_rollouts();
+      ran += c.iterate(x.data(), u.data()).rollouts == counts[n % 6];
+      c.fan(16, 16, &fan);
+      Quadrotor::step(model, x.data(), u.data(), c.dt());
+    }
+    EXPECT_EQ(testing::allocation_count() - before, 0u) << simd;
+    EXPECT_EQ(ran, 60) << simd;
+    EXPECT_EQ(c.active_rollouts(), 256) << simd;
+  }
+}
+
 TEST(NoAlloc, CyclesThatKeepAndSampleTheirRolloutsAllocateNothing) {
   // tools/view's rollout fan: every fifth cycle keeps its rollouts, then a sample of 32 is
   // rebuilt into a fan reserved before.

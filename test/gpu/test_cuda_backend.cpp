@@ -486,6 +486,63 @@ TEST(CudaParity, ChunkedKernelOddRolloutCounts) {
   }
 }
 
+// The active rollout count (set_active_rollouts: the daemon's work sizer). A backend of K
+// running its first n samples is a backend built with K = n: with the chunked kernel's shape
+// fixed (both launches then agree) the same costs and the same plan bit for bit, cycle after
+// cycle; back at K, K's update again; and with the default launch at a K that flies the lane
+// kernel, the CPU's update of n within the parity tolerance.
+TEST(CudaParity, ActiveRolloutsAreABackendBuiltWithThatMany) {
+  SKIP_WITHOUT_CUDA();
+  CudaSettings fixed = kernel_of(CudaSettings::Kernel::kChunked);
+  fixed.chunk_steps = 4;
+  fixed.warps = 4;
+  fixed.controls = CudaSettings::Controls::kKeep;
+  constexpr int kK = 4096;
+  for (int n : {1024, 1000, 33}) {
+    auto big = gpu_test::make_scenario<QuadrotorForest>(kK, 100);
+    big.settings.seed = 11;
+    auto small = big;
+    small.settings.rollouts = n;
+    auto gpu_k = make_cuda_backend<QuadrotorForest>(big.settings, fixed);
+    auto gpu_n = make_cuda_backend<QuadrotorForest>(small.settings, fixed);
+    EXPECT_EQ(gpu_k->set_active_rollouts(n), n);
+    EXPECT_EQ(gpu_k->active_rollouts(), n);
+    auto pk = gpu_test::initial_plan(big.settings), pn = pk;
+    for (std::uint32_t cycle = 0; cycle < 3; ++cycle) {
+      UpdateStats sk, sn;
+      gpu_k->update(big.x0.data(), big.params, cycle, pk.data(), &sk);
+      gpu_n->update(small.x0.data(), small.params, cycle, pn.data(), &sn);
+      EXPECT_EQ(sk.rollouts, n);
+      EXPECT_EQ(gpu_k->rollout_costs(), gpu_n->rollout_costs()) << "n=" << n << " cycle " << cycle;
+      EXPECT_EQ(pk, pn) << "n=" << n << " cycle " << cycle;
+    }
+    // Back at K: the update of a backend of K from the same plan.
+    EXPECT_EQ(gpu_k->set_active_rollouts(kK + 5), kK);  // clamped to the ceiling
+    auto fresh = make_cuda_backend<QuadrotorForest>(big.settings, fixed);
+    std::vector<float> pf = pk;
+    UpdateStats sk, sf;
+    gpu_k->update(big.x0.data(), big.params, 7, pk.data(), &sk);
+    fresh->update(big.x0.data(), big.params, 7, pf.data(), &sf);
+    EXPECT_EQ(sk.rollouts, kK);
+    EXPECT_EQ(gpu_k->rollout_costs(), fresh->rollout_costs()) << "back at K after n=" << n;
+    EXPECT_EQ(pk, pf) << "back at K after n=" << n;
+  }
+  // The default launch at K = 40,000 (the lane kernel, weigh_local's chunks) run over 10,000.
+  auto big = gpu_test::make_scenario<QuadrotorForest>(40000, 100);
+  big.settings.seed = 5;
+  auto small = big;
+  small.settings.rollouts = 10000;
+  CpuBackend<QuadrotorForest> cpu(small.settings);
+  auto gpu = make_cuda_backend<QuadrotorForest>(big.settings);
+  gpu->set_active_rollouts(small.settings.rollouts);
+  auto plan = gpu_test::initial_plan(small.settings);
+  const Errors e = compare_one_update(small, cpu, *gpu, 3, &plan);
+  std::printf("[parity] K=40000 active 10000: %d bit-identical, %d over tolerance, plan err %.3g\n", e.identical,
+              e.over_tolerance, e.plan);
+  EXPECT_LE(e.over_tolerance, kDivergentFraction * small.settings.rollouts);
+  EXPECT_LE(e.plan, plan_tolerance(small.settings, e.abs_in_tolerance));
+}
+
 // Several cycles through the optimizer (update, shift) on a fresh backend each run.
 template <class T>
 std::vector<float> run_cycles(int k, int cycles) {

@@ -269,6 +269,51 @@ TEST(CudaLaunchPlan, WeighingChunksFillTheDeviceWithinGridY) {
   EXPECT_GE(static_cast<long long>(p.weigh_chunk) * p.weigh_chunks, 2000000000LL);
 }
 
+// The active rollout count (CudaBackend::set_active_rollouts): the launch at K with its counts
+// for n. Every choice stays K's (the buffers were sized for them); the blocks and the weighting
+// chunks cover exactly the n rollouts, and never need more partial sums than K's launch.
+TEST(CudaLaunchPlan, ResizedLaunchKeepsTheChoicesAndCoversTheActiveRollouts) {
+  struct {
+    const char* what;
+    CudaTaskShape task;
+    int k;
+    CudaSettings cuda;
+  } cases[] = {{"single chunked", quadrotor_forest(), 4096, {}},
+               {"single lanes", quadrotor_forest(), 100000, {}},
+               {"single lanes past 65536", quadrotor_track(), 1048576, {}},
+               {"team3 chunked", team(3), 1200, {}},
+               {"team9 lanes", team(9), 6000, {}}};
+  for (const auto& c : cases) {
+    const CudaLaunchPlan at_k = plan_launch(sized(c.k, 100), c.task, h100(), c.cuda);
+    ASSERT_TRUE(at_k.error.empty()) << c.what;
+    EXPECT_EQ(resize_launch(at_k, c.task, c.k).parts(), at_k.parts()) << c.what;
+    for (int n : {1, 31, 32, 33, c.k / 4, c.k / 2 + 7, c.k - 1}) {
+      const CudaLaunchPlan p = resize_launch(at_k, c.task, n);
+      const std::string at = std::string(c.what) + " K=" + std::to_string(c.k) + " n=" + std::to_string(n);
+      EXPECT_EQ(p.chunked, at_k.chunked) << at;
+      EXPECT_EQ(p.prepass, at_k.prepass) << at;
+      EXPECT_EQ(p.keep_controls, at_k.keep_controls) << at;
+      EXPECT_EQ(p.chunk_steps, at_k.chunk_steps) << at;
+      EXPECT_EQ(p.chunk_warps, at_k.chunk_warps) << at;
+      EXPECT_EQ(p.chunk_smem, at_k.chunk_smem) << at;
+      EXPECT_EQ(p.lanes, at_k.lanes) << at;
+      EXPECT_EQ(p.rollout_block, at_k.rollout_block) << at;
+      EXPECT_EQ(p.weigh_chunk, at_k.weigh_chunk) << at;
+      EXPECT_LE(p.parts(), at_k.parts()) << at;
+      // The blocks hold the n rollouts, and one block fewer would not.
+      const long long per_chunk_block = c.task.chunk_rollouts;
+      EXPECT_GE(p.chunk_blocks * per_chunk_block, n) << at;
+      EXPECT_LT((p.chunk_blocks - 1) * per_chunk_block, n) << at;
+      const long long per_lane_block = c.task.vehicles > 1
+                                           ? static_cast<long long>(c.task.team_rollouts_per_warp) * p.warps_per_block
+                                           : p.rollout_block / p.lanes;
+      EXPECT_GE(p.rollout_grid * per_lane_block, n) << at;
+      EXPECT_GE(static_cast<long long>(p.weigh_chunks) * p.weigh_chunk, n) << at;
+      EXPECT_LT(static_cast<long long>(p.weigh_chunks - 1) * p.weigh_chunk, n) << at;
+    }
+  }
+}
+
 TEST(CudaLaunchPlan, NoiseBudgetIsAQuarterOfTheFreeMemoryAtMost16GiB) {
   // team9 K=6000: 6000 x 100 x 37 floats = 89 MB of pre-pass buffers.
   CudaDeviceLimits small = h100();

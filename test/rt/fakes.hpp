@@ -3,6 +3,7 @@
 // and failures are scripted.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -145,7 +146,13 @@ class FakeController final : public Controller {
   // A fake built by a live-update factory: these settings (horizon included).
   void use_settings(const MppiSettings& s) {
     s_ = s;
+    active_ = -1;
     plan_.assign(static_cast<std::size_t>(s.horizon) * 4, 3000.0f);
+  }
+  // The rollouts it is built with (mppi.rollouts, the work sizer's ceiling); all active.
+  void set_rollouts(int k) {
+    s_.rollouts = k;
+    active_ = -1;
   }
   const std::string& task() const override { return name_; }
   const char* backend() const override { return "fake"; }
@@ -192,6 +199,13 @@ class FakeController final : public Controller {
     shift();
   }
   void set_stop_flag(const std::atomic<bool>* stop) override { stop_flag = stop; }
+  int set_active_rollouts(int n) override {
+    if (in_iterate_) mid_cycle_changes++;
+    ++active_changes;
+    return active_ = std::clamp(n, 1, s_.rollouts);
+  }
+  int active_rollouts() const override { return active_ < 0 ? s_.rollouts : active_; }
+  int rollout_quantum() const override { return quantum; }
   void reset() override {
     ++resets;
     std::fill(plan_.begin(), plan_.end(), 3000.0f);
@@ -235,6 +249,8 @@ class FakeController final : public Controller {
   // Iteration n may corrupt the plan/stats; return true to throw instead.
   std::function<bool(int, std::vector<float>*, UpdateStats*)> fault;
   int iterations = 0, resets = 0, inputs_set = 0, mid_cycle_changes = 0;
+  int active_changes = 0;  // set_active_rollouts calls
+  int quantum = 1;         // rollout_quantum()
   int restores = 0;  // set_plan calls (the loop restoring its last good plan)
   int shifts = 0;    // extra steps the loop shifted the plan by (time moved on)
   mutable int propagations = 0;
@@ -257,6 +273,7 @@ class FakeController final : public Controller {
   std::vector<float> plan_;
   UpdateStats stats_;
   bool in_iterate_ = false;
+  int active_ = -1;  // set_active_rollouts; -1: all of s_.rollouts
 };
 
 // The header of a one-vehicle state: by default a 16-state quadrotor (model 1, the shape the

@@ -546,22 +546,25 @@ TEST(ControlLoop, ParameterUpdatesWaitForTheStateTimeTheyName) {
     p.apply_utime = at_us;
     r.inbox.offer_param(p);
   };
-  r.fresh_cycle();
-  const std::int64_t t0 = r.inbox.state.front().sample_utime;
+  const std::int64_t t0 = 5'000'000;  // the states' sample times, on their own clock
+  auto cycle_at = [&](std::int64_t sample_us) {
+    r.state(++r.seq, 1.0f, sample_us);
+    r.cycle();
+  };
+  cycle_at(t0);
   push("cost.w_xy", 3.0, t0 + 60'000);   // three periods on
   push("cost.w_xy", 4.0, t0 + 40'000);   // two periods on: first
   push("cost.w_xy", 5.0, t0 + 60'000);   // due with the first, after it
   push("cost.w_xy", 2.0, 0);             // at once
-  r.fresh_cycle();                       // state at t0 + 20 ms
+  cycle_at(t0 + 20'000);
   ASSERT_EQ(r.ctl.params_set.size(), 1u);
   EXPECT_EQ(r.ctl.params_set[0].second, 2.0);
-  r.fresh_cycle();                       // t0 + 40 ms
+  cycle_at(t0 + 40'000);
   ASSERT_EQ(r.ctl.params_set.size(), 2u);
   EXPECT_EQ(r.ctl.params_set[1].second, 4.0);
-  r.state(++r.seq, 1.0f, t0 + 50'000);   // an older sample than the update asks: it waits
-  r.cycle();
+  cycle_at(t0 + 59'999);                 // not yet
   EXPECT_EQ(r.ctl.params_set.size(), 2u);
-  r.fresh_cycle();
+  cycle_at(t0 + 60'000);
   ASSERT_EQ(r.ctl.params_set.size(), 4u);
   EXPECT_EQ(r.ctl.params_set[2].second, 3.0);
   EXPECT_EQ(r.ctl.params_set[3].second, 5.0);

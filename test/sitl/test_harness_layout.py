@@ -160,8 +160,9 @@ def test_sim_flight_commands(mppid_binary, tmp_path):
     assert ctrl[1:5] == ["--config", str(paths.TASKS / "quadrotor_forest.yaml"), "--lcm-url", spec.lcm_url]
     assert "--lockstep" in ctrl and ctrl[ctrl.index("--backend") + 1] == "cpu"
     sets = [ctrl[i + 1] for i, c in enumerate(ctrl) if c == "--set"]
-    assert sets == ["daemon.latency.floor_ms=12", "daemon.latency.ceiling_ms=12", "mppi.seed=7",
-                    "daemon.rollouts.hz=5", "daemon.rollouts.top=16", "daemon.rollouts.random=16", "mppi.lambda=9"]
+    assert sets == ["daemon.latency.floor_ms=12", "daemon.latency.ceiling_ms=12", "daemon.work.enabled=false",
+                    "mppi.seed=7", "daemon.rollouts.hz=5", "daemon.rollouts.top=16", "daemon.rollouts.random=16",
+                    "mppi.lambda=9"]
     sim = cmds["sim"][cmds["sim"].index("--scenario") - 1:]
     assert sim[1:] == ["--scenario", str(paths.SCENARIOS / "forest_4m.yaml"), "--seed", "7", "--lcm-url",
                        spec.lcm_url, "--out", str(tmp_path), "--lockstep", "--latency", "0.012"]

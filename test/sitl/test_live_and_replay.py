@@ -126,20 +126,28 @@ def test_replay_names_the_first_divergence(lockstep_live):
 
 def test_measured_latency_lockstep_flight_replays_bit_for_bit(mppid_binary, tmp_path):
     """The simulator charges the measured latency and the daemon's estimator follows its own
-    compute times: the replay takes each cycle's expected latency from the command's lead."""
+    compute times: the replay takes each cycle's expected latency from the command's lead. The
+    work sizer too sizes the rollouts from the compute times (daemon.work, here with a target
+    of 0.4 ms that K = 512 passes on any machine): the replay runs each command's `rollouts`."""
     out = tmp_path / "measured"
     # (A floor of 0.1 ms: the estimate follows the compute times of K = 512, ~1 ms.) The charged
     # latency is this machine's compute time, so the flight itself differs from machine to
     # machine (CI's AVX-512 lanes once met a trunk at K = 512): what is checked is the replay of
     # whatever was flown, ended by the goal or by a collision, never by an error.
     p = sitl("run", "--scenario", "forest_4m", "--seed", 5, "--out", out, "--no-plots", "--set", "mppi.rollouts=512",
-             "--set", "daemon.latency.floor_ms=0.1", timeout=300)
+             "--set", "daemon.latency.floor_ms=0.1", "--set", "daemon.work.target=0.02",
+             "--set", "daemon.work.grow_below=0.01", "--set", "daemon.work.floor=128", "--set", "daemon.work.window=10",
+             timeout=300)
     assert p.returncode in (0, 1), p.stdout + p.stderr
     score = json.loads((out / "score.json").read_text())
     assert score["success"] or score["reason"].startswith("collision"), score
     assert score["commands"] > 100, score  # at least two seconds of flight to replay
-    leads = {m.lead_us for _, m in logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND"})["MPPI_COMMAND"]}
+    cmds = [m for _, m in logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND"})["MPPI_COMMAND"]]
+    leads = {m.lead_us for m in cmds}
+    sizes = [m.rollouts for m in cmds]
     p = replay(out / "flight.lcmlog")
     assert p.returncode == 0, p.stdout + p.stderr
     assert "commands identical bit for bit" in p.stdout
     assert len(leads) > 10  # the latency did vary: a replay with a fixed one would not match
+    # The rollouts did change in flight (from 512 down, at least to 256), inside the floor and K.
+    assert sizes[0] == 512 and min(sizes) <= 256 and min(sizes) >= 128, sorted(set(sizes))

@@ -75,16 +75,19 @@ class RolloutBackend {
   virtual ~RolloutBackend() = default;
   virtual const char* name() const = 0;
 
-  // Sample K sequences around `plan` (T x NU, row-major, inside the limits), roll each out
-  // from x0 with `params`, weight them, and overwrite `plan` with the weighted update.
+  // Sample K sequences (the active count, set_active_rollouts) around `plan` (T x NU,
+  // row-major, inside the limits), roll each out from x0 with `params`, weight them, and
+  // overwrite `plan` with the weighted update.
   // `cycle` keys the noise with the settings' seed. Allocates nothing.
   virtual void update(const float* x0, const Params& params, std::uint32_t cycle, float* plan,
                       UpdateStats* stats) = 0;
 
-  // S~(tau_0,k) of every rollout of the last update (tests and tools; may allocate).
+  // S~(tau_0,k) of every rollout of the last update, the active ones (tests and tools; may
+  // allocate).
   virtual std::vector<float> rollout_costs() const = 0;
-  // The same K floats into out without allocating (the display sample of a cycle's
-  // rollouts, rollout_fan.hpp, on the cycles that publish one). The default allocates.
+  // The same floats (the active count, at most K) into out without allocating (the display
+  // sample of a cycle's rollouts, rollout_fan.hpp, on the cycles that publish one). The
+  // default allocates.
   virtual void step0_costs(float* out) const {
     const std::vector<float> c = rollout_costs();
     std::copy(c.begin(), c.end(), out);
@@ -96,6 +99,17 @@ class RolloutBackend {
   // (core keeps no clock). Null (the default) runs every rollout. A backend that cannot stop
   // early (CUDA) ignores it.
   virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
+
+  // The active rollout count: update() runs samples 0..n-1 of the K allocated (K =
+  // MppiSettings::rollouts, the ceiling) and weighs those, exactly the update of a backend
+  // built with K = n (the noise is keyed by the sample index, so sample k draws the same
+  // numbers whatever n is). n is clamped into [1, K]; returns the count in use. Between
+  // updates only; allocates nothing (the CUDA backend captures its graph again).
+  virtual int set_active_rollouts(int n) = 0;
+  virtual int active_rollouts() const = 0;
+  // The multiple a count should be of to run without a partly filled batch (the CPU's
+  // SIMD lanes and partial sums, the CUDA chunked kernel's block).
+  virtual int rollout_quantum() const { return 1; }
 
   // Whether update() prepares the parameters for the cycle itself (Task::prepare: the forest
   // cost's obstacle grid over the plan's path, which the CUDA backend builds on the device

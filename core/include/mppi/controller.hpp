@@ -59,6 +59,17 @@ class Controller {
   // The caller owns the flag: clear it before iterate(), set it from another thread. Null:
   // off. CPU backend only (CUDA ignores it, as does this default).
   virtual void set_stop_flag(const std::atomic<bool>* stop) { (void)stop; }
+  // The work of a cycle: iterate() runs the first n of the mppi.rollouts samples (the
+  // ceiling), as a controller built with mppi.rollouts = n would; the plan and the noise
+  // stream go on. Clamped into [1, mppi.rollouts]; returns the count in use. Between cycles
+  // only; allocates nothing. rollout_quantum(): the multiple a count is best rounded to; 0
+  // for a controller without rollouts (DDP), whose work these leave alone (mppi.rollouts).
+  virtual int set_active_rollouts(int n) {
+    (void)n;
+    return settings().rollouts;
+  }
+  virtual int active_rollouts() const { return settings().rollouts; }
+  virtual int rollout_quantum() const { return 0; }
   virtual void reset() = 0;
   // Replace the plan (horizon x nu, clamped into the limits): e.g. restore the last good one.
   virtual void set_plan(const float* plan) = 0;
@@ -219,6 +230,9 @@ class TaskController final : public Controller {
   const UpdateStats& iterate(const float* x0, float* u_out) override { return mppi_.iterate(x0, params_, u_out); }
   void fallback(float* u_out) override { mppi_.fallback(u_out); }
   void set_stop_flag(const std::atomic<bool>* stop) override { mppi_.set_stop_flag(stop); }
+  int set_active_rollouts(int n) override { return mppi_.set_active_rollouts(n); }
+  int active_rollouts() const override { return mppi_.active_rollouts(); }
+  int rollout_quantum() const override { return mppi_.backend().rollout_quantum(); }
   void reset() override { mppi_.reset(); }
   void set_plan(const float* plan) override { mppi_.set_plan(plan); }
   void shift(int steps) override { mppi_.shift(steps); }

@@ -12,6 +12,9 @@
 // its share of each chunk and reads the flag before its next one, and K' is the chunks every
 // thread finished (a barrier per chunk cost the daemon 1.2 ms of a 5.9 ms cycle at K = 4096
 // on the 2-core VM: a sleeping OpenMP worker is woken through the hypervisor).
+//
+// Active rollouts (set_active_rollouts): the same prefix, chosen between updates: the
+// buffers stay sized for K and the update runs and weighs samples 0..n-1 only.
 #pragma once
 
 #include <cstdint>
@@ -78,6 +81,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   // Throws std::invalid_argument when settings.simd names a target this CPU does not run.
   explicit CpuBackend(const MppiSettings& s)
       : k_(s.rollouts),
+        active_(s.rollouts),
         t_(s.horizon),
         stride_((s.rollouts + cpu::kPartials - 1) / cpu::kPartials * cpu::kPartials),
         dt_(s.dt),
@@ -116,6 +120,9 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   simd::Target target() const { return target_; }
 
   void set_stop_flag(const std::atomic<bool>* stop) override { stop_ = stop; }
+  int set_active_rollouts(int n) override { return active_ = std::clamp(n, 1, k_); }
+  int active_rollouts() const override { return active_; }
+  int rollout_quantum() const override { return cpu::kPartials; }
   void set_nominal(const float* u_nominal) override { std::copy_n(u_nominal, kNu, c_.u_nominal); }
 
   // Test hook: called between chunks (on one of the threads, the others waiting at a barrier)
@@ -146,7 +153,8 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     b.weights = weights_.data();
 
     const int n = roll_out(b);
-    if (n < min_rollouts_ || n == 0) {
+    // A full run of the active rollouts always updates, however few they are.
+    if ((n < min_rollouts_ && n < active_) || n == 0) {
       // Too few rollouts for an update: the plan stays as it was.
       if (stats != nullptr) {
         *stats = UpdateStats{};
@@ -174,10 +182,12 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     summarise(stats, plan, n, best, sum0);
   }
 
-  // S~(tau_0,k) of every rollout of the last update (after a partial one, the first
+  // S~(tau_0,k) of the active rollouts of the last update (after a partial one, the first
   // UpdateStats::rollouts are this cycle's).
-  std::vector<float> rollout_costs() const override { return std::vector<float>(cost_.begin(), cost_.begin() + k_); }
-  void step0_costs(float* out) const override { std::copy_n(cost_.begin(), k_, out); }
+  std::vector<float> rollout_costs() const override {
+    return std::vector<float>(cost_.begin(), cost_.begin() + active_);
+  }
+  void step0_costs(float* out) const override { std::copy_n(cost_.begin(), active_, out); }
 
   std::size_t host_bytes() const override {
     return (cost_.size() + du_.size() + weights_.size()) * sizeof(float) + crashed_.size();
@@ -187,13 +197,14 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   // Runs the rollouts: all of them, or with a stop flag (or hook) chunk by chunk until it is
   // set. Returns how many finished (a prefix of the samples).
   int roll_out(const cpu::Batch<TaskT>& b) {
+    const int k = active_;
     const auto* ops = &ops_;
     const int lanes = ops_.lanes;
     if (stop_ == nullptr && hook_ == nullptr) {
-      const int batches = (k_ + lanes - 1) / lanes;
+      const int batches = (k + lanes - 1) / lanes;
 #pragma omp parallel for schedule(static) num_threads(threads_)
-      for (int c = 0; c < batches; ++c) ops->rollouts(b, c * lanes, std::min(k_, (c + 1) * lanes));
-      return k_;
+      for (int c = 0; c < batches; ++c) ops->rollouts(b, c * lanes, std::min(k, (c + 1) * lanes));
+      return k;
     }
     if (hook_ == nullptr) return roll_out_anytime(b);
     int done = 0;
@@ -203,12 +214,12 @@ class CpuBackend final : public RolloutBackend<TaskT> {
       for (int c0 = 0;; c0 += chunk_) {
 #pragma omp single
         {
-          done = std::min(c0, k_);
+          done = std::min(c0, k);
           if (c0 > 0 && hook_ != nullptr) hook_(hook_ctx_, done);
-          go = c0 < k_ && !(stop_ != nullptr && stop_->load(std::memory_order_acquire));
+          go = c0 < k && !(stop_ != nullptr && stop_->load(std::memory_order_acquire));
         }
         if (!go) break;
-        const int c1 = std::min(k_, c0 + chunk_);
+        const int c1 = std::min(k, c0 + chunk_);
         const int batches = (c1 - c0 + lanes - 1) / lanes;
 #pragma omp for schedule(static)
         for (int c = 0; c < batches; ++c) ops->rollouts(b, c0 + c * lanes, std::min(c1, c0 + (c + 1) * lanes));
@@ -222,8 +233,9 @@ class CpuBackend final : public RolloutBackend<TaskT> {
   // The threads agree on nothing until the region ends; then the chunks all of them finished
   // are the prefix the update uses (samples a thread ran beyond it are left out).
   int roll_out_anytime(const cpu::Batch<TaskT>& b) {
+    const int k = active_;
     const auto* ops = &ops_;
-    const int lanes = ops_.lanes, chunks = (k_ + chunk_ - 1) / chunk_;
+    const int lanes = ops_.lanes, chunks = (k + chunk_ - 1) / chunk_;
     int threads = 1;
     int* done = chunks_done_.data();
     const std::atomic<bool>* stop = stop_;
@@ -233,7 +245,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
       if (t == 0) threads = n;
       int c = 0;
       for (; c < chunks && !stop->load(std::memory_order_acquire); ++c) {
-        const int c0 = c * chunk_, c1 = std::min(k_, c0 + chunk_);
+        const int c0 = c * chunk_, c1 = std::min(k, c0 + chunk_);
         const int batches = (c1 - c0 + lanes - 1) / lanes;
         const int first = batches * t / n, last = batches * (t + 1) / n;
         for (int i = first; i < last; ++i) ops->rollouts(b, c0 + i * lanes, std::min(c1, c0 + (i + 1) * lanes));
@@ -242,7 +254,7 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     }
     int all = chunks;
     for (int t = 0; t < std::min(threads, static_cast<int>(chunks_done_.size())); ++t) all = std::min(all, done[t]);
-    return std::min(k_, all * chunk_);
+    return std::min(k, all * chunk_);
   }
 
   // Statistics of the step-0 weights of the first n rollouts, summed in the kernels' order.
@@ -268,14 +280,16 @@ class CpuBackend final : public RolloutBackend<TaskT> {
     stats->ess = sum_sq > 0.0f ? 1.0f / sum_sq : 0.0f;
     stats->crashed = crashed;
     stats->rollouts = n;
-    stats->partial = n < k_;
+    stats->partial = n < active_;
     stats->updated = true;
     bool ok = ffinite(stats->ess);
     for (int i = 0; i < t_ * kNu; ++i) ok = ok && ffinite(plan[i]);
     stats->finite = ok;
   }
 
-  int k_, t_, stride_;
+  int k_;       // allocated: the ceiling of the active count
+  int active_;  // the rollouts an update runs (a prefix of the K)
+  int t_, stride_;
   float dt_;
   int substeps_;
   float inv_lambda_;

@@ -83,6 +83,12 @@ class Mppi {
   // The anytime cycle (RolloutBackend::set_stop_flag).
   void set_stop_flag(const std::atomic<bool>* stop) { backend_->set_stop_flag(stop); }
 
+  // The rollouts the next updates run, samples 0..n-1 of settings().rollouts (the ceiling;
+  // RolloutBackend::set_active_rollouts): the plan, the warm start and the noise counter go
+  // on as they are. Returns the count in use (n clamped into [1, K]). Between updates only.
+  int set_active_rollouts(int n) { return backend_->set_active_rollouts(n); }
+  int active_rollouts() const { return backend_->active_rollouts(); }
+
   // The parameters the last update ran with, after Task::prepare (tasks whose cost uses the
   // plan's path, e.g. the forest's obstacle grid; for the others, unused defaults).
   const Params& prepared_params() const { return *work_; }

@@ -78,7 +78,8 @@ ControlLoop::ControlLoop(Controller* controller, rt::Clock* clock, transport::Tr
       u_(static_cast<std::size_t>(controller->nu())),
       act_(s_.latency, *controller),
       estimators_(s_.disturbance, s_.latency.delay_estimate, *controller, actuator_states(s_, *controller)),
-      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max) {
+      manoeuvre_(s_.identification, controller->settings().u_min, controller->settings().u_max),
+      work_(s_.work, period_ns_) {
   s_.command_kind = outputs_.kind();
   counters_.actuation_delay_ns.store(s_.latency.actuation_delay_ns, std::memory_order_relaxed);
   if (s_.deadline_guard && !s_.lockstep)
@@ -181,6 +182,7 @@ Outcome ControlLoop::hold_stale(const CycleState& s) {
 Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
   const float* x0 = predict_to_act(s);
   monitor_.record_age(s.age_ns);
+  work_.before_update(*c_);  // the rollout count this update runs
   const bool guarded = guard_ != nullptr && guard_->running();
   if (guarded && guard_->anytime()) c_->set_stop_flag(guard_->next_stop_flag());
   if (guarded) guard_->arm(deadline_ns, s.seq, plan_.held());
@@ -188,6 +190,7 @@ Outcome ControlLoop::optimize(const CycleState& s, std::int64_t deadline_ns) {
   const bool good = run_optimizer(x0);
   const std::int64_t done = clock_->now_ns();
   monitor_.record_optimize(done - optimize_start);
+  work_.after_update(done - optimize_start);
   const int guard_steps = guarded ? guard_->disarm() : 0;
   const Outcome o = choose_outcome(guard_steps > 0, good, plan_.last_stats().updated, done > deadline_ns);
   if (o == Outcome::kGuardCovered) take_back_from_guard(guard_steps, good, deadline_ns);
@@ -274,7 +277,7 @@ void ControlLoop::restart_estimates() {
 // ---- the sends: stamp the timing, publish, remember what went out (the command history) --
 
 Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
-  outputs_.stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0);
+  outputs_.stamp_timing(s.have ? s.age_ns : 0, clock_->now_ns() - t0, 0, c_->active_rollouts());
   if (outputs_.publish_failsafe(s.seq)) act_.remember_sent(sent_ns(s.now_ns, t0), outputs_.failsafe().data());
   return Mode::kFailsafe;
 }
@@ -283,7 +286,7 @@ Mode ControlLoop::send_failsafe(const CycleState& s, std::int64_t t0) {
 // published: the failsafe if the held step fails the gate. The command history records what
 // went out: the failsafe then, not the refused step (nothing, if the failsafe was blocked too).
 Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
-  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, 0);
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, 0, c_->active_rollouts());
   std::copy_n(plan_.due(), u_.size(), u_.data());
   if (outputs_.publish(Mode::kHoldPlan, u_.data(), s.seq)) {
     act_.remember_sent(sent_ns(s.now_ns, t0), u_.data());
@@ -295,7 +298,7 @@ Mode ControlLoop::send_held(const CycleState& s, std::int64_t t0) {
 
 Mode ControlLoop::send_fresh(const CycleState& s, std::int64_t t0) {
   manoeuvre_.excite(s.x->x, s.now_ns, u_.data());  // the identification manoeuvre, when asked for
-  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns);
+  outputs_.stamp_timing(s.age_ns, clock_->now_ns() - t0, s.lead_ns, c_->active_rollouts());
   const Mode m = outputs_.publish(Mode::kNormal, u_.data(), s.seq) ? Mode::kNormal : Mode::kFailsafe;
   const std::int64_t sent = sent_ns(s.now_ns, t0);
   // In lock-step the plant's clock stands still while the controller computes, and the
@@ -326,7 +329,8 @@ void ControlLoop::account(const CycleState& s, std::int64_t start_ns, std::int64
 void ControlLoop::maybe_status(bool force) {
   if (!outputs_.status_due(cycle_index_, force)) return;
   outputs_.publish_status({monitor_.window(), act_.estimate_ns(), estimators_.disturbance(), c_->mass(),
-                           act_.actuation_delay_ns(), plan_.last_stats(), in_->counters});
+                           act_.actuation_delay_ns(), plan_.last_stats(), in_->counters, c_->active_rollouts(),
+                           work_.changes()});
   monitor_.reset_window();
 }
 

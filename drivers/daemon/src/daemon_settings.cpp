@@ -110,6 +110,11 @@ struct ReadRow {
       fail(k.path, "must be in [" + num(k.lo) + ", " + num(hi(k)) + "], got " + n.Scalar());
     return v;
   }
+  double whole(const DaemonKey& k, const YAML::Node& n) const {
+    const double v = number(k, n);
+    if (v != std::floor(v)) fail(k.path, "must be a whole number, got " + n.Scalar());
+    return v;
+  }
   std::string text(const DaemonKey& k, const YAML::Node& n) const {
     const auto v = scalar<std::string>(n, k.path);
     if (v.empty()) fail(k.path, "must not be empty");
@@ -131,7 +136,7 @@ struct ReadRow {
 
   void operator()(const DaemonKey& k, const YAML::Node& n, double& f) const { f = number(k, n); }
   void operator()(const DaemonKey& k, const YAML::Node& n, float& f) const { f = static_cast<float>(number(k, n)); }
-  void operator()(const DaemonKey& k, const YAML::Node& n, int& f) const { f = static_cast<int>(number(k, n)); }
+  void operator()(const DaemonKey& k, const YAML::Node& n, int& f) const { f = static_cast<int>(whole(k, n)); }
   void operator()(const DaemonKey& k, const YAML::Node& n, std::int64_t& f) const {
     f = std::llround(number(k, n) * k.scale);
   }
@@ -183,6 +188,10 @@ void check_rows(const YAML::Node& section, const std::string& task, const Daemon
     fail("latency.estimate_lag_ms", "only for the quadrotor models (position and velocity first), not " + task);
   if (l.rollouts.top + l.rollouts.random > FanSettings::kMaxRollouts)
     fail("rollouts.random", "top + random must be at most " + std::to_string(FanSettings::kMaxRollouts));
+  // The grown count's compute must stay under the target, or a steady load would swing.
+  if (l.work.grow_below * l.work.grow >= l.work.target)
+    fail("work.grow_below", "must be below work.target / work.grow (" + num(l.work.target / l.work.grow) +
+                                "), got " + num(l.work.grow_below));
 }
 }  // namespace
 
@@ -227,6 +236,7 @@ DaemonSettings parse_daemon_settings(const YAML::Node& section, const std::strin
   d.loop.command_kind = command_kind_for(task);
   d.loop.deadline_guard = true;
   d.loop.anytime_margin_ns = 3 * rt::kNsPerMs;
+  d.loop.work.enabled = true;  // the rollout count sized to the computer (daemon.work)
   d.expect_model = state_model_for(task);
   d.local_map = task.find("forest") != std::string::npos;
   if (!section || section.IsNull()) {

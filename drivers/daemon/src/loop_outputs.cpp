@@ -41,13 +41,14 @@ void LoopOutputs::describe(const Controller& c) {
 
 // ---- commands ---------------------------------------------------------------------------
 
-void LoopOutputs::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns) {
+void LoopOutputs::stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns, int rollouts) {
   auto us = [](std::int64_t ns) {
     return static_cast<std::int32_t>(std::clamp<std::int64_t>(ns / rt::kNsPerUs, 0, INT32_MAX));
   };
   cmd_.age_us = us(age_ns);
   cmd_.compute_us = us(compute_ns);
   cmd_.lead_us = us(lead_ns);
+  cmd_.rollouts = rollouts;
 }
 
 bool LoopOutputs::publish(Mode mode, const float* u, std::int64_t state_seq) {
@@ -98,6 +99,8 @@ void LoopOutputs::publish_status(const StatusSources& src) {
   status_.ess = src.stats.ess;
   status_.min_cost = src.stats.min_cost;
   fill_counts(src.inbox);
+  status_.rollouts_active = src.rollouts_active;
+  status_.work_size_changes = src.work_size_changes;
   status_.healthy = status_.mode == Mode::kNormal && loop_healthy_.load(std::memory_order_relaxed);
   tx_->publish_status(status_);
   counters_->status_published.fetch_add(1, std::memory_order_relaxed);

@@ -145,6 +145,9 @@ void log_controller(const mppi::Controller& c, const mppi::app::AppConfig& cfg, 
     spdlog::info("task {} on {} backend: K={} T={} dt={} lambda={} nu={}, {} Hz{}", c.task(), c.backend(),
                  c.settings().rollouts, c.settings().horizon, c.settings().dt, c.settings().lambda, c.settings().nu,
                  ds.loop.rate_hz, lockstep);
+  if (const auto& w = ds.loop.work; w.enabled && cfg.controller != "ddp")
+    spdlog::info("work: rollouts sized to this computer, {} to {}, compute p99 under {:.0f} % of the period (daemon.work)",
+                 std::min(w.floor, c.settings().rollouts), c.settings().rollouts, 100.0 * w.target);
 }
 
 // Settings (the command line's changes included), the memory lock of --realtime, the

@@ -9,12 +9,15 @@
 //     with daemon.latency.floor_ms = ceiling_ms): command_t.lead_us gives it back exactly
 //     (the daemon keeps it in whole microseconds), cycle by cycle;
 //   - when a parameter update took effect (mppi.* ones after the builder thread): each
-//     param_result_t names the cycle.
+//     param_result_t names the cycle;
+//   - the rollouts each update ran (daemon.work sizes them from measured compute times):
+//     command_t.rollouts gives them back, cycle by cycle, and the replay runs those.
 // The noise is keyed by (seed, cycle), the seed from the settings, the cycle counter
 // starting after daemon.warmup_iterations as in the daemon. So the same settings, the same
 // inputs in the same order (fed through the daemon's own LCM decoder, over memq://) and the
 // same ControlLoop reproduce every command; the replay compares state_seq, mode, kind, u
-// (bitwise), age_us and lead_us, and stops at the first difference (cycle, field, values).
+// (bitwise), age_us, lead_us and rollouts, and stops at the first difference (cycle, field,
+// values).
 #include <CLI/CLI.hpp>
 #include <cstdint>
 #include <spdlog/spdlog.h>
@@ -101,6 +104,7 @@ std::string compare(const mppi_lcm::command_t& log, const Command& run) {
   }
   if (log.age_us != run.age_us) return num("age_us", log.age_us, run.age_us);
   if (log.lead_us != run.lead_us) return num("lead_us", log.lead_us, run.lead_us);
+  if (log.rollouts != run.rollouts) return num("rollouts", log.rollouts, run.rollouts);
   return {};
 }
 
@@ -180,6 +184,7 @@ std::string load_settings(const Options& o, mppi::app::AppConfig* cfg, mppi::dae
   }
   ds->loop.lockstep = true;
   ds->loop.deadline_guard = false;
+  ds->loop.work.enabled = false;  // the recorded rollout counts instead (Replay::pin_work_size)
   return {};
 }
 
@@ -252,6 +257,7 @@ class Replay {
         if (auto u = rec_.updates.find(seq); u != rec_.updates.end()) publish(*u->second);
     }
     pin_expected_latency(e, cycle);
+    pin_work_size(cycle);
     publish(e);
     flush();
     if (inbox_.ticks.empty()) return true;  // a state the inbox refused: no tick, no cycle
@@ -297,6 +303,12 @@ class Replay {
     const auto& ls = ds_.loop.latency;
     const std::int64_t t_act = (s->second + c->second.lead_us) * mppi::rt::kNsPerUs;
     loop_.set_expected_latency(t_act - now_us * mppi::rt::kNsPerUs - ls.transport_ns - ls.actuation_delay_ns);
+  }
+
+  // The rollouts this cycle ran, from its command.
+  void pin_work_size(std::int64_t cycle) {
+    const auto c = rec_.commands.find(cycle + 1);
+    if (c != rec_.commands.end() && c->second.rollouts > 0) loop_.set_work_size(c->second.rollouts);
   }
 
   // What this step published (a cycle's command, or a repeated tick's resend).
@@ -361,7 +373,7 @@ int replay_flight(const Options& o, const std::vector<Event>& events, const Reco
   for (const auto& [seq, c] : rec.commands)
     if (seq > replay.cycles()) ++unreplayed;
   std::printf("replay: %" PRId64 " cycles, %" PRId64 " commands identical bit for bit (state_seq, mode, kind, u, "
-              "age_us, lead_us) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
+              "age_us, lead_us, rollouts) on %s; %" PRId64 " logged commands after the last replayed cycle%s\n",
               replay.cycles(), replay.compared(), replay.backend(), unreplayed,
               o.max_cycles >= 0 ? " (--max-cycles)" : "");
   std::fflush(stdout);

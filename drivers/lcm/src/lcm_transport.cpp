@@ -169,6 +169,7 @@ bool LcmTransport::publish_command(const Command& c) {
   m.age_us = c.age_us;
   m.compute_us = c.compute_us;
   m.lead_us = c.lead_us;
+  m.rollouts = c.rollouts;
   m.n = c.n;
   m.u.assign(c.u, c.u + c.n);  // within the reserved capacity
   return send(ch_.command, m);
@@ -183,6 +184,8 @@ bool LcmTransport::publish_status(const StatusReport& s) {
   m.task.assign(s.task);
   m.rollouts = s.rollouts;
   m.horizon = s.horizon;
+  m.rollouts_active = s.rollouts_active;
+  m.work_size_changes = s.work_size_changes;
   m.compute_ms_last = s.compute_ms_last;
   m.compute_ms_min = s.compute_ms_min;
   m.compute_ms_mean = s.compute_ms_mean;

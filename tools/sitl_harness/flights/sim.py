@@ -81,9 +81,11 @@ def mppid_command(spec: FlightSpec, scen: dict, cfg: Path, fifo: bool) -> list[s
     if lockstep:
         cmd.append("--lockstep")
         if spec.latency is not None:
-            # The controller is told the fixed latency charged: the run repeats exactly.
+            # The controller is told the fixed latency charged, and runs mppi.rollouts (its work
+            # not sized from measured compute times): the run repeats exactly.
             ms = f"{1e3 * spec.latency:g}"
-            cmd += ["--set", f"daemon.latency.floor_ms={ms}", "--set", f"daemon.latency.ceiling_ms={ms}"]
+            cmd += ["--set", f"daemon.latency.floor_ms={ms}", "--set", f"daemon.latency.ceiling_ms={ms}",
+                    "--set", "daemon.work.enabled=false"]
     cmd += ["--backend", spec.backend]
     if spec.controller == "ddp":
         cmd += ["--controller", "ddp"]

@@ -78,6 +78,12 @@ constexpr int kCudaReduceBlock = 256;  // threads a block of the weighting kerne
 CudaLaunchPlan plan_launch(const MppiSettings& s, const CudaTaskShape& task, const CudaDeviceLimits& device,
                            const CudaSettings& cuda);
 
+// The launch `at_k` (plan_launch's at K) run over the first `rollouts` of its K samples (the
+// active count, RolloutBackend::set_active_rollouts): every choice kept (kernel, blocks, lanes,
+// chunks, noise, controls, weighting chunk), only the counts of blocks and weighting chunks
+// made for `rollouts`, so the buffers sized for K hold it (parts() is at most at_k's).
+CudaLaunchPlan resize_launch(const CudaLaunchPlan& at_k, const CudaTaskShape& task, long long rollouts);
+
 // One line: the kernel and its launch shape, the noise, the controls, the weighting, the
 // obstacle grid, PDL and the graph.
 std::string describe(const CudaLaunchPlan& plan, const CudaTaskShape& task);

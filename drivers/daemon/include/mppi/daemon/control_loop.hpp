@@ -39,6 +39,7 @@
 #include "mppi/daemon/pacing.hpp"
 #include "mppi/daemon/plan_timeline.hpp"
 #include "mppi/daemon/task_inputs.hpp"
+#include "mppi/daemon/work_sizer.hpp"
 #include "mppi/rt/clock.hpp"
 #include "mppi/rt/deadline_monitor.hpp"
 #include "mppi/rt/wakeup.hpp"
@@ -93,6 +94,8 @@ struct LoopSettings {
   // keeps it and its cycles are counted (map_stale_cycles): the trees it holds are still
   // there, while a map dropped would leave the cost blind to them (docs/sensing.md).
   std::int64_t map_timeout_ns = 500 * rt::kNsPerMs;
+  // The rollout count sized to the computer (work_sizer.hpp); off: mppi.rollouts, pinned.
+  WorkSizerSettings work;
 };
 
 class ControlLoop {
@@ -156,6 +159,10 @@ class ControlLoop {
   // Replay: the next cycles' expected latency (ns) instead of the estimator's; < 0: the
   // estimator's.
   void set_expected_latency(std::int64_t ns) { act_.set_expected_latency(ns); }
+  // Replay: the next cycles' rollout count (command_t.rollouts) instead of the sizer's; <= 0:
+  // the sizer's.
+  void set_work_size(int rollouts) { work_.pin(rollouts); }
+  const WorkSizer& work_sizer() const { return work_; }
 
  private:
   // One row of the parameter table (loop_params.cpp): the key (a prefix when it ends in
@@ -249,6 +256,7 @@ class ControlLoop {
 
   LiveOptimizer* live_ = nullptr;
   ParamSchedule params_;  // updates held until the state time they name
+  WorkSizer work_;        // the rollout count (loop thread)
 };
 
 }  // namespace mppi::daemon

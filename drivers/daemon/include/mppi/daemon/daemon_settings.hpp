@@ -175,6 +175,13 @@ void visit_daemon_settings(D& d, V&& v) {
   v(key("realtime.lock_memory"), d.realtime.lock_memory);
   v(key("map.enabled"), d.local_map);
   v(millis("map.timeout_ms", 1.0, 60000.0), l.map_timeout_ns);
+  v(key("work.enabled"), l.work.enabled);
+  v(number("work.target", 0.01, 1.0), l.work.target);
+  v(number("work.grow_below", 0.001, 1.0), l.work.grow_below);
+  v(number("work.floor", 1, 1 << 26), l.work.floor);
+  v(number("work.window", 1, 100000), l.work.window);
+  v(number("work.shrink", 0.1, 0.95), l.work.shrink);
+  v(number("work.grow", 1.05, 4.0), l.work.grow);
 }
 
 // The keys a parameter update may change while mppid runs, from the table:

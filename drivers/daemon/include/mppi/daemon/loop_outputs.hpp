@@ -39,6 +39,8 @@ struct StatusSources {
   std::int64_t actuation_delay_ns;
   const UpdateStats& stats;
   const transport::InboxCounters& inbox;
+  int rollouts_active;             // the work sizer's count
+  std::int64_t work_size_changes;  // and how often it changed
 };
 
 class LoopOutputs {
@@ -48,7 +50,8 @@ class LoopOutputs {
   // ---- commands
   bool passes(const float* u) const { return out_.passes(u); }
   // Timing fields of the next command (command_t age_us, compute_us, lead_us).
-  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns);
+  // The next command's timing fields, and the rollout count its update ran (or will run).
+  void stamp_timing(std::int64_t age_ns, std::int64_t compute_ns, std::int64_t lead_ns, int rollouts);
   // u through the gate and out; false (nothing sent) when it fails the gate.
   bool publish(transport::Mode mode, const float* u, std::int64_t state_seq);
   // The failsafe command; false (counted as blocked) when even it fails the gate.

@@ -44,7 +44,7 @@ bool decode_message(const void* data, std::size_t size, mppi_lcm::local_map_t* m
 // generated encoders, so a change of the .lcm files that moves them fails a test.
 namespace wire {
 constexpr std::size_t kStateCount = 8 + 8 + 8 + 8 + 1 + 2 + 2;  // int32 n, then n floats
-constexpr std::size_t kCommandCount = 8 + 8 + 8 + 8 + 1 + 1 + 4 + 4 + 4;  // int32 n, then n floats
+constexpr std::size_t kCommandCount = 8 + 8 + 8 + 8 + 1 + 1 + 4 + 4 + 4 + 4;  // int32 n, then n floats
 constexpr std::size_t kObstaclesCount = 8 + 8 + 8;               // int32 n, then n cylinders
 constexpr std::size_t kCylinderBytes = 5 * 4;
 constexpr std::size_t kReferenceCount = 8 + 8 + 8 + 1 + 12 + 4 + 4 + 4 + 8;  // int16, then 3 floats each

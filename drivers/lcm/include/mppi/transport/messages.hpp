@@ -45,6 +45,7 @@ struct Command {
   Mode mode = Mode::kFailsafe;
   std::int8_t kind = 3;  // command_t::KIND_*
   std::int32_t age_us = 0, compute_us = 0, lead_us = 0;  // see command_t
+  std::int32_t rollouts = 0;  // the update's rollout count (command_t.rollouts)
   std::int32_t n = 0;
   float u[kMaxControls] = {};
 };
@@ -122,6 +123,8 @@ struct StatusReport {
   const char* backend = "";
   const char* task = "";
   std::int32_t rollouts = 0, horizon = 0;
+  std::int32_t rollouts_active = 0;     // the work sized to the computer (<= rollouts)
+  std::int64_t work_size_changes = 0;
   float compute_ms_last = 0, compute_ms_min = 0, compute_ms_mean = 0, compute_ms_max = 0, compute_ms_p99 = 0;
   float period_ms_min = 0, period_ms_mean = 0, period_ms_max = 0, period_ms_p99 = 0;
   float jitter_ms_p99 = 0;
