@@ -34,6 +34,15 @@ inline MppiSettings quadrotor_settings(int k, int t, float lambda, float sigma, 
   return s;
 }
 
+// The same on 2 threads of one SIMD target (`simd`: "off", "avx2", ...), 30 steps, with a
+// weighting: the optimizer tests run over every target this machine has.
+inline MppiSettings quadrotor_simd_settings(const char* simd, int k, Weighting w = Weighting::kCostToGo) {
+  MppiSettings s = quadrotor_settings(k, 30, 10.0f, 150.0f, 2);
+  s.simd = simd;
+  s.weighting = w;
+  return s;
+}
+
 // A model's state: `base` (zero if none) with the named entries set, e.g.
 // state_with<Racecar>({{Racecar::VX, 5.0f}, {Racecar::FX, 30.0f}}).
 template <class Model>

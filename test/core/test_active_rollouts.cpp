@@ -19,10 +19,7 @@ namespace mppi {
 namespace {
 
 MppiSettings settings(const char* simd, int k, Weighting w = Weighting::kCostToGo) {
-  MppiSettings s = testing::quadrotor_settings(k, 30, 10.0f, 150.0f, 2);
-  s.simd = simd;
-  s.weighting = w;
-  return s;
+  return testing::quadrotor_simd_settings(simd, k, w);
 }
 
 std::vector<float> start_plan(const MppiSettings& s) {

@@ -20,9 +20,7 @@ namespace mppi {
 namespace {
 
 MppiSettings settings(const char* simd, int k, Weighting w = Weighting::kCostToGo) {
-  MppiSettings s = testing::quadrotor_settings(k, 30, 10.0f, 150.0f, 2);
-  s.simd = simd;
-  s.weighting = w;
+  MppiSettings s = testing::quadrotor_simd_settings(simd, k, w);
   s.chunk_rollouts = 64;
   s.min_rollouts = 64;
   return s;

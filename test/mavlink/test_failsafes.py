@@ -95,7 +95,7 @@ def test_mppid_restart_never_reengages(netns, procs, tmp_path, tap):
     try:
         _engage(c, tap)
         ctl.close()                       # mppid dies
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engaged") is False, 10, "the bridge to disengage")
         assert "stopped" in c.status()["disengaged_why"]
         wait_for(lambda: c.status().get("mode") == "BRAKE", 5, "the hand-back to BRAKE")
         time.sleep(1.0)
@@ -119,11 +119,11 @@ def test_hand_back_holds_altitude_whatever_the_throttle_stick(netns, procs, tmp_
         c.ok("takeoff 2")
         _engage(c, tap)
         ctl.close()                       # mppid dies
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engaged") is False, 10, "the bridge to disengage")
         wait_for(lambda: c.status().get("mode") not in ("GUIDED", None), 5, "the hand-back")
         watch = StandInController()
         watch.answer = False
-        wait_for(lambda: watch.last_x is not None, 3, "states")
+        wait_for(lambda: watch.last_x is not None, 10, "states")
         z0, zs = watch.last_x[2], []
         for _ in range(30):               # 3 s in the hand-back's mode
             time.sleep(0.1)
@@ -164,7 +164,7 @@ def test_states_that_stop_never_reengage(netns, procs, tmp_path, tap):
     try:
         _engage(c, tap)
         _gcs(tap, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, -1)
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engaged") is False, 10, "the bridge to disengage")
         time.sleep(1.0)
         _gcs(tap, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, 20000)
         t_back = time.monotonic_ns() // 1000
@@ -251,20 +251,21 @@ def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
 def test_px4_switch_engages_before_and_after_a_disengage(netns, procs, tmp_path, tap):
     """PX4, one rule before and after a disengage: the operator's own switch into OFFBOARD (a
     ground station's here, the RC's alike) engages mppid before any `offboard`, and again after
-    a switch out of it disengaged the bridge. Each change is told to the ground station."""
+    a switch out of it disengaged the bridge. Each change is told to the ground station. (The
+    waits are bounds for a busy machine, 10 s each: what is asserted is that each happens.)"""
     ctl = StandInController()
     c = _chain(procs, tmp_path)
     try:
         wait_for(lambda: c.status().get("engagement") == "prestream" and c.status().get("streaming"), 5, "pre-stream")
         for attempt in ("before", "after"):
             n = len(tap.setpoints())  # PX4 takes OFFBOARD only with setpoints arriving
-            wait_for(lambda: len(tap.setpoints()) > n + 10, 3, f"the pre-stream ({attempt})")
+            wait_for(lambda: len(tap.setpoints()) > n + 10, 10, f"the pre-stream ({attempt})")
             _gcs(tap, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 6, 0)
-            wait_for(lambda: c.status().get("engagement") == "engaged", 4, f"engaged by the switch ({attempt})")
+            wait_for(lambda: c.status().get("engagement") == "engaged", 10, f"engaged by the switch ({attempt})")
             assert c.status()["mode"] == "OFFBOARD"
             _gcs(tap, mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3)
-            wait_for(lambda: c.status().get("engagement") != "engaged", 4, f"disengaged by the switch out ({attempt})")
-            wait_for(lambda: c.status().get("engagement") == "prestream", 4, "pre-streamed again")
+            wait_for(lambda: c.status().get("engagement") != "engaged", 10, f"disengaged by the switch out ({attempt})")
+            wait_for(lambda: c.status().get("engagement") == "prestream", 10, "pre-streamed again")
         texts = [t for _, t in _statustexts(tap)]
         assert sum("mppid engaged" in t for t in texts) == 2, texts
         assert sum("mppid disengaged: mode changed to" in t for t in texts) == 2, texts
@@ -334,7 +335,7 @@ def test_battery_failsafe_disengages(netns, procs, tmp_path, tap, autopilot):
         _engage_armed(c, tap, autopilot)
         fs = c.wait_event("failsafe", 10)[0]
         assert fs["reason"] == "battery low"
-        wait_for(lambda: c.status().get("engagement") != "engaged", 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engagement") != "engaged", 10, "the bridge to disengage")
         wait_for(lambda: any("mode changed to LAND by someone else" in e["text"] for e in c.events("statustext")), 3,
                  "the ground station told")
         assert [e["mode"] for e in c.events("mode")][-1] in ("AUTO.LAND", "LAND")
@@ -371,7 +372,7 @@ def test_ground_station_lost_disengages(netns, procs, tmp_path, tap, autopilot):
         quiet.set()
         fs = c.wait_event("failsafe", 5)[0]
         assert fs["reason"] == "ground station lost" and fs["action"] == mode
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engaged") is False, 10, "the bridge to disengage")
         assert c.status()["disengaged_why"].startswith("mode changed to"), c.status()["disengaged_why"]
         t = time.monotonic_ns() // 1000
         time.sleep(1.0)
@@ -397,7 +398,7 @@ def test_a_stopped_stream_ends_with_zero_rates_on_px4(netns, procs, tmp_path, ta
     try:
         _engage(c, tap)
         ctl.answer = False
-        wait_for(lambda: c.status().get("engaged") is False, 3, "the bridge to disengage")
+        wait_for(lambda: c.status().get("engaged") is False, 10, "the bridge to disengage")
         sps = [m for _, m in tap.setpoints()]
         turning = [m for m in sps if m.body_roll_rate == pytest.approx(1.0)]
         assert len(turning) > 25

@@ -20,7 +20,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 from mppi_mavlink import frames
 from mppi_mission import plan as plan_mod
 from mppi_mission.vehicles import FlightError, GuidedLink, _wait, arm_when_ready
@@ -33,30 +32,20 @@ class Px4OffboardLink(GuidedLink):
     """GuidedLink's setpoint stream, with PX4's arming, take-off and OFFBOARD hand-over."""
 
     def __init__(self, url: str, state_hz: float = 50.0):
-        self.custom_mode = None
         self.params = {}
         super().__init__(url, state_hz)
 
-    def _loop(self):
-        while not self.stop.is_set():
-            msg = self.conn.recv_match(blocking=True, timeout=0.1)
-            if msg is None:
-                continue
-            t = msg.get_type()
-            if t == "LOCAL_POSITION_NED":
-                self._set_state(msg.time_boot_ms * 1000, np.array(frames.ned_to_enu((msg.x, msg.y, msg.z))))
-            elif t == "ATTITUDE_QUATERNION":  # the NED heading -> ENU yaw
-                w, x, y, z = msg.q1, msg.q2, msg.q3, msg.q4
-                self.yaw = frames.yaw_ned_to_enu(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
-            elif t == "HEARTBEAT" and msg.get_srcSystem() == self.target and msg.get_srcComponent() == 1:
-                self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-                self.custom_mode = msg.custom_mode
-            elif t == "EXTENDED_SYS_STATE":
-                self.landed_state = msg.landed_state
-            elif t == "COMMAND_ACK":
-                self.acks[msg.command] = msg.result
-            elif t == "PARAM_VALUE":
-                self.params[msg.param_id] = msg.param_value
+    def _from_autopilot(self, msg) -> bool:
+        return msg.get_srcSystem() == self.target and msg.get_srcComponent() == 1
+
+    def _on_message(self, t: str, msg):
+        if t == "ATTITUDE_QUATERNION":  # the NED heading -> ENU yaw
+            w, x, y, z = msg.q1, msg.q2, msg.q3, msg.q4
+            self.yaw = frames.yaw_ned_to_enu(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+        elif t == "PARAM_VALUE":
+            self.params[msg.param_id] = msg.param_value
+        else:
+            super()._on_message(t, msg)
 
     def param_set(self, name: str, value: float, timeout: float = 5.0):
         self.params.pop(name, None)

@@ -245,6 +245,7 @@ class GuidedLink(StateClock):
         super().__init__()
         self.state_hz = state_hz
         self.armed = False
+        self.custom_mode = None
         self.landed_state = None
         self.acks = {}
         self.stop = threading.Event()
@@ -259,17 +260,23 @@ class GuidedLink(StateClock):
     def _loop(self):
         while not self.stop.is_set():
             msg = self.conn.recv_match(blocking=True, timeout=0.1)
-            if msg is None:
-                continue
-            t = msg.get_type()
-            if t == "LOCAL_POSITION_NED":
-                self._set_state(msg.time_boot_ms * 1000, np.array(frames.ned_to_enu((msg.x, msg.y, msg.z))))
-            elif t == "HEARTBEAT" and msg.get_srcSystem() == self.target and msg.type != self.mavlink.MAV_TYPE_GCS:
-                self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-            elif t == "EXTENDED_SYS_STATE":
-                self.landed_state = msg.landed_state
-            elif t == "COMMAND_ACK":
-                self.acks[msg.command] = msg.result
+            if msg is not None:
+                self._on_message(msg.get_type(), msg)
+
+    def _from_autopilot(self, msg) -> bool:
+        """A heartbeat of the autopilot's, not of a ground station on the same link."""
+        return msg.get_srcSystem() == self.target and msg.type != self.mavlink.MAV_TYPE_GCS
+
+    def _on_message(self, t: str, msg):
+        if t == "LOCAL_POSITION_NED":
+            self._set_state(msg.time_boot_ms * 1000, np.array(frames.ned_to_enu((msg.x, msg.y, msg.z))))
+        elif t == "HEARTBEAT" and self._from_autopilot(msg):
+            self.armed = bool(msg.base_mode & self.mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+            self.custom_mode = msg.custom_mode
+        elif t == "EXTENDED_SYS_STATE":
+            self.landed_state = msg.landed_state
+        elif t == "COMMAND_ACK":
+            self.acks[msg.command] = msg.result
 
     def command(self, cmd, params, timeout=3.0, retries=3):
         for _ in range(retries):
