@@ -37,7 +37,7 @@ fi
 
 status=0
 # Each stage's wall time, printed at the end (a stage over its share of CI's time shows here).
-stage_names=() stage_secs=() stage_t0=$SECONDS
+stage_names=() stage_secs=() stage_t0=0  # SECONDS: since the script began, so setup counts
 stage_done() { stage_names+=("$1"); stage_secs+=($((SECONDS - stage_t0))); stage_t0=$SECONDS; }
 stage_done setup
 
