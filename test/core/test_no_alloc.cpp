@@ -110,22 +110,38 @@ TEST(NoAlloc, FactoryControllerCyclesAllocateNothing) {
   }
 }
 
+// A forest controller of one SIMD target, its first cycle flown from a hover 2 m up, and a fan
+// of 32 reserved: the rig of the cycles below that keep and sample their rollouts.
+struct HoverForest {
+  explicit HoverForest(const std::string& simd)
+      : s(with_simd(simd)),
+        c("quadrotor_forest", s, QuadrotorForest::Params{}, std::make_unique<CpuBackend<QuadrotorForest>>(s)),
+        x(Quadrotor::kNx, 0.0f),
+        u(Quadrotor::kNu, 0.0f) {
+    c.set_inputs(forest_inputs());
+    fan.reserve(32, 1, s.horizon);
+    x[Quadrotor::PZ] = 2.0f;
+    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
+    c.iterate(x.data(), u.data());
+  }
+  static MppiSettings with_simd(const std::string& simd) {
+    MppiSettings m = forest_settings();
+    m.simd = simd;
+    return m;
+  }
+  MppiSettings s;
+  TaskController<QuadrotorForest> c;
+  RolloutFan fan;
+  Quadrotor::Params model;
+  std::vector<float> x, u;
+};
+
 // The work sizer's changes (Controller::set_active_rollouts) between cycles, with and without
 // the anytime stop flag, and the rollout fan of a cycle run at fewer than K.
 TEST(NoAlloc, ChangingTheActiveRolloutsAllocatesNothing) {
   for (const std::string simd : {"off", "auto"}) {
-    MppiSettings s = forest_settings();
-    s.simd = simd;
-    TaskController<QuadrotorForest> c("quadrotor_forest", s, QuadrotorForest::Params{},
-                                      std::make_unique<CpuBackend<QuadrotorForest>>(s));
-    c.set_inputs(forest_inputs());
-    RolloutFan fan;
-    fan.reserve(32, 1, s.horizon);
-    Quadrotor::Params model;
-    std::vector<float> x(Quadrotor::kNx, 0.0f), u(Quadrotor::kNu, 0.0f);
-    x[Quadrotor::PZ] = 2.0f;
-    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
-    c.iterate(x.data(), u.data());
+    HoverForest r(simd);
+    auto& [s, c, fan, model, x, u] = r;
     std::atomic<bool> stop{false};
     const int counts[] = {128, 64, 256, 96, 16, 256};
     int ran = 0;
@@ -148,18 +164,8 @@ TEST(NoAlloc, CyclesThatKeepAndSampleTheirRolloutsAllocateNothing) {
   // tools/view's rollout fan: every fifth cycle keeps its rollouts, then a sample of 32 is
   // rebuilt into a fan reserved before.
   for (const std::string simd : {"off", "auto"}) {
-    MppiSettings s = forest_settings();
-    s.simd = simd;
-    TaskController<QuadrotorForest> c("quadrotor_forest", s, QuadrotorForest::Params{},
-                                      std::make_unique<CpuBackend<QuadrotorForest>>(s));
-    c.set_inputs(forest_inputs());
-    RolloutFan fan;
-    fan.reserve(32, 1, s.horizon);
-    Quadrotor::Params model;
-    std::vector<float> x(Quadrotor::kNx, 0.0f), u(Quadrotor::kNu, 0.0f);
-    x[Quadrotor::PZ] = 2.0f;
-    for (int i = 0; i < 4; ++i) x[Quadrotor::M1 + i] = Quadrotor::hover_speed(model);
-    c.iterate(x.data(), u.data());
+    HoverForest r(simd);
+    auto& [s, c, fan, model, x, u] = r;
     int fans = 0;
     const std::size_t before = testing::allocation_count();
     for (int n = 0; n < 50; ++n) {
