@@ -3,7 +3,8 @@
 # clang 14). Three steps, each CPU-only and warning-checked:
 #   1. asan  (build-asan, clang, ASan + UBSan, preset `asan`): every test and the libFuzzer
 #            targets in one build; ctest there, the excluded tests below said why;
-#   2. fuzz  each libFuzzer target for MPPID_FUZZ_SECONDS (60), two at a time (tools/fuzz);
+#   2. fuzz  each libFuzzer target for MPPID_FUZZ_SECONDS (30), two at a time (tools/fuzz;
+#            longer runs: tools/fuzz --seconds 600);
 #   3. tsan  (build-tsan, clang, ThreadSanitizer, preset `tsan`): the threaded tests (rt_tests:
 #            loop, deadline guard, latest-value slot, rings; driver_tests: the LCM receive
 #            thread with the loop), OpenMP made visible to TSan by LLVM's Archer tool.
@@ -16,7 +17,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
 do_asan=1 do_fuzz=1 do_tsan=1
-fuzz_seconds="${MPPID_FUZZ_SECONDS:-60}"
+fuzz_seconds="${MPPID_FUZZ_SECONDS:-30}"
 while (($#)); do
   case "$1" in
     --skip-asan) do_asan=0 ;;

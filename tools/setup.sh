@@ -49,7 +49,7 @@ while (($#)); do
   shift
 done
 
-log() { printf '[setup] %s\n' "$*"; }
+log() { printf '[setup %3d s] %s\n' "$SECONDS" "$*"; }  # seconds since setup began
 
 # ---- Debian packages ------------------------------------------------------------------
 # Everything the build, the tests and the tools need, nothing recommended on top.
@@ -328,5 +328,7 @@ if ((do_build)); then
   else
     cmake --build "${build_args[@]}"
   fi
+  # Whether this was a warm build (the cache's totals, all builds since it was last zeroed).
+  if command -v ccache >/dev/null; then log "ccache: $(ccache -s | grep -E '^ *(Hits|Misses):' | tr -s ' ' | paste -sd ',')"; fi
 fi
 log "done"

@@ -24,6 +24,8 @@ DEFAULT_TESTS=(
   "test/sitl/test_ap_sensing.py::test_truth_to_sensors_to_mapper_makes_a_map_of_the_tree_ahead"
   "test/mavlink/test_clock_sync.py::test_flight_with_an_autopilot_clock_two_percent_slow"
   "test/sitl/test_live_and_replay.py::test_lockstep_flight_with_live_updates_replays_bit_for_bit"
+  "test/sitl/test_live_and_replay.py::test_rollouts_and_horizon_change_in_a_realtime_flight_without_a_late_cycle"
+  "test/sitl/test_mission.py::test_the_mission_tool_flies_a_figure_eight_on_mppid_sim"
 )
 
 runs=20 cpu=2 list=0 tests=()

@@ -56,7 +56,7 @@ if [[ -d test ]] && [[ -n "$(find test -name 'test_*.py' -print -quit)" ]]; then
   [[ "${MPPID_PYTEST_JOBS:-2}" == 0 ]] && jobs_args=()
   echo "[test] pytest test ${jobs_args[*]} ${PYTEST_ARGS:-}"
   # shellcheck disable=SC2086
-  .venv/bin/python -m pytest test -q "${jobs_args[@]}" ${PYTEST_ARGS:-} || {
+  .venv/bin/python -m pytest test -q --durations=12 "${jobs_args[@]}" ${PYTEST_ARGS:-} || {
     rc=$?
     # 5: no test was collected; not a failure while Python tests are being added.
     if ((rc != 5)); then status=1; fi

@@ -224,8 +224,12 @@ def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
     try:
         _engage_armed(c, tap, "px4")
         losses = c.status()["link_losses"]
+        # Counted from the cut: on a busy machine a gap in the stand-in's answers before it may
+        # already have tripped (and ended) one fallback, which is not what this test is about.
+        failsafes, resumed = len(c.events("failsafe")), len(c.events("offboard_resumed"))
+        modes_before = len(c.events("mode"))
         tap.cut = True
-        c.wait_event("failsafe", 5)
+        wait_for(lambda: len(c.events("failsafe")) > failsafes, 5, "PX4's offboard-loss failsafe after the cut")
         wait_for(lambda: c.status().get("link_up") is False, 10, "the link declared lost")
         assert c.status()["link_losses"] == losses + 1
         assert c.status()["engagement"] == "disengaged"
@@ -238,8 +242,9 @@ def test_px4_link_back_never_resumes_offboard(netns, procs, tmp_path, tap):
         assert "link up" in log[log.index("link lost"):], log[-2000:]
         time.sleep(2.0)
         assert _between(tap, t_back, time.monotonic_ns() // 1000) == [], "setpoints after the link returned"
-        modes = [e["mode"] for e in c.events("mode")]
-        assert modes[-1] == "AUTO.LOITER" and not c.events("offboard_resumed"), modes
+        modes = [e["mode"] for e in c.events("mode")][modes_before:]
+        assert modes == ["AUTO.LOITER"], modes
+        assert len(c.events("offboard_resumed")) == resumed, c.events("offboard_resumed")
         assert c.status()["engagement"] == "disengaged"
         t_offboard = time.monotonic_ns() // 1000
         assert "OFFBOARD" in _engage(c, tap)

@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 from sitl_helpers import ROOT, sitl
 from sitl_harness import logs
@@ -34,7 +35,7 @@ def status_sizes(msgs):
 
 def check_answers(score):
     res = score["param_results"]
-    assert len(res) == len(UPDATES), res
+    assert len(res) == len(UPDATES), (score["reason"], score["sim_time"], res)
     refused = [r for r in res if not r["applied"]]
     assert [r["key"] for r in refused] == ["mppi.bogus"]
     assert refused[0]["reason"].startswith("mppi.bogus: unknown field")
@@ -65,25 +66,30 @@ def lockstep_live(mppid_binary, tmp_path_factory):
 
 def test_rollouts_and_horizon_change_in_a_realtime_flight_without_a_late_cycle(mppid_binary, tmp_path):
     """Real time (SCHED_FIFO where allowed): the optimizer is rebuilt off the loop thread and
-    swapped in between cycles six times while the quadrotor flies the forest; no swap makes
-    its cycle late, every update is answered, and the status reports each new size."""
+    swapped in between cycles six times while the quadrotor tracks a circle; no swap makes its
+    cycle late, every update is answered, the status reports each new size, and the flight
+    goes on to its end. (A circle, not the forest: 256-512 rollouts are below the forest task's
+    measured floor, daemon.work.floor, and such a forest flight on a busy machine could end on
+    the ground before the last update: then nothing after it was tested. How well 256 rollouts
+    track is not what is tested either.)"""
+    scenario = yaml.safe_load((ROOT / "config" / "scenarios" / "track_circle.yaml").read_text())
+    scenario["timing"]["duration"] = 6.0    # past the last update (4 s)
+    (tmp_path / "circle.yaml").write_text(yaml.safe_dump(scenario))
     out = tmp_path / "rt"
-    args = ["run", "--scenario", "forest_4m", "--seed", 3, "--realtime", "--out", out, "--no-plots",
-            "--set", "mppi.rollouts=512"]
+    args = ["run", "--scenario", tmp_path / "circle.yaml", "--seed", 3, "--realtime", "--out", out,
+            "--no-plots", "--set", "mppi.rollouts=512"]
     for u in UPDATES:
         args += ["--param", u]
-    # The flight itself (with 256 rollouts for a second) is not what is tested: it ends at the
-    # goal or, rarely, on a trunk or the ground after the last update (1 of 18 flights here).
     p = sitl(*args, timeout=180)
     assert p.returncode in (0, 1), p.stdout + p.stderr
     score = json.loads((out / "score.json").read_text())
-    assert score["success"] or score["reason"].startswith("collision"), score
+    assert score["collisions"] == [] and score["sim_time"] >= 5.9, score["reason"]
     applied = check_answers(score)
     assert len({r["cycle"] for r in applied}) >= 4  # at least four swaps
     msgs = logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_STATUS", "MPPI_COMMAND"})
     sizes = status_sizes(msgs)
-    assert sizes[0] == (512, 100)
-    for want in [(1024, 100), (1024, 60), (256, 120), (512, 100)]:
+    assert sizes[0] == (512, 75)   # config/tasks/quadrotor_track.yaml's horizon
+    for want in [(1024, 75), (1024, 60), (256, 120), (512, 100)]:
         assert want in sizes, sizes
     # The swaps cost the loop nothing: the cycle that swapped each update in and the two after
     # it (command seq = cycle + 1) each finished well inside the period. The flight's misses
@@ -140,7 +146,7 @@ def test_measured_latency_lockstep_flight_replays_bit_for_bit(mppid_binary, tmp_
              timeout=300)
     assert p.returncode in (0, 1), p.stdout + p.stderr
     score = json.loads((out / "score.json").read_text())
-    assert score["success"] or score["reason"].startswith("collision"), score
+    assert score["success"] or score["reason"].startswith("collision"), score["reason"]
     assert score["commands"] > 100, score  # at least two seconds of flight to replay
     cmds = [m for _, m in logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND"})["MPPI_COMMAND"]]
     leads = {m.lead_us for m in cmds}
