@@ -143,7 +143,7 @@ STAMP="$VENV/.mppid-requirements.sha256"
 FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
 VIEW_STAMP="$VENV/.mppid-view-requirements.sha256"
 # requirements.txt includes both of these; its stamp covers all three.
-ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt)
+ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt requirements-nodeps.txt)
 
 # The stamp of a requirements file: it and the interpreter, so a Python upgrade reinstalls.
 requirements_hash() {
@@ -160,6 +160,10 @@ pip_install() {
   fi
   log "pip install -r $file"
   "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r "$file"
+  if [[ "$file" == requirements.txt ]]; then
+    log "pip install --no-deps -r requirements-nodeps.txt"
+    "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps -r requirements-nodeps.txt
+  fi
   printf '%s\n' "$want" >"$stamp"
 }
 

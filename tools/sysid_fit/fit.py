@@ -89,8 +89,12 @@ class Grid:
         return i, t - self.t[i]
 
 
-def _rate_cost(grid: Grid, data: FlightData, axis: int, delay: float, tau: float, pairs, gain: float | None = None):
-    u = grid.input(Q.RATE_X + axis, delay)
+def _rate_cost(grid: Grid, data: FlightData, axis: int, delay: float, tau: float, pairs, gain: float | None = None,
+               u: np.ndarray | None = None):
+    """The axis's mean squared error at (delay, tau) and its least-squares gain (or `gain`'s
+    error); `u`: grid.input at this delay, when the caller already has it (a search over tau)."""
+    if u is None:
+        u = grid.input(Q.RATE_X + axis, delay)
     a = np.exp(-GRID_H / tau)
     y = lfilter([0.0, 1.0 - a], [1.0, -a], u)
     i, f = grid.at(data.t)
@@ -130,7 +134,8 @@ def fit_rate_axis(data: FlightData, axis: int, grid: Grid | None = None, delay: 
     pairs = _pairs(data)
 
     def best_tau(d):
-        r = minimize_scalar(lambda lt: _rate_cost(grid, data, axis, d, float(np.exp(lt)), pairs)[0],
+        u = grid.input(Q.RATE_X + axis, d)  # the same for every tau tried
+        r = minimize_scalar(lambda lt: _rate_cost(grid, data, axis, d, float(np.exp(lt)), pairs, u=u)[0],
                             bounds=(np.log(0.005), np.log(2.0)), method="bounded", options={"xatol": 1e-4})
         return float(np.exp(r.x)), float(r.fun)
 
