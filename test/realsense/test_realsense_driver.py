@@ -254,3 +254,58 @@ def test_a_frame_is_stamped_on_the_host_clock_its_own_time_or_its_arrival():
     assert before <= d.frame_utime(hw) <= time.time_ns() // 1000 and d.n["host_stamped"] == 1
     d = Driver(settings.load(str(CONFIG), ["timestamps=host"]), mppi_lcm, lambda ch, data: None)
     assert before <= d.frame_utime(own) <= time.time_ns() // 1000 and d.n["host_stamped"] == 0
+
+
+def software_camera(rs, modes):
+    """A software device with a depth sensor offering `modes` [(width, height)] at 30 fps, as a
+    D4xx's stereo module offers its depth modes; returns the device, its sensor, the profiles."""
+    dev = rs.software_device()
+    dev.register_info(rs.camera_info.serial_number, "123456")
+    sensor = dev.add_sensor("Stereo Module")
+    profiles = []
+    for uid, (w, h) in enumerate(modes):
+        intr = rs.intrinsics()
+        intr.width, intr.height, intr.ppx, intr.ppy, intr.fx, intr.fy = w, h, (w - 1) / 2, (h - 1) / 2, w / 2, w / 2
+        intr.model, intr.coeffs = rs.distortion.brown_conrady, [0.0] * 5
+        vs = rs.video_stream()
+        vs.type, vs.index, vs.uid = rs.stream.depth, 0, uid
+        vs.width, vs.height, vs.fps, vs.bpp, vs.fmt, vs.intrinsics = w, h, 30, 2, rs.format.z16, intr
+        profiles.append(sensor.add_video_stream(vs).as_video_stream_profile())
+    sensor.add_read_only_option(rs.option.depth_units, 0.001)
+    return dev, sensor, profiles
+
+
+def test_a_live_camera_streams_the_asked_mode_decimated_and_stamped_on_the_host_clock():
+    """The live path (no recording) on a software device standing in for the camera: the
+    settings' depth mode chosen among the sensor's, an unknown one refused naming them, frames
+    pushed with librealsense's global time deprojected, decimated and kept on the host clock."""
+    from mppi_realsense import settings
+    from mppi_realsense.camera import Camera
+    try:
+        from mppi_realsense.camera import import_rs
+        rs = import_rs()
+    except RuntimeError as e:
+        missing(str(e))
+    dev, sensor, profiles = software_camera(rs, [(424, 240), (848, 480)])
+    with pytest.raises(RuntimeError, match=r"^stream: 640x480@30 is not one of the camera's depth modes "
+                                           r"\(424x240@30, 848x480@30\)"):
+        Camera(settings.load(str(CONFIG), ["stream.width=640"]), device=dev)
+    cam = Camera(settings.load(str(CONFIG), ["stream.width=424", "stream.height=240", "decimation=2"]), device=dev)
+    assert (cam.profile.width(), cam.profile.height()) == (424, 240)
+    got = []
+    cam.start(got.append)
+    stamps = [time.time() * 1000.0 + k for k in range(3)]
+    for i, ts in enumerate(stamps):
+        f = rs.software_video_frame()
+        f.pixels = np.full((240, 424), 2500, dtype=np.uint16).tobytes()
+        f.bpp, f.stride, f.timestamp, f.domain = 2, 2 * 424, ts, rs.timestamp_domain.global_time
+        f.frame_number, f.profile = i + 1, profiles[0]
+        sensor.on_video_frame(f)
+    deadline = time.monotonic() + 30.0
+    while len(got) < 3 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    cam.stop()
+    assert [g.timestamp_ms for g in got] == pytest.approx(stamps, abs=1e-3) and all(g.host_clock for g in got)
+    assert all((g.width, g.height) == (212, 120) for g in got)
+    z = got[0].vertices[:, 2]
+    assert len(z) == 212 * 120 and z == pytest.approx(2.5, abs=1e-3)  # a flat scene 2.5 m ahead

@@ -32,7 +32,9 @@ class DepthFrame:
 
 
 class Camera:
-    def __init__(self, settings, bag: str | None = None):
+    def __init__(self, settings, bag: str | None = None, device=None):
+        """The camera of `settings` (device.serial, stream), or the recording `bag`, or `device`
+        (a librealsense device already at hand, e.g. a software device) taken as a camera."""
         self.rs = rs = import_rs()
         self.s, self.bag = settings, bag
         self.ctx = rs.context()
@@ -44,7 +46,7 @@ class Camera:
             self.playback.set_real_time(False)
             self.playback.set_status_changed_callback(self._on_status)
         else:
-            self.device = self._find_device()
+            self.device = device if device is not None else self._find_device()
         self.sensor, self.profile = self._depth_profile()
         self.decimate = None
         if settings.decimation > 1:
