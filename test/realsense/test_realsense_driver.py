@@ -148,7 +148,6 @@ def test_a_recorded_wall_played_back_lands_in_the_map_where_it_stands(tmp_path):
     in a private network namespace: every recorded frame read, the empty one refused, the
     clouds decimated, within the range limits and the point budget, placed by the vehicle's
     state and the mounting; the wall's columns in the map at its distance and its extent."""
-    pytest.importorskip("mppi_realsense")
     try:
         from mppi_realsense import synthetic
         synthetic.import_rs()
