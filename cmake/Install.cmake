@@ -2,12 +2,14 @@
 # and the Debian package (cmake/Packaging.cmake, tools/package.sh) put in place
 #   bin/mppid                               the controller
 #   bin/mppid-mapper                        the local map from a depth camera or LiDAR (docs/sensing.md)
-#   bin/mppid-mavlink-bridge, bin/mppid-mission   Debian's python3 with lib/mppid/python
+#   bin/mppid-mavlink-bridge, bin/mppid-mission, bin/mppid-realsense   Debian's python3 with
+#                                           lib/mppid/python (mppid-realsense also needs
+#                                           pyrealsense2, not carried: docs/deploy.md)
 #   lib/mppid/python/                       the project's Python packages and the LCM types, with
 #                                           the PyPI wheels Debian 12 lacks (pymavlink, fastcrc,
 #                                           lcm: its lcm-logger is the flight recorder)
 #   lib/systemd/system/mppid*.{target,service}   the units (drivers/systemd/)
-#   /etc/mppid/{mppid,vehicle,mavlink-bridge,mapper}.yaml  the live settings (conffiles)
+#   /etc/mppid/{mppid,vehicle,mavlink-bridge,mapper,realsense}.yaml  the live settings (conffiles)
 #   share/mppid/                            their templates: the link profiles per autopilot and
 #                                           port, tasks, vehicles, missions, autopilot parameters
 #   share/doc/mppid/                        first-flight.md, deploy.md, failsafes.md; copyright (every
@@ -39,7 +41,7 @@ if(TARGET mppid-mapper)
 endif()
 # The Python programs: Debian's python3 on the package's own Python directory (no venv: a
 # venv's absolute paths would be the build machine's).
-foreach(_prog mppid-mavlink-bridge:mppi_mavlink mppid-mission:mppi_mission)
+foreach(_prog mppid-mavlink-bridge:mppi_mavlink mppid-mission:mppi_mission mppid-realsense:mppi_realsense)
   string(REPLACE ":" ";" _pm ${_prog})
   list(GET _pm 0 MPPID_PROGRAM)
   list(GET _pm 1 MPPID_PY_MODULE)
@@ -58,9 +60,9 @@ set(MPPID_PYTHON_PACKAGES "" CACHE STRING "Python package folders the package ca
 if(MPPID_PYTHON_PACKAGES)
   set(_py_packages "${MPPID_PYTHON_PACKAGES}")
 elseif(EXISTS ${PROJECT_SOURCE_DIR}/lcmtypes/pyproject.toml)
-  set(_py_packages "${PROJECT_SOURCE_DIR}/drivers/mavlink;${PROJECT_SOURCE_DIR}/drivers/mission;${PROJECT_SOURCE_DIR}/lcmtypes")
+  set(_py_packages "${PROJECT_SOURCE_DIR}/drivers/mavlink;${PROJECT_SOURCE_DIR}/drivers/mission;${PROJECT_SOURCE_DIR}/drivers/realsense;${PROJECT_SOURCE_DIR}/lcmtypes")
 else()
-  set(_py_packages "${PROJECT_SOURCE_DIR}/drivers/mavlink;${PROJECT_SOURCE_DIR}/drivers/mission;${CMAKE_BINARY_DIR}/python")
+  set(_py_packages "${PROJECT_SOURCE_DIR}/drivers/mavlink;${PROJECT_SOURCE_DIR}/drivers/mission;${PROJECT_SOURCE_DIR}/drivers/realsense;${CMAKE_BINARY_DIR}/python")
 endif()
 # MPPID_PYTHON_WHEELS: what Debian 12 lacks, from PyPI for the target (pinned to the venv's).
 set(_wheels "")
@@ -107,6 +109,7 @@ install(FILES ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid.target
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-recorder.service
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-lcm-route.service
               ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-mapper.service
+              ${PROJECT_SOURCE_DIR}/drivers/systemd/mppid-realsense.service
         DESTINATION lib/systemd/system)
 
 # ---- settings: live files in /etc/mppid, templates in share/mppid ---------------------
@@ -126,6 +129,13 @@ file(READ ${PROJECT_SOURCE_DIR}/config/mapper/mapper.yaml _mapper)
 string(REGEX REPLACE "\nlcm_url: [^\n]*" "\nlcm_url: \"udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304\"  # mppid's bus: the maps go out, the frames come in (unless sensor_lcm_url)" _mapper "${_mapper}")
 file(WRITE ${CMAKE_BINARY_DIR}/deploy/etc/mapper.yaml "${_mapper}")
 install(FILES ${CMAKE_BINARY_DIR}/deploy/etc/mapper.yaml DESTINATION ${_etc})
+# /etc/mppid/realsense.yaml: the camera driver's settings with the bus named (mppid's: the
+# bridge's states come in, the frames go out to the mapper's lcm_url). pyrealsense2 is not in the
+# package (x86_64 wheels only): docs/deploy.md says how to add it.
+file(READ ${PROJECT_SOURCE_DIR}/config/realsense/realsense.yaml _realsense)
+string(REGEX REPLACE "\nlcm_url: [^\n]*" "\nlcm_url: \"udpm://239.255.76.67:7667?ttl=0\"  # mppid's bus: the states come in, the frames go out (unless sensor_lcm_url)" _realsense "${_realsense}")
+file(WRITE ${CMAKE_BINARY_DIR}/deploy/etc/realsense.yaml "${_realsense}")
+install(FILES ${CMAKE_BINARY_DIR}/deploy/etc/realsense.yaml DESTINATION ${_etc})
 file(GLOB _bridge_profiles ${PROJECT_SOURCE_DIR}/config/bridge/px4_*.yaml ${PROJECT_SOURCE_DIR}/config/bridge/ardupilot_*.yaml)
 # Not the simulators' (this machine's SITL) nor px4_serial.yaml (a vehicle path of the source tree).
 list(FILTER _bridge_profiles EXCLUDE REGEX "(_sitl|px4_serial)\\.yaml$")
@@ -194,6 +204,8 @@ if(MPPID_HELP2MAN AND TARGET mppid AND TARGET mppid-mapper)
                  ${PROJECT_SOURCE_DIR}/drivers/mavlink/mppi_mavlink/__main__.py ${MPPID_HOST_PYTHON} -m mppi_mavlink)
   mppid_man_page(mppid-mission "missions and single legs for mppid to fly"
                  ${PROJECT_SOURCE_DIR}/drivers/mission/mppi_mission/__main__.py ${MPPID_HOST_PYTHON} -m mppi_mission)
+  mppid_man_page(mppid-realsense "RealSense depth camera frames as point clouds for mppid-mapper"
+                 ${PROJECT_SOURCE_DIR}/drivers/realsense/mppi_realsense/__main__.py ${MPPID_HOST_PYTHON} -m mppi_realsense)
   get_property(_man_pages GLOBAL PROPERTY MPPID_MAN_PAGES)
   add_custom_target(mppid-man DEPENDS ${_man_pages})
   install(FILES ${_man_pages} DESTINATION ${CMAKE_INSTALL_MANDIR}/man1 OPTIONAL)

@@ -36,6 +36,8 @@ set(MPPID_DEB_DEPENDS
     "libc6 (>= 2.36), libstdc++6 (>= 12), libgcc-s1, libgomp1, libyaml-cpp0.7, libspdlog1.10, libfmt9, libhwy1, libsystemd0, libglib2.0-0, python3 (>= 3.11), python3 (<< 3.12), python3-numpy, python3-yaml, python3-serial, iproute2"
     CACHE STRING "The package's Depends (Debian 12 names)")
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "${MPPID_DEB_DEPENDS}")
+# mppid-realsense's pyrealsense2 (not carried: docs/deploy.md) links libusb.
+set(CPACK_DEBIAN_PACKAGE_SUGGESTS "libusb-1.0-0")
 # The live settings are the operator's: an upgrade keeps edited files (dpkg asks).
 set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
     ${PROJECT_SOURCE_DIR}/cmake/debian/conffiles ${PROJECT_SOURCE_DIR}/cmake/debian/postinst

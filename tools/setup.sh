@@ -75,6 +75,8 @@ APT_PACKAGES=(
   xvfb xauth iproute2 util-linux procps
   # daemon tests: capsh makes the OS refuse real-time, systemd-analyze verifies the unit
   libcap2-bin systemd
+  # pyrealsense2's wheel (mppid-realsense and its test, docs/sensing.md) links libusb
+  libusb-1.0-0
   # cyclictest: how late this machine wakes a SCHED_FIFO thread (drivers/daemon/README.md)
   rt-tests
   # tools/stress-tests.sh: the timed tests again and again beside busy CPU workers
@@ -212,7 +214,7 @@ fi
 # sources change (lcmtypes/setup.py, lcmtypes/*/*.lcm).
 PY_PACKAGES_FLIGHT=(lcmtypes drivers/mavlink drivers/mission tools/sitl_harness)
 PY_PACKAGES_VIEW=(tools/mppid_view)
-PY_PACKAGES=("${PY_PACKAGES_FLIGHT[@]}" "${PY_PACKAGES_VIEW[@]}" sim/mavlink_vehicle tools/sysid_fit)
+PY_PACKAGES=("${PY_PACKAGES_FLIGHT[@]}" "${PY_PACKAGES_VIEW[@]}" sim/mavlink_vehicle tools/sysid_fit drivers/realsense)
 PACKAGES_STAMP="$VENV/.mppid-packages.sha256"
 FLIGHT_PACKAGES_STAMP="$VENV/.mppid-flight-packages.sha256"
 

@@ -24,6 +24,7 @@ LINKS = {"pi5_uart": "/dev/ttyAMA0", "jetson_uart": "/dev/ttyTHS1", "usb": "/dev
 PROFILES = [ROOT / "config" / "bridge" / f"{ap}_{link}.yaml" for ap in ("px4", "ardupilot") for link in LINKS]
 SERVICES = ("mppid-lcm-route.service", "mppid-recorder.service", "mppid.service", "mppid-mavlink-bridge.service")
 MAPPER = "mppid-mapper.service"  # part of the target once enabled; not started by it unasked
+REALSENSE = "mppid-realsense.service"  # the same
 
 
 def build_dir() -> Path:
@@ -75,13 +76,13 @@ def test_the_target_starts_and_stops_every_service():
     t = unit("mppid.target")
     assert words(t, "Wants") == set(SERVICES) == words(t, "Also")
     assert words(t, "WantedBy") == {"multi-user.target"}
-    assert {p.name for p in UNITS.glob("*.service")} == set(SERVICES) | {MAPPER}
-    for s in SERVICES + (MAPPER,):
+    assert {p.name for p in UNITS.glob("*.service")} == set(SERVICES) | {MAPPER, REALSENSE}
+    for s in SERVICES + (MAPPER, REALSENSE):
         u = unit(s)
         assert words(u, "PartOf") == {"mppid.target"}, s
         assert words(u, "WantedBy") == {"mppid.target"}, s
         assert "network-online.target" not in words(u, "After") | words(u, "Wants"), f"{s}: a field has no network"
-    for s in SERVICES[1:] + (MAPPER,):  # the bus needs the route first
+    for s in SERVICES[1:] + (MAPPER, REALSENSE):  # the bus needs the route first
         u = unit(s)
         assert "mppid-lcm-route.service" in words(u, "Requires") & words(u, "After"), s
     assert {"mppid.service", "mppid-mavlink-bridge.service"} <= words(unit("mppid-recorder.service"), "Before")
@@ -103,7 +104,8 @@ def test_mppid_and_the_bridge_fly_one_vehicle_file_from_etc():
     assert option(b, "--config") == "/etc/mppid/mavlink-bridge.yaml"
     conffiles = (ROOT / "cmake" / "debian" / "conffiles").read_text().split()
     assert sorted(conffiles) == sorted(["/etc/mppid/mppid.yaml", "/etc/mppid/vehicle.yaml",
-                                        "/etc/mppid/mavlink-bridge.yaml", "/etc/mppid/mapper.yaml"])
+                                        "/etc/mppid/mavlink-bridge.yaml", "/etc/mppid/mapper.yaml",
+                                        "/etc/mppid/realsense.yaml"])
 
 
 def test_the_mapper_is_enabled_on_its_own_and_maps_before_mppid_starts():
@@ -132,6 +134,27 @@ def test_the_installed_mapper_settings_name_the_bus_and_run(tmp_path):
     assert p.returncode == 0 and '"frames":0' in rest, rest
 
 
+def test_the_camera_is_enabled_on_its_own_and_reads_its_installed_settings():
+    t, u = unit("mppid.target"), unit(REALSENSE)
+    assert REALSENSE not in words(t, "Wants") | words(t, "Also"), "a vehicle without the camera runs no driver"
+    assert exec_start(REALSENSE) == ["/usr/bin/mppid-realsense", "--config", "/etc/mppid/realsense.yaml"]
+    assert "CPUSchedulingPolicy" not in u, "time-shared: below mppid's and the bridge's SCHED_FIFO"
+    assert "plugdev" in words(u, "SupplementaryGroups")  # the camera's USB device (udev rules)
+
+
+def test_the_installed_camera_settings_name_the_bus_and_load():
+    """/etc/mppid/realsense.yaml (made by cmake/Install.cmake from config/realsense/realsense.yaml):
+    the bridge's bus, on which the states come and the frames go to the mapper's lcm_url."""
+    sys.path.insert(0, str(ROOT / "drivers" / "realsense"))
+    from mppi_realsense import settings as rs_settings
+    cfg = build_dir() / "deploy" / "etc" / "realsense.yaml"
+    s = rs_settings.load(str(cfg))
+    url = settings.DEFAULTS["lcm"]["url"]
+    assert s.lcm_url == url and s.sensor_lcm_url == "" and s.channel == "MPPI_DEPTH"
+    mapper = (build_dir() / "deploy" / "etc" / "mapper.yaml").read_text()
+    assert f'\nlcm_url: "{url}&recv_buf_size=4194304"' in mapper and "MPPI_DEPTH" in mapper
+
+
 def test_route_and_recorder_use_the_group_of_the_settings_lcm_url():
     url = settings.DEFAULTS["lcm"]["url"]
     group = re.match(r"udpm://([0-9.]+):", url).group(1)
@@ -149,7 +172,8 @@ def test_units_verify(tmp_path):
     assert mppid.is_file(), f"{mppid} not built (tools/setup.sh)"
     swap = {"/usr/bin/mppid-mavlink-bridge": str(ROOT / "drivers" / "mavlink" / "mppid-mavlink-bridge"),
             "/usr/bin/mppid ": f"{mppid} ", "/usr/lib/mppid/python/bin/lcm-logger": str(logger),
-            "/usr/bin/mppid-mapper": str(build_dir() / "bin" / "mppid-mapper")}
+            "/usr/bin/mppid-mapper": str(build_dir() / "bin" / "mppid-mapper"),
+            "/usr/bin/mppid-realsense": str(Path(sys.executable).parent / "mppid-realsense")}
     for f in UNITS.iterdir():
         text = f.read_text()
         for a, b in swap.items():
