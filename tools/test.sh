@@ -3,9 +3,9 @@
 # (tools/check-hygiene.py), ctest over the build, pytest over test/ on two workers (a real-time
 # forest flight among them), a short soak with scheduled faults (tools/soak, every fault once,
 # flown beside the sanitizer stage), the sanitizer and fuzzing stage (tools/sanitize.sh:
-# ASan+UBSan build of every test, each libFuzzer target 30 s, TSan of the threaded tests),
-# the aarch64 stage beside pytest (tools/aarch64.sh: a cross build's tests under qemu-user) and
-# the package stage (tools/package-test.sh: the .debs built, installed into a clean Debian 12 root
+# ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
+# then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user) and the
+# package stage (tools/package-test.sh: the .debs built, installed into a clean Debian 12 root
 # and flown from there; the arm64 one's programs under qemu-user).
 # Exits non-zero when anything failed. This is what CI runs (.ci/run).
 #
@@ -50,17 +50,6 @@ echo "[test] ctest --test-dir $BUILD_DIR --output-on-failure -j2 ${CTEST_ARGS:-}
 ctest --test-dir "$BUILD_DIR" --output-on-failure --no-tests=error -j2 ${CTEST_ARGS:-} || status=1
 stage_done ctest
 
-aarch64_pid=
-if ((!quick)); then
-  # The aarch64 stage (a cross build through ccache, then its tests under qemu-user, one job)
-  # runs beside the Python tests: those wait on real-time flights and their peers for most of
-  # their wall time, and every test must pass on a busy machine anyway.
-  echo "[test] tools/aarch64.sh with one job (beside pytest; its log: results/aarch64.log)"
-  mkdir -p results
-  MPPID_JOBS=1 tools/aarch64.sh >results/aarch64.log 2>&1 &
-  aarch64_pid=$!
-fi
-
 if [[ -d test ]] && [[ -n "$(find test -name 'test_*.py' -print -quit)" ]]; then
   # Two workers, a test file each at a time (pytest-xdist; MPPID_PYTEST_JOBS=0: one process).
   jobs_args=(-n "${MPPID_PYTEST_JOBS:-2}" --dist loadfile)
@@ -76,16 +65,6 @@ else
   echo "[test] no Python tests under test/"
 fi
 stage_done pytest
-if [[ -n "$aarch64_pid" ]]; then
-  aarch64_rc=0
-  wait "$aarch64_pid" || aarch64_rc=$?
-  grep '^\[aarch64\]' results/aarch64.log || true
-  if ((aarch64_rc != 0)); then
-    tail -n 60 results/aarch64.log
-    echo "[test] the aarch64 stage FAILED (rc $aarch64_rc): results/aarch64.log" >&2; status=1
-  fi
-  stage_done aarch64  # what it took beyond pytest
-fi
 
 if ((!quick)); then
   # The soak flies in real time (SCHED_FIFO) beside the sanitizer stage's builds and fuzzers:
@@ -102,6 +81,9 @@ if ((!quick)); then
   grep '^\[soak\]' results/soak-test.log || tail -n 20 results/soak-test.log
   if ((soak_rc != 0)); then echo "[test] the soak FAILED (rc $soak_rc): results/soak-test.log" >&2; status=1; fi
   stage_done soak
+  echo "[test] tools/aarch64.sh"
+  tools/aarch64.sh || status=1
+  stage_done aarch64
   echo "[test] tools/package-test.sh (MPPID_PACKAGE_STAGE=0 skips it)"
   tools/package-test.sh || status=1
   stage_done package
