@@ -3,7 +3,7 @@
 # (tools/check-hygiene.py), ctest over the build, pytest over test/ on two workers (a real-time
 # forest flight among them), a short soak with scheduled faults (tools/soak, every fault once,
 # flown beside the sanitizer stage), the sanitizer and fuzzing stage (tools/sanitize.sh:
-# ASan+UBSan build of every test, each libFuzzer target 60 s, TSan of the threaded tests),
+# ASan+UBSan build of every test, each libFuzzer target 30 s, TSan of the threaded tests),
 # then the aarch64 stage (tools/aarch64.sh: a cross build's tests under qemu-user) and the
 # package stage (tools/package-test.sh: the .debs built, installed into a clean Debian 12 root
 # and flown from there; the arm64 one's programs under qemu-user).
