@@ -94,10 +94,12 @@ _HEADER = struct.Struct(">8sqq3ff3ifi")   # local_map_t up to its array, LCM's b
 
 
 class MapCells:
-    """The occupied cells of one local_map_t: centres (world ENU) and the window. Immutable."""
+    """The occupied cells of one local_map_t: centres (world ENU) in ascending z (so that a height
+    band is a slice), and the window. Immutable."""
 
     def __init__(self, xyz: np.ndarray, lo, hi, resolution: float, seq: int, arrived: float):
         self.xyz = xyz
+        self.z = np.ascontiguousarray(xyz[:, 2])
         self.lo, self.hi = np.asarray(lo, float), np.asarray(hi, float)
         self.resolution, self.seq, self.arrived = resolution, seq, arrived
         self.n = len(xyz)
@@ -116,7 +118,7 @@ def decode_map(data: bytes, fingerprint: bytes, arrived: float) -> MapCells:
     if not (math.isfinite(res) and res > 0 and all(math.isfinite(c) for c in (ox, oy, oz))):
         raise ValueError(f"local_map_t: resolution {res}, origin ({ox}, {oy}, {oz})")
     dist = np.frombuffer(data, dtype=">i2", count=n, offset=_HEADER.size)
-    idx = np.flatnonzero(dist < 0)
+    idx = np.flatnonzero(dist < 0)          # ascending, so in ascending k (z): the index's slowest
     k, rest = np.divmod(idx, nx * ny)
     j, i = np.divmod(rest, nx)
     xyz = np.empty((len(idx), 3))
@@ -160,53 +162,62 @@ class Sectors:
         self.body_cw = np.radians(body_deg)                            # sector centres, clockwise
 
     def _grow(self, n: int):
+        """Work buffers for up to n cells in the band (more than ever before: new ones)."""
         if n > self.cap:
             self.cap = max(n, 2 * self.cap)
-            self.rel = np.empty((self.cap, 3))
-            self.work = np.empty(self.cap)
-            self.band = np.empty(self.cap, dtype=bool)
-            self.tmp = np.empty(self.cap, dtype=bool)
+            self.r = np.empty((self.cap, 3))
+            self.d, self.cw, self.half, self.f = (np.empty(self.cap) for _ in range(4))
+            self.lo, self.span, self.sector = (np.empty(self.cap, dtype=np.intp) for _ in range(3))
+            self.wide = np.empty(self.cap, dtype=bool)
 
     def compute(self, cells: MapCells, p, q, want_points: int = 0):
         """Fills self.distances (cm) for the vehicle at p (ENU) with attitude q; returns the 3-D
         points (body FRD, nearest first, at most want_points) as an (m, 3) array."""
-        self._grow(cells.n)
-        n = cells.n
-        rel, band = self.rel[:n], self.band[:n]
-        np.subtract(cells.xyz, p, out=rel)
-        dz = rel[:, 2]
-        np.greater_equal(dz, -self.below, out=band)
-        np.less_equal(dz, self.above, out=self.tmp[:n])
-        band &= self.tmp[:n]
-        sel = np.flatnonzero(band)
+        a = int(np.searchsorted(cells.z, p[2] - self.below, side="left"))
+        b = int(np.searchsorted(cells.z, p[2] + self.above, side="right"))
+        m = b - a
+        self._grow(m)
         yaw = heading(q)
         self.nearest.fill(np.inf)
-        sector = d = None
-        if len(sel):
-            r = rel[sel]
-            d = np.hypot(r[:, 0], r[:, 1])
-            cw = yaw - np.arctan2(r[:, 1], r[:, 0])          # clockwise from the nose
-            sector = self._fill(cw, d, cells.resolution)
+        r, d, cw = self.r[:m], self.d[:m], self.cw[:m]
+        if m:
+            for axis in range(3):                         # the cells in the height band: a slice
+                np.subtract(cells.xyz[a:b, axis], p[axis], out=r[:, axis])
+            np.hypot(r[:, 0], r[:, 1], out=d)
+            np.arctan2(r[:, 1], r[:, 0], out=cw)
+            np.subtract(yaw, cw, out=cw)                  # clockwise from the nose
+            self._fill(cw, d, cells.resolution, m)
         self._to_cm(cells, p, yaw)
-        if not want_points or d is None:
+        if not want_points or not m:
             return np.empty((0, 3))
-        return self._points(q, r, d, sector, cells.resolution, want_points)
+        return self._points(q, r, d, cw, cells.resolution, want_points)
 
-    def _fill(self, cw, d, res):
-        """self.nearest from cells at bearings cw (clockwise from the nose) and horizontal
+    def _fill(self, cw, d, res, m):
+        """self.nearest from m cells at bearings cw (clockwise from the nose) and horizontal
         distances d: each cell in every sector its footprint's circumscribed circle reaches (near
         the vehicle a cell spans several sectors), at its distance less half a cell (its near
-        face; d is changed so). The sector of each cell's centre back."""
+        face; d is changed so)."""
         inv = 1.0 / math.radians(SECTOR_DEG)
-        half = np.arctan2(res * math.sqrt(0.5), d)
-        lo = np.rint((cw - half) * inv).astype(np.intp)
-        span = np.rint((cw + half) * inv).astype(np.intp) - lo
+        half, f, lo, span = self.half[:m], self.f[:m], self.lo[:m], self.span[:m]
+        np.arctan2(res * math.sqrt(0.5), d, out=half)
+        np.subtract(cw, half, out=f)
+        f *= inv
+        np.rint(f, out=f)
+        np.copyto(lo, f, casting="unsafe")
+        np.add(cw, half, out=f)
+        f *= inv
+        np.rint(f, out=f)
+        np.copyto(span, f, casting="unsafe")
+        span -= lo
         d -= 0.5 * res
-        np.minimum.at(self.nearest, lo % SECTORS, d)
+        np.remainder(lo, SECTORS, out=lo)
+        np.minimum.at(self.nearest, lo, d)
+        wide = self.wide[:m]
+        np.greater_equal(span, 1, out=wide)
+        near = np.flatnonzero(wide)                 # the few cells that span sectors
         for k in range(1, min(int(span.max(initial=0)), SECTORS - 1) + 1):
-            wide = np.flatnonzero(span >= k)
-            np.minimum.at(self.nearest, (lo[wide] + k) % SECTORS, d[wide])
-        return np.rint(cw * inv).astype(np.intp) % SECTORS
+            near = near[span[near] >= k]
+            np.minimum.at(self.nearest, (lo[near] + k) % SECTORS, d[near])
 
     def _to_cm(self, cells: MapCells, p, yaw: float):
         near = self.nearest
@@ -233,14 +244,22 @@ class Sectors:
             np.minimum(reach, t, out=reach)
         return reach
 
-    def _points(self, q, r, d, sector, res, want):
-        """The nearest cell of each sector with one (within max_distance), nearest first."""
-        is_min = (d == self.nearest[sector]) & (d <= self.max_m)
-        cand = np.flatnonzero(is_min)
+    def _points(self, q, r, d, cw, res, want):
+        """The nearest cell of each sector (by its centre's bearing) within max_distance, nearest
+        first."""
+        sector = self.sector[:len(d)]
+        f = self.f[:len(d)]
+        np.multiply(cw, 1.0 / math.radians(SECTOR_DEG), out=f)
+        np.rint(f, out=f)
+        np.copyto(sector, f, casting="unsafe")
+        np.remainder(sector, SECTORS, out=sector)
+        own = np.full(SECTORS, np.inf)
+        np.minimum.at(own, sector, d)
+        cand = np.flatnonzero((d == own[sector]) & (d <= self.max_m))
         _, first = np.unique(sector[cand], return_index=True)
         pick = cand[first]
         pick = pick[np.argsort(d[pick], kind="stable")][:want]
-        v = r[pick].copy()
+        v = r[pick]
         h = np.hypot(v[:, 0], v[:, 1])
         scale = np.maximum(h - 0.5 * res, max(self.min_m, 1e-3)) / np.maximum(h, 1e-9)
         v[:, 0] *= scale
