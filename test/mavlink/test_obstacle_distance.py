@@ -196,12 +196,18 @@ def test_a_stale_map_sends_nothing_and_is_counted(monkeypatch):
     snd, link = sender("ardupilot", max_map_age_s=0.5)
     assert not snd.tick(1_000_000, (0, 0, 1), quat_yaw(0)) and snd.counters["obstacle_no_map"] == 1
     snd.on_map("MPPI_LOCAL_MAP", trunk_map([(5.0, 0.0, 0.3)]))
-    now = snd.map.arrived
-    monkeypatch.setattr("mppi_mavlink.obstacle_distance.time.monotonic", lambda: now + 0.6)
-    assert not snd.tick(1_100_000, (0, 0, 1), quat_yaw(0))
-    assert snd.counters["obstacle_stale"] == 1 and not link.sent
-    snd.on_map("MPPI_LOCAL_MAP", b"not a map")
-    assert snd.counters["obstacle_maps_rejected"] == 1 and snd.counters["obstacle_maps"] == 1
+    now = snd.latest[1]
+    clock = [now + 0.4]
+    monkeypatch.setattr("mppi_mavlink.obstacle_distance.time.monotonic", lambda: clock[0])
+    assert snd.tick(1_066_667, (0, 0, 1), quat_yaw(0)) and len(link.sent) > 1
+    sent = len(link.sent)
+    clock[0] = now + 0.6
+    assert not snd.tick(1_133_334, (0, 0, 1), quat_yaw(0))
+    assert snd.counters["obstacle_stale"] == 1 and len(link.sent) == sent
+    snd.on_map("MPPI_LOCAL_MAP", b"not a map")           # read at the next tick: refused, counted
+    assert not snd.tick(1_200_000, (0, 0, 1), quat_yaw(0))
+    assert snd.counters["obstacle_maps_rejected"] == 1 and snd.counters["obstacle_maps"] == 2
+    assert snd.counters["obstacle_stale"] == 2 and snd.map.seq == 1
 
 
 BAD = [("rate_hz", 5, "obstacle_distance.rate_hz"), ("max_distance_m", 700, "obstacle_distance.max_distance_m"),

@@ -279,6 +279,7 @@ class ObstacleSender:
         self.period_us = int(round(1e6 / self.o["rate_hz"]))
         self.sectors = Sectors(self.o)
         self.map: MapCells | None = None
+        self.latest = self.read_from = None     # (local_map_t bytes, monotonic s at arrival)
         self.next_tick_us = None
         self.ticks = deque(maxlen=8)      # (autopilot us, position, attitude) due, oldest first
         self.cv = threading.Condition()
@@ -288,12 +289,22 @@ class ObstacleSender:
 
     # ---- inputs -------------------------------------------------------------------------
     def on_map(self, _channel, data: bytes):
-        try:
-            self.map = decode_map(data, self.fingerprint, time.monotonic())
-            self.counters["obstacle_maps"] += 1
-        except ValueError as e:
-            self.counters["obstacle_maps_rejected"] += 1
-            log.warning("%s", e)
+        """Kept as it came: the LCM thread also forwards mppid's commands, so the sender's thread
+        reads the map, at its next tick."""
+        self.latest = (data, time.monotonic())
+        self.counters["obstacle_maps"] += 1
+
+    def current_map(self) -> MapCells | None:
+        """The newest map that reads well (a bad one is counted, and the one before stays)."""
+        latest = self.latest
+        if latest is not None and latest is not self.read_from:
+            self.read_from = latest
+            try:
+                self.map = decode_map(latest[0], self.fingerprint, latest[1])
+            except ValueError as e:
+                self.counters["obstacle_maps_rejected"] += 1
+                log.warning("%s", e)
+        return self.map
 
     def on_state(self, boot_us: int, x) -> None:
         """A state built from the autopilot's telemetry at its time boot_us: a tick when due."""
@@ -330,7 +341,7 @@ class ObstacleSender:
 
     def tick(self, boot_us: int, p, q) -> bool:
         """One tick: the messages for the latest map seen from (p, q); False when none went out."""
-        m = self.map
+        m = self.current_map()
         if m is None:
             self.counters["obstacle_no_map"] += 1
             return False
