@@ -39,6 +39,7 @@ from collections import deque
 
 import numpy as np
 
+from .autopilots.base import mavlink
 from .layout import QuadrotorRate as Q
 
 log = logging.getLogger("mppi_mavlink")
@@ -353,7 +354,6 @@ class ObstacleSender:
         return True
 
     def _send(self, boot_us: int, points):
-        from .autopilots.base import mavlink
         s = self.sectors
         dist = s.distances.tolist()
         if self.link.send(lambda mv: mv.obstacle_distance_send(
