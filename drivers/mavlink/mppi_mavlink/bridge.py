@@ -5,13 +5,15 @@ It composes its rooms: the link (link.py), the autopilot as seen and asked (auto
 its profile (autopilots/px4.py, autopilots/ardupilot.py), telemetry -> state (state.py), the
 forwarding gate (gate.py, pure) and forwarding (forwarding.py), the engagement (engagement.py)
 and its failsafe (failsafe.py), the flight checks (checks.py), what the operator is told
-(notices.py), requests to mppid (mppid_link.py) and the reports (report.py).
+(notices.py), requests to mppid (mppid_link.py), the reports (report.py) and the map sent to
+the autopilot (obstacle_distance.py).
 
 Threads: the MAVLink receive thread (telemetry -> LCM at once, ACKs, params), the LCM
 thread (commands -> the wire at once, so the bridge adds no period of its own), the
 housekeeping thread (companion HEARTBEAT 1 Hz, link watch, reconnect, the failsafe, link
-status), and the control socket thread (arm / takeoff / offboard / land / status, one at a
-time). Nothing is ever re-sent or made up, and nothing engages by itself: after `offboard`,
+status), the map-to-the-autopilot thread (OBSTACLE_DISTANCE on the autopilot's clock,
+whether mppid flies or not), and the control socket thread (arm / takeoff / offboard / land /
+status, one at a time). Nothing is ever re-sent or made up, and nothing engages by itself: after `offboard`,
 mppid's stream stopping, the link lost or a mode change made by someone else disengage the
 bridge until the next `offboard` (engagement.py, failsafe.py, docs/failsafes.md).
 """
@@ -32,6 +34,7 @@ from .forwarding import COUNTERS, Forwarder
 from .link import Link
 from .mppid_link import MppidParams
 from .notices import CRITICAL, INFO, NOTICE, WARNING, Notices
+from .obstacle_distance import ObstacleSender
 from .state import StatePublisher, mono_us, rotate as _rotate, wall_us  # noqa: F401  (re-exported)
 
 log = logging.getLogger("mppi_mavlink")
@@ -70,6 +73,11 @@ class Bridge:
         self.lc.subscribe(l["command_channel"], self.fwd.on_command)
         self.lc.subscribe(l["status_channel"], self.fwd.on_status)
         self.lc.subscribe(l["param_result_channel"], self.mppid.on_result)
+        self.obstacles = ObstacleSender(settings, self.link, self.profile, self.counters,
+                                        self.mppi_lcm.local_map_t._get_packed_fingerprint())
+        if settings["obstacle_distance"]["enabled"]:
+            self.states.on_published = self.obstacles.on_state
+            self.lc.subscribe(settings["obstacle_distance"]["map_channel"], self.obstacles.on_map)
         self.link_up_mono = None
         self.link_seq = 0
 
@@ -328,6 +336,7 @@ class Bridge:
             (self._housekeeping, "housekeeping"))]
         for t in self.threads:
             t.start()
+        self.obstacles.start(self.stop)
 
     def _lcm_loop(self):
         while not self.stop.is_set():

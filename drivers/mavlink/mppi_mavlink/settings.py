@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from . import autopilots, fence
+from . import autopilots, fence, obstacle_distance
 from . import vehicle as vehicle_file
 
 DEFAULTS = {
@@ -81,6 +81,8 @@ DEFAULTS = {
               "min_z": None, "max_z": None},        # m, either shape
     "control": {"socket": "/run/mppid-mavlink/control.sock"},
     "trace": {"file": None},              # JSONL of every forwarded setpoint (latency measurement)
+    # The map to the autopilot: mppid-mapper's map as OBSTACLE_DISTANCE(_3D) (obstacle_distance.py).
+    "obstacle_distance": obstacle_distance.DEFAULTS,
 }
 
 
@@ -220,3 +222,8 @@ def validate(s: dict):
         raise SettingsError(f"mavlink.signing_key_file: must be a file name or null, got {k!r}")
     if not isinstance(s["mavlink"]["url"], str) or not s["mavlink"]["url"]:
         raise SettingsError("mavlink.url: must be a pymavlink connection string")
+    obstacle_distance.validate(s, _raise)
+
+
+def _raise(message: str):
+    raise SettingsError(message)

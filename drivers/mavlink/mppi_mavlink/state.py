@@ -66,6 +66,7 @@ class StatePublisher:
         self.lock = threading.Lock()
         self.rate = telemetry.StateRate(1.0)
         self.last_p = None           # ENU position of the latest state published
+        self.on_published = None     # f(the autopilot's time [us], x): the map to the autopilot's ticks
 
     def published(self, seq):
         """(monotonic us when published, the autopilot's time, monotonic us when its sample arrived,
@@ -168,3 +169,5 @@ class StatePublisher:
         self.last_p = tuple(x[Q.POS])
         self.counters["states_published"] += 1
         self.rate.add(time.monotonic())
+        if self.on_published is not None:
+            self.on_published(int(boot_us), x)

@@ -178,6 +178,8 @@ class Vehicle:
                 self.on_command(msg)
             elif t.startswith("PARAM_"):
                 self.on_param_message(msg, t, now)
+            elif t in ("OBSTACLE_DISTANCE", "OBSTACLE_DISTANCE_3D"):
+                self.on_obstacle_distance(msg, t, now)
 
     def on_heartbeat(self, msg):
         """A companion's (the bridge's: counted, the first one an event) or a ground station's."""
@@ -204,6 +206,20 @@ class Vehicle:
             if name in self.params and math.isfinite(msg.param_value):
                 self.params[name] = float(msg.param_value)
             self.send_param(name)
+
+    def on_obstacle_distance(self, m, t, now):
+        """Proximity data from a companion (the bridge's map, obstacle_distance.py): counted and
+        logged whole with this autopilot's clock at arrival (`t`), as a proximity driver takes it."""
+        rec = {"mono_us": now, "type": t, "t": round(self.t, 4), "src": [m.get_srcSystem(), m.get_srcComponent()],
+               "frame": m.frame, "min_distance": m.min_distance, "max_distance": m.max_distance}
+        if t == "OBSTACLE_DISTANCE":
+            self.counters["obstacle_distance"] = self.counters.get("obstacle_distance", 0) + 1
+            rec.update(time_usec=m.time_usec, distances=list(m.distances), increment=m.increment,
+                       increment_f=m.increment_f, angle_offset=m.angle_offset)
+        else:
+            self.counters["obstacle_distance_3d"] = self.counters.get("obstacle_distance_3d", 0) + 1
+            rec.update(time_boot_ms=m.time_boot_ms, obstacle_id=m.obstacle_id, x=m.x, y=m.y, z=m.z)
+        self._wire(rec)
 
     def on_statustext(self, m):
         """Recorded as a ground station shows it: MAVLink 2 chunks (one id, 50 characters each

@@ -25,6 +25,7 @@ class ArduPilot(AutopilotProfile):
     mav_autopilot = mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
     hover_param = "MOT_THST_HOVER"
     prestream = False
+    obstacle_distance_3d = True
     # ArduPilot sends no ODOMETRY: the bridge pairs the attitude with the latest position.
     state_messages = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 

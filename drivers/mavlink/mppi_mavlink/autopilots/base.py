@@ -33,6 +33,9 @@ class AutopilotProfile:
     # arrive again (PX4: OFFBOARD stays the intended mode): after the bridge's own failsafe
     # disengaged it, nothing may be pre-streamed until `offboard` (engagement.py).
     offboard_loss_resumes = False
+    # The autopilot takes OBSTACLE_DISTANCE_3D (ArduPilot's AP_Proximity_MAV) beside
+    # OBSTACLE_DISTANCE (obstacle_distance.py).
+    obstacle_distance_3d = False
 
     def decode_param(self, msg) -> float:
         """PARAM_VALUE's value as a number."""
