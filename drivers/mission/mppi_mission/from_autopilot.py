@@ -1,0 +1,143 @@
+"""`mppid-mission from-autopilot`: the mission the operator uploaded to the autopilot, flown
+by mppid (docs/missions.md, "Missions planned in a ground station").
+
+Read through the bridge (`mission download`: its one link to the autopilot), converted
+(autopilot_plan.py) and checked before anything is armed or taken over: a refusal names the
+item and why, on the ground station (STATUSTEXT) and here, and nothing is flown. Then the
+runner flies it as any mission (arm, the autopilot's take-off, `offboard`: ArduPilot GUIDED,
+PX4 OFFBOARD), the ground station following: the autopilot's current item set to the item
+flown (MISSION_SET_CURRENT), MISSION_ITEM_REACHED when it is done, a STATUSTEXT at each.
+
+The mission changed from the ground station in flight (the bridge's `mission status`): at the
+end of the leg being flown, the mission is read again and flown from the autopilot's current
+item; refused, mppid holds where the vehicle is and the tool ends (the operator takes the
+vehicle back with a mode switch). Exit status: 0 done, 1 refused or failed, 2 bad arguments.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import autopilot_plan as ap_plan
+from .runner import Runner
+from .vehicles import FlightError
+
+IN_AIR = 2          # MAV_LANDED_STATE_IN_AIR
+REREAD_TRIES = 3    # a mission changed while read again: read again, this many times
+
+
+class Bridge:
+    """The bridge's `mission ...` requests (through the link's control socket)."""
+
+    def __init__(self, link):
+        self.link = link
+
+    def ask(self, line: str, timeout=30.0) -> dict:
+        from mppi_mavlink import control
+        return control.request(self.link.socket, line, timeout)
+
+    def download(self) -> dict:
+        r = self.ask("mission download")
+        if not r.get("ok"):
+            raise ap_plan.Refusal(None, r.get("message", "the mission could not be read"))
+        return r["mission"]
+
+    def refuse(self, text: str):
+        self.ask(f"mission refuse mppid refuses the mission: {text}")
+
+
+def _airborne(link) -> bool:
+    st = link.bridge_status()
+    return bool(st.get("armed")) and st.get("landed_state") in (None, IN_AIR)
+
+
+def read_and_convert(link, bridge: Bridge, speed: float, here=None, start_from_current=False):
+    """The autopilot's mission as a plan, flown from `here` (default: where the vehicle is)."""
+    dl = bridge.download()
+    h = link.heading()
+    start = dl.get("current") if start_from_current else None
+    return ap_plan.convert(dl, link.position() if here is None else here,
+                           None if h is None else math.degrees(h), _airborne(link), speed, start)
+
+
+class AutopilotRunner(Runner):
+    def __init__(self, conv: ap_plan.Converted, link, bridge: Bridge, speed: float, **kw):
+        super().__init__(conv.mission, link, **kw)
+        self.conv, self.bridge, self.speed = conv, bridge, speed
+        self.current = None
+        self.summary["items"] = []
+
+    def _fly_legs(self, here, origin) -> str:
+        if self.conv.takeoff_item is not None:
+            self._reached(self.conv.takeoff_item)
+        i = 0
+        while i < len(self.m.legs):
+            seq = self.conv.leg_items[i]
+            if seq != self.current:
+                self.current = seq
+                n = self.conv.numbers[seq]
+                self.bridge.ask(f"mission current {seq} mppid: item {n} {self.conv.names[seq]}")
+            ok, here = self._fly_leg(i, here, origin)
+            if not ok:
+                self.bridge.ask(f"mission say mppid: item {self.conv.numbers[seq]} failed, holding")
+                return f"item {self.conv.numbers[seq]} failed"
+            if i + 1 == len(self.m.legs) or self.conv.leg_items[i + 1] != seq:
+                self._reached(seq)
+            i += 1
+            if self.bridge.ask("mission status").get("mission_status", {}).get("changed"):
+                if not self._reload(here):
+                    return "refused in flight: holding"
+                i = 0
+        self.bridge.ask("mission say mppid: mission done" + (", landing" if self.m.land else ""))
+        return "done"
+
+    def _reached(self, seq):
+        self.bridge.ask(f"mission reached {seq}")
+        self.summary["items"].append(seq)
+
+    def _reload(self, here) -> bool:
+        """The changed mission read again and flown from the autopilot's current item (True),
+        or refused: mppid holds where the vehicle is (False)."""
+        self.say("the mission changed on the autopilot: reading it again")
+        for attempt in range(REREAD_TRIES):
+            try:
+                conv = read_and_convert(self.link, self.bridge, self.speed, here=np.asarray(here, float),
+                                        start_from_current=True)
+                break
+            except ap_plan.Refusal as e:
+                if "changed while it was read" in str(e) and attempt + 1 < REREAD_TRIES:
+                    continue
+                self.hold_here()
+                self.m.land = False
+                self.bridge.refuse(f"{e}; holding")
+                self.say(f"new mission refused: {e}; mppid holds where the vehicle is")
+                self.summary["refused"] = str(e)
+                return False
+        self.conv, self.m, self.current = conv, conv.mission, None
+        self.summary.setdefault("reloads", 0)
+        self.summary["reloads"] += 1
+        self.say(f"new mission: {len(self.m.legs)} legs from item {conv.numbers[conv.leg_items[0]]}")
+        return True
+
+
+def run(link, speed: float, seed: int, out, say) -> int:
+    """Reads, checks and flies the autopilot's mission; the exit status."""
+    if link.socket is None:
+        say("from-autopilot needs the bridge (--bridge SOCKET)")
+        return 2
+    bridge = Bridge(link)
+    try:
+        link.wait_state()
+        conv = read_and_convert(link, bridge, speed)
+    except ap_plan.Refusal as e:
+        bridge.refuse(str(e))
+        say(f"mppid refuses the mission: {e}")
+        return 1
+    except FlightError as e:
+        say(f"mission not started: {e}")
+        return 1
+    say(f"the autopilot's mission: {conv.count} items, {len(conv.mission.legs)} legs"
+        + (f", take-off to {conv.mission.takeoff:g} m" if conv.mission.takeoff else ""))
+    summary = AutopilotRunner(conv, link, bridge, speed, seed=seed, out=out, say=say).run()
+    return 0 if summary["outcome"] == "done" else 1
