@@ -97,9 +97,9 @@ def _chain(procs, tmp_path, dialect, bridge_sets=(), vehicle_params=()):
     return c
 
 
-def tool(c, out, wait=True):
+def tool(c, out, wait=True, extra=()):
     cmd = [PYTHON, "-m", "mppi_mission", "from-autopilot", "--bridge", c.sock, "--lcm-url",
-           "udpm://239.255.76.67:7667?ttl=0", "--out", str(out)]
+           "udpm://239.255.76.67:7667?ttl=0", "--out", str(out), *extra]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
     if not wait:
         return p
@@ -298,5 +298,37 @@ def test_a_mission_changed_in_flight_to_one_refused_holds(netns, procs, tmp_path
         x0 = ctl.last_x[:3]
         time.sleep(1.0)
         assert max(abs(a - b) for a, b in zip(ctl.last_x[:3], x0)) < 0.3 and x0[2] > 1.5   # held in the air
+    finally:
+        ctl.close()
+
+
+def test_the_operator_starts_it_by_arming_and_takes_it_back_with_a_mode_switch(netns, procs, tmp_path, tap):
+    """From the ground station alone: `from-autopilot --wait-armed` (as a unit would run it)
+    does nothing until the operator arms; then it reads the mission and flies it. The
+    operator's switch to LOITER in flight ends it at once: nothing landed, the mode kept."""
+    ctl = TrackingController()
+    c = _chain(procs, tmp_path, "ardupilot", vehicle_params=["SIM_RC_THROTTLE=0.5"])
+    gcs = Gcs(tap)
+    try:
+        assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
+                                  (M.MAV_CMD_NAV_WAYPOINT, 6.0, 0.0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 6.0, 6.0, 2.0),
+                                  (M.MAV_CMD_NAV_LAND,))) == 0
+        p = tool(c, tmp_path / "fly", wait=False, extra=["--wait-armed"])
+        lines = []
+        while not any("waiting for the vehicle to be armed" in x for x in lines):
+            lines.append(p.stdout.readline())
+            assert lines[-1], "".join(lines)
+        assert not [r for r in c.wire() if r["type"] == "COMMAND_LONG"
+                    and r["command"] != M.MAV_CMD_SET_MESSAGE_INTERVAL], "the tool asked before the arming"
+        gcs.send(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0))
+        wait_for(lambda: 2 in seqs(c, "mission_set_current"), 60, "the first waypoint flown")
+        gcs.send(M.MAVLink_command_long_message(1, 1, M.MAV_CMD_DO_SET_MODE, 0,
+                                                M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 5, 0, 0, 0, 0, 0))   # LOITER
+        out = "".join(lines) + p.communicate(timeout=30)[0]
+        s = _summary(tmp_path / "fly")
+        assert p.returncode == 1 and s["outcome"].startswith("stopped at item 2: mppid disengaged"), out
+        assert [e["mode"] for e in c.events("mode")] == ["GUIDED", "LOITER"] and c.status()["mode"] == "LOITER"
+        assert 3 not in seqs(c, "mission_set_current")
+        assert any("mission stopped at item 2" in t for t in texts(c))
     finally:
         ctl.close()

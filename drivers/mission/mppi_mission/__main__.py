@@ -3,8 +3,8 @@ the command line, against mppid-sim or a real autopilot (through the MAVLink bri
 `--guided URL` flies the same mission with ArduCopter's own position controller instead.
 
     mppid-mission fly config/missions/circle.yaml [--seed 51] [--bridge SOCKET] [--out DIR]
-    mppid-mission from-autopilot --bridge SOCKET [--speed 2]   the mission uploaded to the
-                                               autopilot from a ground station (from_autopilot.py)
+    mppid-mission from-autopilot --bridge SOCKET [--speed 2] [--wait-armed]   the mission
+                                  uploaded to the autopilot from a ground station (from_autopilot.py)
     mppid-mission hold [X,Y,Z]                 mppid-mission goal X,Y,Z [--radius 1]
     mppid-mission circle --center X,Y,Z --radius 5 --speed 3 [--laps 2] [--ramp S]
     mppid-mission figure-eight --center X,Y,Z --radius 5 --speed 3 [--laps 1]
@@ -62,6 +62,8 @@ def _parser():
     f.add_argument("mission", type=Path)
     fa = sub.add_parser("from-autopilot", parents=[common], help="fly the mission uploaded to the autopilot")
     fa.add_argument("--speed", type=float, default=2.0, help="m/s until a DO_CHANGE_SPEED (default 2)")
+    fa.add_argument("--wait-armed", action="store_true",
+                    help="wait for the vehicle to be armed from the ground station, then read and fly the mission")
     h = sub.add_parser("hold", parents=[common, legs], help="hold a point (default: where the vehicle is)")
     h.add_argument("at", nargs="?", type=_point)
     h.add_argument("--for", dest="seconds", type=float)
@@ -153,7 +155,7 @@ def _from_autopilot(a) -> int:
     say = (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
     link = MppidLink(a.lcm_url, a.bridge)
     try:
-        return run(link, a.speed, a.seed, a.out, say)
+        return run(link, a.speed, a.seed, a.out, say, a.wait_armed)
     finally:
         link.close()
 

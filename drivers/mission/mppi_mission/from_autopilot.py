@@ -11,11 +11,15 @@ flown (MISSION_SET_CURRENT), MISSION_ITEM_REACHED when it is done, a STATUSTEXT 
 The mission changed from the ground station in flight (the bridge's `mission status`): at the
 end of the leg being flown, the mission is read again and flown from the autopilot's current
 item; refused, mppid holds where the vehicle is and the tool ends (the operator takes the
-vehicle back with a mode switch). Exit status: 0 done, 1 refused or failed, 2 bad arguments.
+vehicle back with a mode switch). The operator's mode switch in flight (the bridge disengages)
+ends the mission at once, nothing landed by the tool. `--wait-armed`: the tool waits for the
+operator to arm the vehicle from the ground station, then reads the mission and flies it.
+Exit status: 0 done, 1 refused, failed or taken back, 2 bad arguments.
 """
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -80,8 +84,7 @@ class AutopilotRunner(Runner):
                 self.bridge.ask(f"mission current {seq} mppid: item {n} {self.conv.names[seq]}")
             ok, here = self._fly_leg(i, here, origin)
             if not ok:
-                self.bridge.ask(f"mission say mppid: item {self.conv.numbers[seq]} failed, holding")
-                return f"item {self.conv.numbers[seq]} failed"
+                return self._stopped(seq)
             if i + 1 == len(self.m.legs) or self.conv.leg_items[i + 1] != seq:
                 self._reached(seq)
             i += 1
@@ -91,6 +94,24 @@ class AutopilotRunner(Runner):
                 i = 0
         self.bridge.ask("mission say mppid: mission done" + (", landing" if self.m.land else ""))
         return "done"
+
+    def interrupted(self) -> str:
+        """The operator took the vehicle back (a mode switch: the bridge disengaged)."""
+        st = self.link.bridge_status()
+        if st.get("engagement") == "disengaged":
+            return f"mppid disengaged ({st.get('disengaged_why')})"
+        return ""
+
+    def _stopped(self, seq) -> str:
+        """A leg not done: nothing lands by itself. Taken back: the autopilot has the vehicle;
+        else mppid holds where it is."""
+        n, why = self.conv.numbers[seq], self.summary["legs"][-1].get("why", "")
+        self.m.land = False
+        if not why.startswith("mppid disengaged"):
+            self.hold_here()
+            why += ", holding"
+        self.bridge.ask(f"mission say mppid: mission stopped at item {n}: {why}")
+        return f"stopped at item {n}: {why}"
 
     def _reached(self, seq):
         self.bridge.ask(f"mission reached {seq}")
@@ -121,7 +142,20 @@ class AutopilotRunner(Runner):
         return True
 
 
-def run(link, speed: float, seed: int, out, say) -> int:
+def wait_armed(link, say, poll_s=0.2):
+    """Until the operator arms the vehicle from the ground station (disarmed, then armed)."""
+    say("waiting for the vehicle to be armed from the ground station")
+    seen_disarmed = False
+    while True:
+        armed = bool(link.bridge_status().get("armed"))
+        if armed and seen_disarmed:
+            say("armed from the ground station: reading the mission")
+            return
+        seen_disarmed = seen_disarmed or not armed
+        time.sleep(poll_s)
+
+
+def run(link, speed: float, seed: int, out, say, wait_for_arming=False) -> int:
     """Reads, checks and flies the autopilot's mission; the exit status."""
     if link.socket is None:
         say("from-autopilot needs the bridge (--bridge SOCKET)")
@@ -129,6 +163,8 @@ def run(link, speed: float, seed: int, out, say) -> int:
     bridge = Bridge(link)
     try:
         link.wait_state()
+        if wait_for_arming:
+            wait_armed(link, say)
         conv = read_and_convert(link, bridge, speed)
     except ap_plan.Refusal as e:
         bridge.refuse(str(e))

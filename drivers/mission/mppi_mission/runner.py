@@ -175,6 +175,13 @@ class Runner:
             if time.monotonic() >= next_say:
                 next_say = time.monotonic() + 1.0
                 self.say(self._progress(step, i, t, p))
+                why = self.interrupted()
+                if why:
+                    return False, why
+
+    def interrupted(self) -> str:
+        """Why the mission cannot go on ('' it can), asked once a second during a step."""
+        return ""
 
     def _progress(self, step, i, t, p):
         r = reference.evaluate(step.ref, [t])[0][0]
