@@ -137,7 +137,7 @@ def test_the_bridge_reads_the_mission_the_ground_station_uploaded(netns, procs, 
             assert read[k] == pytest.approx(getattr(sent, k)), (k, sent, read)
         assert read["z"] == pytest.approx(sent.z)
     asked = [m.seq for _, m in tap.decoded("down") if m.get_type() == "MISSION_REQUEST_INT"]
-    assert asked.count(2) == 2 and sorted(set(asked)) == list(range(len(items))), asked
+    assert asked.count(2) >= 2 and sorted(set(asked)) == list(range(len(items))), asked
     assert c.events("mission_item_dropped")
     assert any(m.get_type() == "MISSION_ACK" for _, m in tap.decoded("down"))
     conv = autopilot_plan.convert(r["mission"], here=[0.0, 0.0, 0.0])
@@ -202,7 +202,7 @@ def test_a_mission_changed_while_it_is_read_is_refused(netns, procs, tmp_path, t
     """The ground station uploads another mission while the bridge waits for a lost item: the
     new total in MISSION_CURRENT ends the download, and nothing is flown."""
     ctl = StandInController()
-    c = _chain(procs, tmp_path, "ardupilot", vehicle_params=["SIM_MIS_DROP=2", "SIM_MIS_DROP_N=3"])
+    c = _chain(procs, tmp_path, "ardupilot", vehicle_params=["SIM_MIS_DROP=2", "SIM_MIS_DROP_N=4"])
     gcs = Gcs(tap)
     try:
         rows = [(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 4.0, 0.0, 2.0),
