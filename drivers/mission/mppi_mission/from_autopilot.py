@@ -31,7 +31,7 @@ IN_AIR = 2          # MAV_LANDED_STATE_IN_AIR
 REREAD_TRIES = 3    # a mission changed while read again: read again, this many times
 
 
-class Bridge:
+class MissionRequests:
     """The bridge's `mission ...` requests (through the link's control socket)."""
 
     def __init__(self, link):
@@ -56,7 +56,7 @@ def _airborne(link) -> bool:
     return bool(st.get("armed")) and st.get("landed_state") in (None, IN_AIR)
 
 
-def read_and_convert(link, bridge: Bridge, speed: float, here=None, start_from_current=False):
+def read_and_convert(link, bridge: MissionRequests, speed: float, here=None, start_from_current=False):
     """The autopilot's mission as a plan, flown from `here` (default: where the vehicle is)."""
     dl = bridge.download()
     h = link.heading()
@@ -66,7 +66,7 @@ def read_and_convert(link, bridge: Bridge, speed: float, here=None, start_from_c
 
 
 class AutopilotRunner(Runner):
-    def __init__(self, conv: ap_plan.Converted, link, bridge: Bridge, speed: float, **kw):
+    def __init__(self, conv: ap_plan.Converted, link, bridge: MissionRequests, speed: float, **kw):
         super().__init__(conv.mission, link, **kw)
         self.conv, self.bridge, self.speed = conv, bridge, speed
         self.current = None
@@ -160,7 +160,7 @@ def run(link, speed: float, seed: int, out, say, wait_for_arming=False) -> int:
     if link.socket is None:
         say("from-autopilot needs the bridge (--bridge SOCKET)")
         return 2
-    bridge = Bridge(link)
+    bridge = MissionRequests(link)
     try:
         link.wait_state()
         if wait_for_arming:
