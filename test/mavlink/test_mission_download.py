@@ -18,10 +18,10 @@ SETTINGS = {"mavlink": {"target_component": 1, "system_id": 1, "dialect": "px4"}
 
 class ScriptedAutopilot:
     """The link: what the bridge sends is decoded and answered by `answer(msg)`, at once."""
-    link_up, target_system = True, 1
+    link_up, target_system, conn_gen = True, 1, 1
 
     def __init__(self, answer):
-        self.answer, self.sent = answer, []
+        self.answer, self.sent, self.commands = answer, [], []
         self.enc = M.MAVLink(io.BytesIO(), srcSystem=1, srcComponent=191)
         self.ap_mav = M.MAVLink(None, srcSystem=1, srcComponent=1)
         self.m = None
@@ -37,6 +37,16 @@ class ScriptedAutopilot:
                 reply.pack(self.ap_mav)   # stamps its header, as from the autopilot
                 self.m.on_message(reply.get_type(), reply)
         return True
+
+    def command_long(self, command, params, name):
+        """COMMAND_LONG accepted; REQUEST_MESSAGE answered with home or the origin."""
+        self.commands.append((command, params[0]))
+        if command == M.MAV_CMD_REQUEST_MESSAGE:
+            msg = M.MAVLink_home_position_message(-353632621, 1491652374, 586000, 0, 0, 0, [1, 0, 0, 0], 0, 0, 0, 0) \
+                if params[0] == M.MAVLINK_MSG_ID_HOME_POSITION else \
+                M.MAVLink_gps_global_origin_message(-353632621, 1491652374, 584000, 0)
+            msg.pack(self.ap_mav)
+            self.m.on_message(msg.get_type(), msg)
 
 
 def item(seq, target=1):
@@ -72,7 +82,11 @@ def test_answers_to_a_ground_station_are_not_taken_for_ours():
             return [item(msg.seq, target=255), item(msg.seq)]
         return []
     ap, m = _missions(answer)
-    items = m.download()
+    r = m.execute(["download"])
+    items = r["mission"]["items"]
+    assert r["mission"]["home"] == pytest.approx((-35.3632621, 149.1652374, 586.0))
+    assert r["mission"]["origin"][2] == pytest.approx(584.0)
+    assert (M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_MISSION_CURRENT) in ap.commands
     assert [i["seq"] for i in items] == [0, 1] and items[1]["x"] == 11
     assert ap.sent[-1].get_type() == "MISSION_ACK" and ap.sent[-1].type == M.MAV_MISSION_ACCEPTED
     # Afterwards: the autopilot's MISSION_CURRENT with another total marks the mission changed.

@@ -59,6 +59,7 @@ class Missions:
         self.downloads = 0
         self.home = self.origin = None
         self.mission_id = None
+        self._current_asked = None    # the link (its conn_gen) MISSION_CURRENT was asked on
 
     # ---- receive thread --------------------------------------------------------------------
     def on_message(self, t: str, msg) -> bool:
@@ -143,6 +144,18 @@ class Missions:
             with self.cond:
                 self.reading = False
 
+    def _ask_for_current(self):
+        """MISSION_CURRENT once a second (how a change is seen; ArduPilot sends a companion's
+        link only what it asked for); once per link, a refusal logged."""
+        if self._current_asked == self.link.conn_gen:
+            return
+        self._current_asked = self.link.conn_gen
+        try:
+            self.ap.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, [mavlink.MAVLINK_MSG_ID_MISSION_CURRENT, 1e6],
+                                 "stream MISSION_CURRENT")
+        except CommandError as e:
+            log.warning("%s: a mission changed in flight may go unseen", e)
+
     def _home_and_origin(self) -> tuple:
         for msg_id, attr in ((mavlink.MAVLINK_MSG_ID_HOME_POSITION, "home"),
                              (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, "origin")):
@@ -165,6 +178,7 @@ class Missions:
         what = args[0] if args else ""
         try:
             if what == "download":
+                self._ask_for_current()
                 items = self.download()
                 home, origin = self._home_and_origin()
                 fence = {k: v for k, v in self.s["fence"].items() if v is not None}

@@ -42,7 +42,7 @@ class MissionRequests:
         return control.request(self.link.socket, line, timeout)
 
     def download(self) -> dict:
-        r = self.ask("mission download")
+        r = self.ask("mission download", timeout=120.0)
         if not r.get("ok"):
             raise ap_plan.Refusal(None, r.get("message", "the mission could not be read"))
         return r["mission"]
