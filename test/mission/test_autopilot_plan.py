@@ -115,3 +115,16 @@ def test_a_landing_at_a_point_flies_above_it_first():
     c = ap.convert(download(items), here=[0.0, 0.0, 0.0])
     assert np.allclose(c.mission.legs[0]["line"]["to"], [3.0, 4.0, 4.0], atol=0.01)   # at the take-off altitude
     assert c.leg_items == [2] and c.mission.land
+
+
+def test_unset_params_take_their_defaults_and_a_value_out_of_range_names_its_item():
+    nan = float("nan")
+    items = [item(0, M.MAV_CMD_NAV_TAKEOFF, z=2.0, p=(nan, nan, nan, nan)),   # PX4 as QGroundControl writes it
+             item(1, M.MAV_CMD_NAV_WAYPOINT, 5.0, 0.0, 2.0, p=(nan, nan, nan, nan)),
+             item(2, M.MAV_CMD_NAV_LOITER_TIME, z=2.0, p=(nan, nan, nan, nan))]
+    c = ap.convert(download(items, dialect="px4"), here=[0.0, 0.0, 0.0])
+    assert c.mission.legs[1]["goal"]["radius"] == ap.DEFAULT_RADIUS and c.mission.legs[2] == {"hold": {"for": 0.0}}
+    items[2] = item(2, M.MAV_CMD_NAV_LOITER_TIME, z=2.0, p=(1e7, 0, 0, 0))
+    with pytest.raises(ap.Refusal) as e:
+        ap.convert(download(items, dialect="px4"), here=[0.0, 0.0, 0.0])
+    assert e.value.number == 3 and "hold.for" in str(e.value)

@@ -204,6 +204,17 @@ class _Builder:
         self.add(it["seq"], "hold", {"for": float(max(2.0, min(angle, 360.0) / rate))})
 
 
+def _finite(it: dict, number: int) -> dict:
+    """The item with its unset (NaN) params as 0, their default here; a position or a heading
+    that is not a number refused."""
+    cmd = it["command"]
+    if cmd in NAV and cmd != mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH and not math.isfinite(it["z"]):
+        raise Refusal(number, f"{command_name(cmd)}: its altitude is not a number")
+    if cmd == mavlink.MAV_CMD_CONDITION_YAW and not math.isfinite(it["param1"]):
+        raise Refusal(number, "CONDITION_YAW: its angle is not a number")
+    return {**it, **{k: 0.0 for k in ("param1", "param2", "param3", "param4") if not math.isfinite(it[k])}}
+
+
 def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = False, speed: float = 2.0,
             start_seq: int | None = None) -> Converted:
     """The plan of the mission `dl` (the bridge's `mission download`), flown from `here`
@@ -211,10 +222,11 @@ def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = F
     `start_seq` (None: the first). Raises Refusal naming the item."""
     ardupilot = dl["dialect"] == "ardupilot"
     first = 1 if ardupilot else 0
-    items = [it for it in dl["items"] if it["seq"] >= first]
 
     def number(seq):
         return seq if ardupilot else seq + 1
+
+    items = [_finite(it, number(it["seq"])) for it in dl["items"] if it["seq"] >= first]
 
     if not items:
         raise Refusal(None, "the autopilot's mission is empty: plan one in the ground station and upload it")
@@ -233,7 +245,11 @@ def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = F
     doc = {"name": "autopilot", "frame": "local", "land": b.land_item is not None, "legs": b.legs}
     if b.takeoff is not None:
         doc["takeoff"] = round(b.takeoff, 3)
-    mission = plan_mod.from_dict(doc)
+    try:
+        mission = plan_mod.from_dict(doc)
+    except plan_mod.PlanError as e:   # a value out of the plan's range: the leg's item named
+        leg = next((int(w[5:].split("]")[0]) for w in str(e).split() if w.startswith("legs[")), None)
+        raise Refusal(None if leg is None else number(b.leg_items[leg]), str(e)) from None
     out = Converted(mission, b.leg_items, {it["seq"]: number(it["seq"]) for it in items},
                     {it["seq"]: command_name(it["command"]) for it in items}, b.takeoff_item, len(dl["items"]))
     _check_fence(out, dl.get("fence"), b.start)
