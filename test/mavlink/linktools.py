@@ -137,3 +137,49 @@ class StandInController:
 
 def all_finite(m) -> bool:
     return all(math.isfinite(v) for v in (m.thrust, m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate))
+
+
+class TrackingController(StandInController):
+    """Stands in for mppid on a mission: follows the reference on MPPI_REFERENCE (hold and
+    line, evaluated as mppid does: mppi_mission.reference) with a PD position loop to thrust
+    (N, a 1 kg vehicle) and body rates (FLU), answering each state as mppid does."""
+
+    def __init__(self):
+        self.ref = None
+        super().__init__()
+        self.lc.subscribe("MPPI_REFERENCE", self._on_reference)
+
+    def _on_reference(self, ch, data):
+        m = self.mppi_lcm.reference_t.decode(data)
+        kinds = {m.KIND_HOLD: "hold", m.KIND_LINE: "line"}
+        self.ref = ({"kind": kinds.get(m.kind, "hold"), "center": list(m.center), "speed": m.speed, "ramp": m.ramp_s,
+                     "yaw": m.yaw, "end": list(m.goals[0]) if m.vehicle_count else list(m.center)}, m.t0_utime)
+
+    def _on_state(self, ch, data):
+        st = self.mppi_lcm.vehicle_state_t.decode(data)
+        self.states += 1
+        self.last_state_seq, self.last_x = st.seq, list(st.x)
+        if self.answer:
+            self.command(st.seq, self.track(st))
+
+    def track(self, st):
+        from mppi_mission import reference
+        x = st.x
+        if self.ref is None:
+            return [9.81, 0.0, 0.0, 0.0]
+        ref, t0 = self.ref
+        p, v, a = (c[0] for c in reference.evaluate(ref, [(st.sample_utime - t0) * 1e-6]))
+        acc = [max(-4.0, min(4.0, a[i] + 2.0 * (p[i] - x[i]) + 3.0 * (v[i] - x[3 + i]))) for i in range(3)]
+        f = [acc[0], acc[1], acc[2] + 9.81]
+        w, qx, qy, qz = x[6:10]
+        bz = [2 * (qx * qz + w * qy), 2 * (qy * qz - w * qx), 1 - 2 * (qx * qx + qy * qy)]   # body z in ENU
+        fn = math.sqrt(sum(c * c for c in f))
+        e = [bz[1] * f[2] - bz[2] * f[1], bz[2] * f[0] - bz[0] * f[2], bz[0] * f[1] - bz[1] * f[0]]
+        e = [c / fn for c in e]
+        bx = [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy + w * qz), 2 * (qx * qz - w * qy)]
+        by = [2 * (qx * qy - w * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz + w * qx)]
+        yaw = math.atan2(bx[1], bx[0])
+        dyaw = math.remainder(ref["yaw"] - yaw, math.tau)
+        thrust = max(0.0, sum(fi * bi for fi, bi in zip(f, bz)))
+        return [thrust, 6.0 * sum(a_ * b_ for a_, b_ in zip(bx, e)), 6.0 * sum(a_ * b_ for a_, b_ in zip(by, e)),
+                2.0 * dyaw]

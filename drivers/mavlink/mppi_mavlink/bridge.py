@@ -32,6 +32,7 @@ from .engagement import DISENGAGED, ENGAGED, PRESTREAM, Engagement
 from .failsafe import Failsafe
 from .forwarding import COUNTERS, Forwarder
 from .link import Link
+from .missions import Missions
 from .mppid_link import MppidParams
 from .notices import CRITICAL, INFO, NOTICE, WARNING, Notices
 from .obstacle_distance import ObstacleSender
@@ -66,6 +67,7 @@ class Bridge:
                              lambda on, why: self._publish_link(force=True))
         self.mppid = MppidParams(self.mppi_lcm, self._publish, l["params_channel"], m["command_timeout_s"])
         self.notices = Notices(self.link)
+        self.missions = Missions(settings, self.link, self.ap, self.notices)   # the operator's mission (missions.py)
         self.failsafe = Failsafe(settings, self.engagement, self.fwd, self.ap, self.profile, self.notices,
                                  self.states)
         self.fwd.on_mppid_restart = lambda: self.failsafe.stream_lost("mppid restarted (its command seq stepped back)")
@@ -105,6 +107,8 @@ class Bridge:
             return
         if t in STATE_TYPES:
             self.states.on_message(t, msg)
+            return
+        if self.missions.on_message(t, msg):
             return
         self.ap.on_message(t, msg)
         if t == "EXTENDED_SYS_STATE":
@@ -312,9 +316,11 @@ class Bridge:
                  "offboard": self.do_offboard, "land": self.do_land, "hold": self.do_hold, "identify": self.do_identify}
         if name == "status":
             return {"ok": True, "message": "status", "status": self.status()}
+        if name == "mission":
+            return self.missions.execute(args)
         if name not in table:
             return {"ok": False, "message": f"unknown command {name!r} (arm, disarm, takeoff [m], offboard, land, "
-                                            f"hold, identify [0|1], status)"}
+                                            f"hold, identify [0|1], status, mission ...)"}
         try:
             msg = table[name](*[float(a) for a in args])
             log.info("%s: %s", name, msg)

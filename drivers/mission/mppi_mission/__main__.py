@@ -3,6 +3,8 @@ the command line, against mppid-sim or a real autopilot (through the MAVLink bri
 `--guided URL` flies the same mission with ArduCopter's own position controller instead.
 
     mppid-mission fly config/missions/circle.yaml [--seed 51] [--bridge SOCKET] [--out DIR]
+    mppid-mission from-autopilot --bridge SOCKET [--speed 2] [--wait-armed]   the mission
+                                  uploaded to the autopilot from a ground station (from_autopilot.py)
     mppid-mission hold [X,Y,Z]                 mppid-mission goal X,Y,Z [--radius 1]
     mppid-mission circle --center X,Y,Z --radius 5 --speed 3 [--laps 2] [--ramp S]
     mppid-mission figure-eight --center X,Y,Z --radius 5 --speed 3 [--laps 1]
@@ -58,6 +60,10 @@ def _parser():
     sub = ap.add_subparsers(dest="cmd", required=True)
     f = sub.add_parser("fly", parents=[common], help="fly a mission file")
     f.add_argument("mission", type=Path)
+    fa = sub.add_parser("from-autopilot", parents=[common], help="fly the mission uploaded to the autopilot")
+    fa.add_argument("--speed", type=float, default=2.0, help="m/s until a DO_CHANGE_SPEED (default 2)")
+    fa.add_argument("--wait-armed", action="store_true",
+                    help="wait for the vehicle to be armed from the ground station, then read and fly the mission")
     h = sub.add_parser("hold", parents=[common, legs], help="hold a point (default: where the vehicle is)")
     h.add_argument("at", nargs="?", type=_point)
     h.add_argument("--for", dest="seconds", type=float)
@@ -106,6 +112,8 @@ def main(argv=None) -> int:
     if a.cmd == "check":
         from .check import run
         return run(a.lcm_url, a.seconds, a.hover_thrust)
+    if a.cmd == "from-autopilot":
+        return _from_autopilot(a)
     try:
         mission = plan_mod.load(a.mission) if a.cmd == "fly" else plan_mod.from_dict(_one_leg(a), a.cmd)
     except (plan_mod.PlanError, OSError, yaml.YAMLError) as e:
@@ -129,6 +137,27 @@ def main(argv=None) -> int:
     finally:
         link.close()
     return 0 if summary["outcome"] == "done" else 1
+
+
+def _from_autopilot(a) -> int:
+    if not a.bridge or a.guided:
+        print("mppid-mission from-autopilot: --bridge SOCKET (the bridge reads the mission), without --guided",
+              file=sys.stderr)
+        return 2
+    if not 0.05 <= a.speed <= 30:
+        print(f"mppid-mission from-autopilot: --speed {a.speed:g}: m/s in [0.05, 30]", file=sys.stderr)
+        return 2
+    if a.out:
+        a.out.mkdir(parents=True, exist_ok=True)
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    from .from_autopilot import run
+    from .vehicles import MppidLink
+    say = (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
+    link = MppidLink(a.lcm_url, a.bridge)
+    try:
+        return run(link, a.speed, a.seed, a.out, say, a.wait_armed)
+    finally:
+        link.close()
 
 
 if __name__ == "__main__":

@@ -178,11 +178,20 @@ def _checked_obstacles(doc: dict) -> dict:
 def check_fence(m: Mission, dt: float = 0.05):
     """Every leg inside the mission's fence, vehicle_radius inside it, sampled every `dt` s of
     its reference; the first point outside names its leg."""
+    breach = fence_breach(m, dt)
+    if breach is not None:
+        raise PlanError(f"fence: legs[{breach[0]}].{breach[1]}")
+
+
+def fence_breach(m: Mission, dt: float = 0.05, start=None) -> tuple[int, str] | None:
+    """The first leg leaving the fence and why ('<kind> leaves it at (x, y, z): <why>'), or
+    None; flown from `start` (default: x, y = 0 at the take-off altitude or the first leg's)."""
     if m.fence is None:
-        return
+        return None
     first_z = next((leg_a[k][2] for leg in m.legs for leg_a in leg.values() for k in ("at", "to", "center")
                     if k in (leg_a or {})), 0.0)
-    here = np.array([0.0, 0.0, m.takeoff if m.takeoff is not None else first_z])
+    here = np.array([0.0, 0.0, m.takeoff if m.takeoff is not None else first_z]) if start is None else \
+        np.asarray(start, float)
     for i in range(len(m.legs)):
         for step in steps(m, i, here, np.zeros(3)):
             if step.duration is None or step.kind in ("hold", "goal"):
@@ -192,9 +201,9 @@ def check_fence(m: Mission, dt: float = 0.05):
             for p in pts:
                 why = m.fence.breach(p, m.vehicle_radius)
                 if why:
-                    raise PlanError(f"fence: legs[{i}].{step.kind} leaves it at ({p[0]:.1f}, {p[1]:.1f}, "
-                                    f"{p[2]:.1f}): {why}")
+                    return i, f"{step.kind} leaves it at ({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}): {why}"
             here = step.end
+    return None
 
 
 def _num(v, lo=-1e6, hi=1e6) -> bool:

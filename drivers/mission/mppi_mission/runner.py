@@ -100,13 +100,7 @@ class Runner:
             if self.step is None:
                 self.hold_here()
             here = np.asarray(self.step.ref["center"], float)
-            for i in range(len(self.m.legs)):
-                ok, here = self._fly_leg(i, here, origin)
-                if not ok:
-                    self.summary["outcome"] = f"leg {i} failed"
-                    break
-            else:
-                self.summary["outcome"] = "done"
+            self.summary["outcome"] = self._fly_legs(here, origin)
             self.link.finish(self.m.land, self.say)
         except FlightError as e:
             self.summary["outcome"] = f"error: {e}"
@@ -129,6 +123,14 @@ class Runner:
             if self.log is not None:
                 self.log.close()
         return self.summary
+
+    def _fly_legs(self, here, origin) -> str:
+        """The legs in turn: the outcome ('done', or which leg failed)."""
+        for i in range(len(self.m.legs)):
+            ok, here = self._fly_leg(i, here, origin)
+            if not ok:
+                return f"leg {i} failed"
+        return "done"
 
     def _fly_leg(self, i, here, origin):
         kind = next(iter(self.m.legs[i]))
@@ -173,6 +175,13 @@ class Runner:
             if time.monotonic() >= next_say:
                 next_say = time.monotonic() + 1.0
                 self.say(self._progress(step, i, t, p))
+                why = self.interrupted()
+                if why:
+                    return False, why
+
+    def interrupted(self) -> str:
+        """Why the mission cannot go on ('' it can), asked once a second during a step."""
+        return ""
 
     def _progress(self, step, i, t, p):
         r = reference.evaluate(step.ref, [t])[0][0]

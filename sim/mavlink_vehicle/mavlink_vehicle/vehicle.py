@@ -25,7 +25,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from mppi_mavlink.layout import QuadrotorRate as Q  # noqa: E402
 
-from . import ned, plant as pl  # noqa: E402
+from . import missions as missions_mod, ned, plant as pl  # noqa: E402
 
 mavlink = mavutil.mavlink
 
@@ -71,7 +71,8 @@ def default_params(offboard_loss_s):
             "COM_LOW_BAT_ACT": 0.0, "BAT_CRIT_THR": 0.07, "BATT_FS_LOW_ACT": 0.0, "BATT_LOW_PCT": 15.0,
             "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
             "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
-            "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0}
+            "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0, "SIM_MIS_DROP": -1.0,
+            "SIM_MIS_DROP_N": 1.0}
 
 
 class Vehicle:
@@ -123,6 +124,9 @@ class Vehicle:
         # ArduPilot: message id -> [interval s, next send time], set by SET_MESSAGE_INTERVAL.
         self.streams = {}
         self.taking_off = False
+        # The mission protocol (missions.py): the mission a ground station uploaded; home where it starts.
+        self.missions = missions_mod.MissionStore(self.conn, autopilot, self.event, self.params)
+        self.missions.home_enu = tuple(float(c) for c in start)
 
     # ---- helpers ------------------------------------------------------------------------
     def event(self, what, **kw):
@@ -180,6 +184,8 @@ class Vehicle:
                 self.on_param_message(msg, t, now)
             elif t in ("OBSTACLE_DISTANCE", "OBSTACLE_DISTANCE_3D"):
                 self.on_obstacle_distance(msg, t, now)
+            elif t.startswith("MISSION_"):
+                self.missions.on_message(t, msg, self.t)
 
     def on_heartbeat(self, msg):
         """A companion's (the bridge's: counted, the first one an event) or a ground station's."""
@@ -279,13 +285,19 @@ class Vehicle:
         if c == mavlink.MAV_CMD_NAV_TAKEOFF:
             return self.on_takeoff(m)
         if c == mavlink.MAV_CMD_NAV_LAND:
+            self.hold_sp = list(self.plant.x[Q.POS])   # lands where it is, as both autopilots do
             self.set_mode("AUTO.LAND" if self.ap == "px4" else "LAND", "command")
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         if c == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL:
             self.set_stream(int(m.param1), m.param2)
             return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
         if c in (mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
+            if c == mavlink.MAV_CMD_REQUEST_MESSAGE and int(m.param1) == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+                self.missions.send_home()
+            elif c == mavlink.MAV_CMD_REQUEST_MESSAGE and int(m.param1) == mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN:
+                self.missions.send_origin()
+            return None
         return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED)
 
     def on_arm_disarm(self, m):
@@ -312,7 +324,7 @@ class Vehicle:
             return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
         if mode == "OFFBOARD" and not self.fresh_setpoint():
             return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
-        if mode in ("AUTO.LOITER", "LOITER", "BRAKE"):
+        if mode in ("AUTO.LOITER", "LOITER", "BRAKE", "AUTO.LAND", "LAND"):
             self.hold_sp = list(self.plant.x[Q.POS])
         if mode == "GUIDED":
             self.hold_sp = list(self.plant.x[Q.POS])
@@ -592,6 +604,8 @@ class Vehicle:
             if self.t >= next_hb:
                 next_hb = self.t + 1.0
                 self.send_heartbeat()
+                self.missions.send_current()
+            self.missions.tick(self.t)
             if self.t >= next_slow:
                 next_slow = self.t + 0.5
                 self.send_slow()
