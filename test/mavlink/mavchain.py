@@ -149,3 +149,15 @@ class Chain:
 
 def world_yaml(name):
     return yaml.safe_load((ROOT / "sim" / "mavlink_vehicle" / "worlds" / f"{name}.yaml").read_text())
+
+
+def tapped_chain(procs, tmp_path, port, bridge_sets=(), **kw) -> Chain:
+    """A chain whose vehicle sends to `port` (a linktools.UdpTap in front of the bridge),
+    its bridge's telemetry grace 1 s, started and checked: link up, checks passed, states."""
+    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0", *bridge_sets], **kw)
+    c.listen_lcm()
+    c.start_bridge()
+    c.start_vehicle(url=f"udpout:127.0.0.1:{port}")
+    wait_for(lambda: c.status().get("link_up") and not c.status().get("refusal")
+             and c.status().get("states_published", 0) >= 60, 15, "link up, checks passed, states")
+    return c

@@ -15,7 +15,7 @@ from pymavlink import mavextra, mavutil, mavwp  # noqa: E402
 
 from mavtest import PYTHON, ROOT, wait_for  # noqa: E402
 from linktools import ARDUPILOT, StandInController, TrackingController  # noqa: E402
-from mavchain import Chain  # noqa: E402
+from mavchain import tapped_chain  # noqa: E402
 from mavlink_vehicle.missions import HOME  # noqa: E402
 from mppi_mission import autopilot_plan  # noqa: E402
 
@@ -88,13 +88,7 @@ class Gcs:
 def _chain(procs, tmp_path, dialect, bridge_sets=(), vehicle_params=()):
     kw = dict(ARDUPILOT) if dialect == "ardupilot" else {"autopilot": "px4", "vehicle_params": []}
     kw["vehicle_params"] = kw["vehicle_params"] + list(vehicle_params)
-    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0", *bridge_sets], **kw)
-    c.listen_lcm()
-    c.start_bridge()
-    c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
-    wait_for(lambda: c.status().get("link_up") and not c.status().get("refusal")
-             and c.status().get("states_published", 0) >= 60, 15, "link up, checks passed, states")
-    return c
+    return tapped_chain(procs, tmp_path, TAP_PORT, bridge_sets, **kw)
 
 
 def tool(c, out, wait=True, extra=()):

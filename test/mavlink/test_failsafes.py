@@ -17,7 +17,7 @@ from pymavlink import mavutil  # noqa: E402
 
 from mavtest import wait_for  # noqa: E402
 from linktools import ARDUPILOT, StandInController  # noqa: E402
-from mavchain import Chain  # noqa: E402
+from mavchain import Chain, tapped_chain  # noqa: E402
 
 pytestmark = pytest.mark.timeout(90)
 mavlink = mavutil.mavlink
@@ -25,13 +25,7 @@ TAP_PORT = 14562
 
 
 def _chain(procs, tmp_path, bridge_sets=(), **kw):
-    c = Chain(procs, tmp_path, bridge_sets=["telemetry.grace_s=1.0", *bridge_sets], **kw)
-    c.listen_lcm()
-    c.start_bridge()
-    c.start_vehicle(url=f"udpout:127.0.0.1:{TAP_PORT}")
-    wait_for(lambda: c.status().get("link_up") and not c.status().get("refusal")
-             and c.status().get("states_published", 0) >= 60, 15, "link up, checks passed, states")
-    return c
+    return tapped_chain(procs, tmp_path, TAP_PORT, bridge_sets, **kw)
 
 
 def _gcs(tap, command, *params):

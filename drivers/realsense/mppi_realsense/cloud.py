@@ -10,15 +10,7 @@ from collections import Counter
 
 import numpy as np
 
-
-def quat_mul(a, b):
-    """Hamilton product of (w, x, y, z) quaternions."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw)
+from mppi_mavlink.frames import quat_mul  # the project's one quaternion product
 
 
 def quat_rotate(q, v):
