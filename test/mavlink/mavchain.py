@@ -23,7 +23,8 @@ MPPID_SETS = ("mppi.rollouts=512",)
 # work. Without this, other builds on the machine make mppid miss its deadlines.
 # MAVLINK_TEST_RT=0 turns it off.
 RT = os.environ.get("MAVLINK_TEST_RT", "1") != "0" and os.geteuid() == 0
-IO_PRIO = ["chrt", "-f", "85"] if RT else []
+# The link's Python processes: `python -m MODULE`, at SCHED_FIFO 85 once imported.
+IO_LAUNCH = [PYTHON, Path(__file__).resolve().parent / "fifo_after_imports.py", "85"] if RT else [PYTHON, "-m"]
 
 
 class Chain:
@@ -44,31 +45,31 @@ class Chain:
     # ---- processes ----------------------------------------------------------------------
     def start_vehicle(self, url=None):
         url = url or f"udpout:127.0.0.1:{ROUTER_IN if self.router else VEHICLE_PORT}"
-        cmd = [PYTHON, "-m", "mavlink_vehicle", "--url", url, "--autopilot", self.autopilot, "--out", self.out,
+        cmd = IO_LAUNCH + ["mavlink_vehicle", "--url", url, "--autopilot", self.autopilot, "--out", self.out,
                "--lcm-url", LCM_URL]
         if self.world:
             cmd += ["--world", ROOT / "sim" / "mavlink_vehicle" / "worlds" / f"{self.world}.yaml"]
         for kv in self.vehicle_params:
             cmd += ["--param", kv]
-        return self.procs.start("vehicle", IO_PRIO + cmd + self.vehicle_args)
+        return self.procs.start("vehicle", cmd + self.vehicle_args)
 
     def start_router(self, extra_outs=()):
-        cmd = [PYTHON, "-m", "MAVProxy.mavproxy", f"--master=udpin:127.0.0.1:{ROUTER_IN}",
+        cmd = IO_LAUNCH + ["MAVProxy.mavproxy", f"--master=udpin:127.0.0.1:{ROUTER_IN}",
                f"--out=udpout:127.0.0.1:{VEHICLE_PORT}", "--daemon", "--non-interactive", "--nowait",
                f"--state-basedir={self.out}", "--default-modules=", "--streamrate=-1"]
         for o in extra_outs:
             cmd.append(f"--out={o}")
-        return self.procs.start("mavproxy", IO_PRIO + cmd)
+        return self.procs.start("mavproxy", cmd)
 
     def start_bridge(self, url=None):
         # The simulated autopilot sends to the bridge's UDP port whatever the config names.
         url = url or f"udpin:127.0.0.1:{VEHICLE_PORT}"
-        cmd = [PYTHON, "-m", "mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,
+        cmd = IO_LAUNCH + ["mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,
                "--set", f"control.socket={self.sock}", "--set", f"trace.file={self.out / 'bridge_trace.jsonl'}",
                "--url", url]
         for kv in self.bridge_sets:
             cmd += ["--set", kv]
-        return self.procs.start("bridge", IO_PRIO + cmd)
+        return self.procs.start("bridge", cmd)
 
     def start_mppid(self):
         mppid = require_binary("mppid")
@@ -76,6 +77,8 @@ class Chain:
                "--backend", "cpu"] + (["--realtime"] if RT else [])
         for kv in self.mppid_sets:
             cmd += ["--set", kv]
+        if RT:
+            self.procs.turn.acquire()  # one real-time mppid on the machine's cores at a time
         return self.procs.start("mppid", cmd)
 
     def start(self):

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pytest
 from sitl_harness.logs import read_jsonl  # noqa: F401  (the tests read their flights' JSON lines through it)
+from sitl_harness.turns import RealtimeTurn
 
 ROOT = Path(__file__).resolve().parents[2]
 # The bridge (mppi_mavlink) and the simulated autopilot (mavlink_vehicle) are the packages
@@ -92,6 +93,7 @@ class Procs:
     def __init__(self, out: Path):
         self.out = out
         self.p: dict[str, subprocess.Popen] = {}
+        self.turn = RealtimeTurn()  # held while a real-time mppid of this test flies (turns.py)
 
     def start(self, name, cmd, env_extra=None):
         env = dict(os.environ)
@@ -117,6 +119,7 @@ class Procs:
     def stop_all(self):
         for name in list(self.p)[::-1]:
             self.stop(name)
+        self.turn.release()
 
     def log(self, name) -> str:
         f = self.out / f"{name}.log"

@@ -26,7 +26,7 @@ from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from . import paths
+from . import paths, turns
 
 MAX_ATTEMPTS = 2   # a failed or lost task is flown once more
 BASE_LCM_PORT = 7700
@@ -161,11 +161,14 @@ class LocalEngine:
                 # The daemon's loop thread goes on the share's last core, its workers fill it.
                 cmd = (["taskset", "-c", ",".join(map(str, cores))] + cmd +
                        ["--set", f"daemon.realtime.cpu={cores[-1]}", "--set", f"mppi.threads={len(cores)}"])
+            env = dict(os.environ)
+            if cores is not None:
+                env.pop(turns.ENV, None)  # cores of its own: it need not take turns (turns.py)
             with self.lock:
                 if task["cancel"]:
                     return {"cancelled": True}
                 with open(out / "harness.stderr", "wb") as err:
-                    task["proc"] = subprocess.Popen(cmd, cwd=paths.ROOT, start_new_session=True,
+                    task["proc"] = subprocess.Popen(cmd, cwd=paths.ROOT, start_new_session=True, env=env,
                                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=err)
             rc = task["proc"].wait()
         finally:

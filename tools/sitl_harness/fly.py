@@ -3,6 +3,7 @@ for the view, score it and plot it; and the process-level duties of a flight pro
 (stop signals, the parent watch)."""
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -12,6 +13,7 @@ from pathlib import Path
 
 from .flights import flight_for
 from .flights.base import FlightError, FlightSpec
+from .turns import RealtimeTurn
 
 
 def _write(path: Path, doc: dict) -> None:
@@ -39,7 +41,8 @@ def fly(spec: FlightSpec) -> dict:
         return result
     info = {}
     try:
-        info = flight.run()
+        with RealtimeTurn() if spec.realtime else contextlib.nullcontext():
+            info = flight.run()
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}
         _write(out / "harness.json", info)
