@@ -43,7 +43,14 @@ class Chain:
                                                   ("px4_sitl.yaml" if autopilot == "px4" else "ardupilot_sitl.yaml"))
 
     # ---- processes ----------------------------------------------------------------------
+    def _take_turn(self):
+        """The link's processes at SCHED_FIFO 85 and a real-time mppid: one such test flies at a
+        time on the machine's cores, and never beside a real-time SITL flight (turns.py)."""
+        if RT:
+            self.procs.turn.acquire()
+
     def start_vehicle(self, url=None):
+        self._take_turn()
         url = url or f"udpout:127.0.0.1:{ROUTER_IN if self.router else VEHICLE_PORT}"
         cmd = IO_LAUNCH + ["mavlink_vehicle", "--url", url, "--autopilot", self.autopilot, "--out", self.out,
                "--lcm-url", LCM_URL]
@@ -54,6 +61,7 @@ class Chain:
         return self.procs.start("vehicle", cmd + self.vehicle_args)
 
     def start_router(self, extra_outs=()):
+        self._take_turn()
         cmd = IO_LAUNCH + ["MAVProxy.mavproxy", f"--master=udpin:127.0.0.1:{ROUTER_IN}",
                f"--out=udpout:127.0.0.1:{VEHICLE_PORT}", "--daemon", "--non-interactive", "--nowait",
                f"--state-basedir={self.out}", "--default-modules=", "--streamrate=-1"]
@@ -62,6 +70,7 @@ class Chain:
         return self.procs.start("mavproxy", cmd)
 
     def start_bridge(self, url=None):
+        self._take_turn()
         # The simulated autopilot sends to the bridge's UDP port whatever the config names.
         url = url or f"udpin:127.0.0.1:{VEHICLE_PORT}"
         cmd = IO_LAUNCH + ["mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,
@@ -77,8 +86,7 @@ class Chain:
                "--backend", "cpu"] + (["--realtime"] if RT else [])
         for kv in self.mppid_sets:
             cmd += ["--set", kv]
-        if RT:
-            self.procs.turn.acquire()  # one real-time mppid on the machine's cores at a time
+        self._take_turn()
         return self.procs.start("mppid", cmd)
 
     def start(self):
