@@ -250,7 +250,9 @@ def test_a_downloaded_mission_is_flown_to_its_end(netns, procs, tmp_path, tap, d
 def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_path, tap):
     """ArduPilot: while the second waypoint is flown the ground station uploads a shorter
     mission: at the end of that leg it is read again and flown from the autopilot's current
-    item (the first after an upload), the take-off skipped in the air, to its landing."""
+    item (the first after an upload), the take-off skipped in the air, to its return to launch,
+    which is ArduPilot's own: AUTO from that item (MISSION_SET_CURRENT, then the mode) flies
+    home and lands."""
     ctl = TrackingController()
     c = _chain(procs, tmp_path, "ardupilot")
     gcs = Gcs(tap)
@@ -261,15 +263,19 @@ def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_p
         p = tool(c, tmp_path / "fly", wait=False)
         wait_for(lambda: 3 in seqs(c, "mission_set_current"), 60, "the second waypoint flown")
         assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
-                                  (M.MAV_CMD_NAV_WAYPOINT, 0.0, 3.0, 2.0), (M.MAV_CMD_NAV_LAND,))) == 0
+                                  (M.MAV_CMD_NAV_WAYPOINT, 0.0, 3.0, 2.0),
+                                  (M.MAV_CMD_NAV_RETURN_TO_LAUNCH, {"frame": M.MAV_FRAME_MISSION}))) == 0
         out = p.communicate(timeout=90)[0]
         s = _summary(tmp_path / "fly")
         assert p.returncode == 0 and s["outcome"] == "done" and s["reloads"] == 1, out
-        assert seqs(c, "mission_item_reached")[-2:] == [2, 3]     # the new mission's waypoint and landing
+        assert seqs(c, "mission_item_reached")[-1] == 2           # the new mission's waypoint
         assert 4 not in seqs(c, "mission_set_current")            # the old mission's third waypoint never flown
+        assert seqs(c, "mission_set_current")[-1] == 3            # the hand-back: AUTO from the RTL item
         c.wait_event("landed", 20)
+        assert [e["seq"] for e in c.events("mission_item_reached") if e["src"] == 1] == [3]   # AUTO's own RTL
+        assert [e["mode"] for e in c.events("mode")] == ["GUIDED", "AUTO"]
         x = c.stop_vehicle()["final_state"]
-        assert abs(x[0]) < 0.6 and abs(x[1] - 3.0) < 0.6, x[:3]
+        assert abs(x[0]) < 0.6 and abs(x[1]) < 0.6, x[:3]                   # home
     finally:
         ctl.close()
 
@@ -387,8 +393,9 @@ def test_guided_segments_inside_auto_are_flown_by_mppid_and_auto_goes_on(netns, 
         (to,) = c.events("guided_timeout")
         (limit,) = c.events("guided_limit")
         g2 = c.events("guided_segment")[1]
-        assert to["seq"] == 8 and 1.0 <= to["since_target_s"] < 1.1 and abs(to["z"] - 2.0) < 0.3, to
-        assert limit["seq"] == 8 and limit["t"] - g2["t"] == pytest.approx(4.0, abs=0.05), (limit, g2)
+        # Never early; late by at most a stalled step of the stand-in's clock on a busy machine.
+        assert to["seq"] == 8 and 1.0 <= to["since_target_s"] < 1.5 and abs(to["z"] - 2.0) < 0.3, to
+        assert limit["seq"] == 8 and 4.0 <= limit["t"] - g2["t"] < 4.5, (limit, g2)
         assert any("guided segment" in t or "item 4 NAV_WAYPOINT" in t for t in texts(c))
         x = c.stop_vehicle()["final_state"]
         assert math.hypot(x[0], x[1] - 5.0) < 1.1, x[:3]                    # AUTO flew item 9 (1 m radius), landed

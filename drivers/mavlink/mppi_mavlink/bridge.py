@@ -296,7 +296,6 @@ class Bridge:
         """The vehicle back to the autopilot's own mission from item `seq` (docs/missions.md):
         forwarding stopped, MISSION_SET_CURRENT, then the mission mode (ArduPilot AUTO, PX4
         AUTO.MISSION) if the vehicle is not in it (AUTO's guided sub-mode: it is)."""
-        self._require_fly("resume")
         seq = int(seq)
         self.engagement.disengage(f"handed back to the autopilot's mission at item {seq}")
         r = self.missions.execute(["current", str(seq)])
@@ -308,7 +307,6 @@ class Bridge:
 
     def do_rtl(self):
         """Forwarding stopped, the autopilot's own return (PX4 AUTO.RTL, ArduPilot RTL)."""
-        self._require_fly("rtl")
         self.engagement.disengage("rtl requested: the autopilot's own return")
         self.profile.rtl(self.ap)
         return "returning (the autopilot's RTL)"
