@@ -374,6 +374,8 @@ def test_guided_segments_inside_auto_are_flown_by_mppid_and_auto_goes_on(netns, 
         wait_for(lambda: c.status().get("armed"), 5, "armed")
         _command(gcs, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 2.0)
         c.wait_event("takeoff_complete", 20)
+        r = c.ctl("segment")                                                # only in AUTO at a NAV_GUIDED_ENABLE
+        assert not r["ok"] and "the vehicle is in GUIDED, not AUTO" in r["message"], r
         _set_mode(gcs, 3)                                                   # then AUTO
         wait_for(lambda: len(c.events("guided_segment")) == 2 and c.status().get("engagement") == "engaged", 40,
                  "mppid engaged in the second segment")
