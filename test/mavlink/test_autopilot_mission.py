@@ -4,6 +4,7 @@ straight to the autopilot through the UDP tap), the bridge reads it over its own
 (`mission download`), and `mppid-mission from-autopilot` refuses it or flies it, mppid stood in
 for by a controller that follows the reference (linktools.TrackingController)."""
 import json
+import math
 import os
 import subprocess
 import time
@@ -218,26 +219,30 @@ def _summary(out):
 
 def test_a_downloaded_mission_is_flown_to_its_end(netns, procs, tmp_path, tap, dialect="px4"):
     """PX4 (OFFBOARD): take-off, two waypoints (a speed change between them, a hold at the
-    second), landing: the autopilot's current item follows (MISSION_SET_CURRENT), each item is
-    reached (MISSION_ITEM_REACHED) and told (STATUSTEXT), and the vehicle lands at the last
-    waypoint. ArduPilot (GUIDED) flies its missions to their end in the tests below."""
+    second), return to launch: the autopilot's current item follows (MISSION_SET_CURRENT), each
+    item is reached (MISSION_ITEM_REACHED) and told (STATUSTEXT); at the NAV_RETURN_TO_LAUNCH
+    the vehicle is handed back to PX4's own AUTO.RTL, which lands it at home. ArduPilot
+    (GUIDED) flies its missions to their end, landing, in the tests below."""
     ctl = TrackingController()
     c = _chain(procs, tmp_path, dialect)
     first = 0
     try:
         items = mission(dialect, (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 4.0, 0.0, 2.0),
                         (M.MAV_CMD_DO_CHANGE_SPEED, 0, 0, 0, (1, 3, -1, 0), {"frame": M.MAV_FRAME_MISSION}),
-                        (M.MAV_CMD_NAV_WAYPOINT, 4.0, 4.0, 2.5, (1, 0.5, 0, 0)), (M.MAV_CMD_NAV_LAND,))
+                        (M.MAV_CMD_NAV_WAYPOINT, 4.0, 4.0, 2.5, (1, 0.5, 0, 0)),
+                        (M.MAV_CMD_NAV_RETURN_TO_LAUNCH, {"frame": M.MAV_FRAME_MISSION}))
         assert Gcs(tap).upload(items) == M.MAV_MISSION_ACCEPTED
         rc, out = tool(c, tmp_path / "fly")
         assert rc == 0 and _summary(tmp_path / "fly")["outcome"] == "done", out
-        assert seqs(c, "mission_item_reached") == [first, first + 1, first + 3, first + 4]
-        assert seqs(c, "mission_set_current") == [first + 1, first + 3, first + 4]
+        assert seqs(c, "mission_item_reached") == [first, first + 1, first + 3]
+        assert seqs(c, "mission_set_current") == [first + 1, first + 3]
         said = texts(c)
         assert any(f"item 2 NAV_WAYPOINT" in t for t in said) and any("item 4 NAV_WAYPOINT" in t for t in said)
+        assert any("item 5 NAV_RETURN_TO_LAUNCH: the autopilot's own" in t for t in said), said
         c.wait_event("landed", 20)
+        assert [e["mode"] for e in c.events("mode")][-2:] == ["OFFBOARD", "AUTO.RTL"]
         x = c.stop_vehicle()["final_state"]
-        assert abs(x[0] - 4.0) < 0.6 and abs(x[1] - 4.0) < 0.6, x[:3]
+        assert abs(x[0]) < 0.6 and abs(x[1]) < 0.6, x[:3]                   # PX4's own return: home
     finally:
         ctl.close()
 
@@ -245,7 +250,9 @@ def test_a_downloaded_mission_is_flown_to_its_end(netns, procs, tmp_path, tap, d
 def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_path, tap):
     """ArduPilot: while the second waypoint is flown the ground station uploads a shorter
     mission: at the end of that leg it is read again and flown from the autopilot's current
-    item (the first after an upload), the take-off skipped in the air, to its landing."""
+    item (the first after an upload), the take-off skipped in the air, to its return to launch,
+    which is ArduPilot's own: AUTO from that item (MISSION_SET_CURRENT, then the mode) flies
+    home and lands."""
     ctl = TrackingController()
     c = _chain(procs, tmp_path, "ardupilot")
     gcs = Gcs(tap)
@@ -256,15 +263,19 @@ def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_p
         p = tool(c, tmp_path / "fly", wait=False)
         wait_for(lambda: 3 in seqs(c, "mission_set_current"), 60, "the second waypoint flown")
         assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
-                                  (M.MAV_CMD_NAV_WAYPOINT, 0.0, 3.0, 2.0), (M.MAV_CMD_NAV_LAND,))) == 0
+                                  (M.MAV_CMD_NAV_WAYPOINT, 0.0, 3.0, 2.0),
+                                  (M.MAV_CMD_NAV_RETURN_TO_LAUNCH, {"frame": M.MAV_FRAME_MISSION}))) == 0
         out = p.communicate(timeout=90)[0]
         s = _summary(tmp_path / "fly")
         assert p.returncode == 0 and s["outcome"] == "done" and s["reloads"] == 1, out
-        assert seqs(c, "mission_item_reached")[-2:] == [2, 3]     # the new mission's waypoint and landing
+        assert seqs(c, "mission_item_reached")[-1] == 2           # the new mission's waypoint
         assert 4 not in seqs(c, "mission_set_current")            # the old mission's third waypoint never flown
+        assert seqs(c, "mission_set_current")[-1] == 3            # the hand-back: AUTO from the RTL item
         c.wait_event("landed", 20)
+        assert [e["seq"] for e in c.events("mission_item_reached") if e["src"] == 1] == [3]   # AUTO's own RTL
+        assert [e["mode"] for e in c.events("mode")] == ["GUIDED", "AUTO"]
         x = c.stop_vehicle()["final_state"]
-        assert abs(x[0]) < 0.6 and abs(x[1] - 3.0) < 0.6, x[:3]
+        assert abs(x[0]) < 0.6 and abs(x[1]) < 0.6, x[:3]                   # home
     finally:
         ctl.close()
 
@@ -324,5 +335,71 @@ def test_the_operator_starts_it_by_arming_and_takes_it_back_with_a_mode_switch(n
         assert [e["mode"] for e in c.events("mode")] == ["GUIDED", "LOITER"] and c.status()["mode"] == "LOITER"
         assert 3 not in seqs(c, "mission_set_current")
         assert any("mission stopped at item 2" in t for t in texts(c))
+    finally:
+        ctl.close()
+
+
+# ---- ArduCopter's guided segments inside AUTO -----------------------------------------------
+def _command(gcs, cmd, *params):
+    gcs.send(M.MAVLink_command_long_message(1, 1, cmd, 0, *(list(params) + [0] * (7 - len(params)))))
+
+
+def _set_mode(gcs, custom_mode):
+    _command(gcs, M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, custom_mode)
+
+
+def test_guided_segments_inside_auto_are_flown_by_mppid_and_auto_goes_on(netns, procs, tmp_path, tap):
+    """ArduCopter: the operator flies the mission in AUTO. At the first NAV_GUIDED_ENABLE mppid
+    engages without a mode change, flies the segment's waypoint and hands back (MISSION_SET_
+    CURRENT to the NAV_GUIDED_ENABLE 0); AUTO flies the rest itself (its own MISSION_ITEM_
+    REACHED). In the second segment mppid goes quiet: the bridge lets go (the vehicle stays in
+    AUTO), GUID_TIMEOUT levels the vehicle, the guided limit's timeout ends the segment and AUTO
+    flies on from the item after it, as ArduCopter does, to the landing."""
+    ctl = TrackingController()
+    c = _chain(procs, tmp_path, "ardupilot", vehicle_params=["GUID_TIMEOUT=1"])
+    gcs = Gcs(tap)
+    ge, mis = M.MAV_CMD_NAV_GUIDED_ENABLE, {"frame": M.MAV_FRAME_MISSION}
+    wp = M.MAV_CMD_NAV_WAYPOINT
+    try:
+        assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0), (wp, 2.0, 0.0, 2.0),   # 1, 2
+                                  (ge, 0, 0, 0, (1, 0, 0, 0), mis), (wp, 2.0, 2.0, 2.0),                  # 3, 4
+                                  (ge, 0, 0, 0, (0, 0, 0, 0), mis), (wp, 0.0, 2.0, 2.0),                  # 5, 6
+                                  (M.MAV_CMD_DO_GUIDED_LIMITS, 0, 0, 0, (4, 0, 0, 0), mis),               # 7
+                                  (ge, 0, 0, 0, (1, 0, 0, 0), mis), (wp, 0.0, 5.0, 2.0),                  # 8, 9
+                                  (ge, 0, 0, 0, (0, 0, 0, 0), mis), (M.MAV_CMD_NAV_LAND,))) == 0          # 10, 11
+        p = tool(c, tmp_path / "fly", wait=False, extra=["--speed", "3"])
+        _set_mode(gcs, 4)                                                   # the operator: GUIDED, arm, take off
+        wait_for(lambda: c.status().get("mode") == "GUIDED", 5, "GUIDED")
+        _command(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        wait_for(lambda: c.status().get("armed"), 5, "armed")
+        _command(gcs, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 2.0)
+        c.wait_event("takeoff_complete", 20)
+        r = c.ctl("segment")                                                # only in AUTO at a NAV_GUIDED_ENABLE
+        assert not r["ok"] and "the vehicle is in GUIDED, not AUTO" in r["message"], r
+        _set_mode(gcs, 3)                                                   # then AUTO
+        wait_for(lambda: len(c.events("guided_segment")) == 2 and c.status().get("engagement") == "engaged", 40,
+                 "mppid engaged in the second segment")
+        time.sleep(0.3)
+        ctl.answer = False                                                  # mppid goes quiet
+        out = p.communicate(timeout=60)[0]
+        c.wait_event("landed", 30)
+        s1 = _summary(tmp_path / "fly" / "segment_3")
+        s2 = _summary(tmp_path / "fly" / "segment_8")
+        assert p.returncode == 1 and s1["outcome"] == "done", out
+        assert s2["outcome"].startswith("stopped at item 9: mppid disengaged"), s2
+        own = [e["seq"] for e in c.events("mission_item_reached") if e["src"] == 1]
+        assert own == [1, 2, 5, 6, 8, 9, 10, 11], own                       # AUTO's own (9: after the limit)
+        assert seqs(c, "mission_item_reached") == [4]                       # mppid's: the segment's waypoint
+        assert seqs(c, "mission_set_current") == [5]                        # mppid's hand-back
+        assert [e["mode"] for e in c.events("mode")] == ["GUIDED", "AUTO"]  # no mode change by mppid
+        (to,) = c.events("guided_timeout")
+        (limit,) = c.events("guided_limit")
+        g2 = c.events("guided_segment")[1]
+        # Never early; late by at most a stalled step of the stand-in's clock on a busy machine.
+        assert to["seq"] == 8 and 1.0 <= to["since_target_s"] < 1.5 and abs(to["z"] - 2.0) < 0.3, to
+        assert limit["seq"] == 8 and 4.0 <= limit["t"] - g2["t"] < 4.5, (limit, g2)
+        assert any("guided segment" in t or "item 4 NAV_WAYPOINT" in t for t in texts(c))
+        x = c.stop_vehicle()["final_state"]
+        assert math.hypot(x[0], x[1] - 5.0) < 1.1, x[:3]                    # AUTO flew item 9 (1 m radius), landed
     finally:
         ctl.close()

@@ -42,10 +42,10 @@ def survey(first=1):
 def test_a_survey_becomes_legs_in_the_local_frame():
     c = ap.convert(download(survey()), here=[0.0, 0.0, 0.0], speed=2.0)
     legs, m = c.mission.legs, c.mission
-    assert m.takeoff == pytest.approx(3.0) and m.land and m.frame == "local"
-    assert [next(iter(leg)) for leg in legs] == ["line", "goal", "hold", "line", "goal", "hold", "line", "hold",
-                                                 "line"]
-    assert c.leg_items == [2, 2, 2, 4, 4, 5, 6, 6, 7]
+    assert m.takeoff == pytest.approx(3.0) and not m.land and m.frame == "local"
+    assert [next(iter(leg)) for leg in legs] == ["line", "goal", "hold", "line", "goal", "hold", "line", "hold"]
+    assert c.leg_items == [2, 2, 2, 4, 4, 5, 6, 6]
+    assert c.handback_item == 7                      # the return is the autopilot's own
     # Home 2 m above the origin: relative 3 m is local z 5; AMSL 591 m is local z 7.
     assert np.allclose(legs[0]["line"]["to"], [10.0, 0.0, 5.0], atol=0.01)
     assert legs[0]["line"]["speed"] == 2.0 and legs[3]["line"]["speed"] == 4.0   # DO_CHANGE_SPEED
@@ -54,7 +54,6 @@ def test_a_survey_becomes_legs_in_the_local_frame():
     assert legs[5]["hold"]["yaw"] == pytest.approx(-90.0)                        # NED 180 (south): ENU -90
     assert np.allclose(legs[6]["line"]["to"], [10.0, 10.0, 6.0], atol=0.01)     # loiter at lat, lon 0: here
     assert legs[7]["hold"] == {"for": 5.0, "yaw": -90.0}
-    assert np.allclose(legs[8]["line"]["to"], [0.0, 0.0, 6.0], atol=0.01)       # home at the altitude flown
     assert c.numbers[2] == 2 and c.names[7] == "NAV_RETURN_TO_LAUNCH" and c.takeoff_item == 1
 
 
@@ -128,3 +127,36 @@ def test_unset_params_take_their_defaults_and_a_value_out_of_range_names_its_ite
     with pytest.raises(ap.Refusal) as e:
         ap.convert(download(items, dialect="px4"), here=[0.0, 0.0, 0.0])
     assert e.value.number == 3 and "hold.for" in str(e.value)
+
+
+# ---- ArduCopter's guided segments (guided_segments.py) ---------------------------------------
+def _segmented():
+    ge, mis = M.MAV_CMD_NAV_GUIDED_ENABLE, M.MAV_FRAME_MISSION
+    return download([item(1, M.MAV_CMD_NAV_TAKEOFF, z=3.0), item(2, M.MAV_CMD_NAV_WAYPOINT, 5.0, 0.0, 3.0),
+                     item(3, ge, p=(1, 0, 0, 0), frame=mis), item(4, M.MAV_CMD_NAV_WAYPOINT, 5.0, 5.0, 3.0),
+                     item(5, M.MAV_CMD_NAV_WAYPOINT, 0.0, 5.0, 3.0), item(6, ge, p=(0, 0, 0, 0), frame=mis),
+                     item(7, M.MAV_CMD_NAV_WAYPOINT, 0.0, 8.0, 3.0), item(8, ge, p=(1, 0, 0, 0), frame=mis),
+                     item(9, M.MAV_CMD_NAV_WAYPOINT, 3.0, 8.0, 3.0)])
+
+
+def test_guided_segments_are_the_items_between_the_enables():
+    from mppi_mission import guided_segments as gs
+    dl = _segmented()
+    segs = gs.check(dl)
+    assert [(g.enable, g.end) for g in segs] == [(3, 6), (8, 10)]      # the last one runs to the mission's end
+    c = gs.convert(dl, segs[0], here=[5.0, 0.0, 5.0])
+    assert sorted(set(c.leg_items)) == [4, 5] and not c.mission.land and c.mission.takeoff is None
+    assert np.allclose(c.mission.legs[-2]["line"]["to"], [0.0, 5.0, 5.0], atol=0.01)
+
+
+def test_a_guided_segment_mppid_cannot_fly_is_refused_naming_the_item():
+    from mppi_mission import guided_segments as gs
+    dl = _segmented()
+    dl["items"][9] = item(9, M.MAV_CMD_NAV_LAND)
+    with pytest.raises(ap.Refusal, match="mission item 9: NAV_LAND inside a guided segment"):
+        gs.check(dl)
+    dl["items"][9] = item(9, M.MAV_CMD_NAV_SPLINE_WAYPOINT, 3.0, 8.0, 3.0)
+    with pytest.raises(ap.Refusal, match="mission item 9: NAV_SPLINE_WAYPOINT: mppid cannot fly it"):
+        gs.check(dl)
+    with pytest.raises(ap.Refusal, match="PX4 has no such item"):
+        gs.check({**_segmented(), "dialect": "px4"})

@@ -256,22 +256,71 @@ class Bridge:
         finally:
             self.engagement.expect_offboard(False)
 
-    def _offboard(self):
-        self.profile.before_offboard(self.engagement, self.s["offboard"]["takeoff_wait_s"])
+    def _stream_ok(self, what: str) -> str:
+        """Waits up to offboard.wait_s for mppid's stream; why it is good (CommandError if not)."""
         deadline = time.monotonic() + self.s["offboard"]["wait_s"]
         ok, why = self.fwd.stream_ok()
         while not ok and time.monotonic() < deadline:
             time.sleep(0.05)
             ok, why = self.fwd.stream_ok()
         if not ok:
-            raise CommandError(f"offboard refused: {why}")
+            raise CommandError(f"{what} refused: {why}")
+        return why
+
+    def _offboard(self):
+        self.profile.before_offboard(self.engagement, self.s["offboard"]["takeoff_wait_s"])
+        why = self._stream_ok("offboard")
         mode = self.profile.offboard(self.ap)
         self.engagement.engage(self.ap.custom_mode, self.ap.mode)
+        self._engaged_now()
+        return f"{mode} ({why})"
+
+    def do_segment(self):
+        """ArduCopter: engages in AUTO's guided sub-mode, no mode change (docs/missions.md):
+        the mission's current item must be a NAV_GUIDED_ENABLE with param1 > 0 of the mission
+        read last; the operator's mode switch or a disarm ends it, as after `offboard`."""
+        self._require_fly("segment")
+        if not self.profile.guided_segments:
+            raise CommandError(f"segment refused: {self.profile.name} has no guided segments in its missions")
+        if not self.profile.in_mission_mode(self.ap.custom_mode):
+            raise CommandError(f"segment refused: the vehicle is in {self.ap.mode}, not AUTO")
+        why = self.missions.guided_item_why()
+        if why:
+            raise CommandError(f"segment refused: {why}")
+        stream = self._stream_ok("segment")
+        self.engagement.engage(self.ap.custom_mode, self.ap.mode, "`segment` (AUTO's guided sub-mode)")
+        self._engaged_now()
+        return f"AUTO's guided sub-mode, attitude/rate targets ({stream})"
+
+    def do_resume(self, seq):
+        """The vehicle back to the autopilot's own mission from item `seq` (docs/missions.md):
+        forwarding stopped, MISSION_SET_CURRENT, then the mission mode (ArduPilot AUTO, PX4
+        AUTO.MISSION) if the vehicle is not in it (AUTO's guided sub-mode: it is)."""
+        seq = int(seq)
+        self.engagement.disengage(f"handed back to the autopilot's mission at item {seq}")
+        r = self.missions.execute(["current", str(seq)])
+        if not r["ok"]:
+            raise CommandError(r["message"])
+        if not self.profile.in_mission_mode(self.ap.custom_mode):
+            self.profile.mission_mode(self.ap)
+        return f"the autopilot flies its mission from item {seq} ({self.ap.mode})"
+
+    def do_rtl(self):
+        """Forwarding stopped, the autopilot's own return (PX4 AUTO.RTL, ArduPilot RTL)."""
+        self.engagement.disengage("rtl requested: the autopilot's own return")
+        self.profile.rtl(self.ap)
+        return "returning (the autopilot's RTL)"
+
+    def do_release(self):
+        """Forwarding stopped, nothing asked of the autopilot (its mission went on by itself)."""
+        self.engagement.disengage("released: the autopilot's mission goes on")
+        return "released"
+
+    def _engaged_now(self):
         # Until now mppid's setpoints were not flown (the autopilot's take-off, a pre-stream):
         # what its estimates (disturbance, mass, delay) learnt from them is wrong. Asked for
         # beside `offboard`'s answer; not fatal.
         threading.Thread(target=self._restart_mppid_estimates, name="restart-estimates", daemon=True).start()
-        return f"{mode} ({why})"
 
     def _restart_mppid_estimates(self):
         why = self.mppid.ask("daemon.restart_estimates", 1.0)
@@ -313,14 +362,16 @@ class Bridge:
             return {"ok": False, "message": "empty command"}
         name, args = parts[0], parts[1:]
         table = {"arm": self.do_arm, "disarm": self.do_disarm, "takeoff": self.do_takeoff,
-                 "offboard": self.do_offboard, "land": self.do_land, "hold": self.do_hold, "identify": self.do_identify}
+                 "offboard": self.do_offboard, "land": self.do_land, "hold": self.do_hold, "identify": self.do_identify,
+                 "segment": self.do_segment, "resume": self.do_resume, "release": self.do_release, "rtl": self.do_rtl}
         if name == "status":
             return {"ok": True, "message": "status", "status": self.status()}
         if name == "mission":
             return self.missions.execute(args)
         if name not in table:
             return {"ok": False, "message": f"unknown command {name!r} (arm, disarm, takeoff [m], offboard, land, "
-                                            f"hold, identify [0|1], status, mission ...)"}
+                                            f"hold, identify [0|1], segment, resume SEQ, release, rtl, status, "
+                                            f"mission ...)"}
         try:
             msg = table[name](*[float(a) for a in args])
             log.info("%s: %s", name, msg)

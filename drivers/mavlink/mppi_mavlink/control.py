@@ -1,6 +1,7 @@
 """The bridge's control socket: a Unix stream socket, one request line in, one JSON line
 out (`{"ok": true, "message": "armed"}`). Requests: arm, disarm, takeoff [m], offboard,
-land, hold, status. A file-system socket, so it is reachable across network namespaces
+land, hold, rtl, status; for the mission tool (docs/missions.md) segment, resume SEQ,
+release and mission .... A file-system socket, so it is reachable across network namespaces
 and guarded by file permissions: owner only (0600), since whoever can connect can arm the
 vehicle. It is created with that mode (umask 0177 around bind), so it is never open to
 others, not even between bind and chmod; requests come from the bridge's own user (or

@@ -4,7 +4,9 @@ states stopped, the link lost), or mppid seen restarting, or the link lost: the 
 disengages, tells the operator, and nothing is forwarded again until a new `offboard`. Then
 the vehicle is handed back (the profile's `hand_back`: ArduPilot's GUIDED would only level
 and drift, so BRAKE (LOITER would read the throttle stick as a climb rate); PX4's own offboard-loss failsafe acts, as COM_OBL_RC_ACT says), once
-the link is up and while the vehicle is still in the offboard mode. Engaged and outside the
+the link is up and while the vehicle is still in the offboard mode (engaged in ArduCopter's
+AUTO guided sub-mode, `segment`, it is not: AUTO keeps it, GUID_TIMEOUT levelling it until a
+guided limit ends the segment, docs/missions.md). Engaged and outside the
 geofence (fence.py, `fence` settings): disengaged and held (the profile's `hold`: PX4 HOLD,
 ArduPilot BRAKE), the operator told; `offboard` outside it is refused."""
 from __future__ import annotations

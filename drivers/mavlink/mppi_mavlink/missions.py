@@ -173,6 +173,19 @@ class Missions:
                 raise MissionError(f"mission download: no {attr.upper()} message from the autopilot")
         return self.home, self.origin
 
+    def guided_item_why(self) -> str:
+        """'' when the autopilot's current item is a NAV_GUIDED_ENABLE with param1 > 0 in the
+        mission read last; else why not."""
+        with self.cond:
+            if self.total is None:
+                return "no mission read yet (mission download)"
+            if self.changed_why:
+                return f"the mission changed: {self.changed_why}"
+            it = self.items.get(self.current)
+        if it is None or it["command"] != mavlink.MAV_CMD_NAV_GUIDED_ENABLE or not it["param1"] > 0.5:
+            return f"the autopilot's current item ({self.current}) is not a NAV_GUIDED_ENABLE with param1 1"
+        return ""
+
     # ---- control requests --------------------------------------------------------------------
     def execute(self, args: list[str]) -> dict:
         what = args[0] if args else ""

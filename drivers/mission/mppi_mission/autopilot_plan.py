@@ -9,7 +9,9 @@ it (the first item is 1: ArduPilot's seq, PX4's seq + 1, ArduPilot's item 0 bein
                           radius (param2; 0: DEFAULT_RADIUS), then its hold time (param1)
     NAV_LOITER_TIME       a line to it (lat, lon 0: where the vehicle is), held param1 s
     NAV_LAND              a line to above it (lat, lon 0: where it is), then the landing
-    NAV_RETURN_TO_LAUNCH  a line to above home at the altitude flown, then the landing
+    NAV_RETURN_TO_LAUNCH  the autopilot's own: the legs before it flown, the vehicle is handed
+                          back there (`handback_item`: ArduPilot AUTO from this item, PX4
+                          AUTO.RTL; from_autopilot.py)
     DO_CHANGE_SPEED       the lines after it at param2 m/s (-1, 0: unchanged)
     CONDITION_YAW         the heading param1 deg (param4 1: relative, param3 -1: counter-
                           clockwise) held at where it is while it turns, and by the legs after it
@@ -58,6 +60,8 @@ class Converted:
     names: dict[int, str]                # seq -> its command's name
     takeoff_item: int | None = None
     count: int = 0
+    handback_item: int | None = None     # the NAV_RETURN_TO_LAUNCH the autopilot flies itself
+    dialect: str = "px4"
     notes: list[str] = field(default_factory=list)
 
 
@@ -125,7 +129,7 @@ class _Builder:
         self.legs, self.leg_items = [], []
         self.yaw_set = False
         self.takeoff = self.takeoff_item = None
-        self.land_item = None
+        self.land_item = self.handback_item = None
         self.start = self.here.copy()         # where the first leg starts (after the take-off)
 
     def add(self, seq, kind, args):
@@ -156,11 +160,12 @@ class _Builder:
         elif cmd == mavlink.MAV_CMD_NAV_LOITER_TIME:
             self.line_to(seq, self.frame.point(it, number, self.here))
             self.add(seq, "hold", {"for": float(max(it["param1"], 0.0))})
-        elif cmd in (mavlink.MAV_CMD_NAV_LAND, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH):
-            if cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-                p = self.frame.home
-            else:   # where it is (lat, lon 0), or above the point given; its altitude: the ground's
-                p = self.here if it["x"] == 0 and it["y"] == 0 else self.frame.point(it, number, self.here)
+        elif cmd == mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            self.handback_item = seq
+            self.land_item, self.land_number = seq, number
+        elif cmd == mavlink.MAV_CMD_NAV_LAND:
+            # where it is (lat, lon 0), or above the point given; its altitude: the ground's
+            p = self.here if it["x"] == 0 and it["y"] == 0 else self.frame.point(it, number, self.here)
             self.line_to(seq, np.array([p[0], p[1], self.here[2]]))
             if not self.legs or self.leg_items[-1] != seq:
                 self.add(seq, "hold", {"for": 0.5})
@@ -216,17 +221,19 @@ def _finite(it: dict, number: int) -> dict:
 
 
 def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = False, speed: float = 2.0,
-            start_seq: int | None = None) -> Converted:
+            start_seq: int | None = None, end_seq: int | None = None) -> Converted:
     """The plan of the mission `dl` (the bridge's `mission download`), flown from `here`
     (local ENU) with the heading `heading_deg` (ENU degrees, None unknown), from item
-    `start_seq` (None: the first). Raises Refusal naming the item."""
+    `start_seq` (None: the first) up to, not including, `end_seq` (None: to its end).
+    Raises Refusal naming the item."""
     ardupilot = dl["dialect"] == "ardupilot"
     first = 1 if ardupilot else 0
 
     def number(seq):
         return seq if ardupilot else seq + 1
 
-    items = [_finite(it, number(it["seq"])) for it in dl["items"] if it["seq"] >= first]
+    items = [_finite(it, number(it["seq"])) for it in dl["items"]
+             if it["seq"] >= first and (end_seq is None or it["seq"] < end_seq)]
 
     if not items:
         raise Refusal(None, "the autopilot's mission is empty: plan one in the ground station and upload it")
@@ -242,7 +249,8 @@ def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = F
                                                 "NAV_LAND, NAV_RETURN_TO_LAUNCH)")
     if b.takeoff is None and not airborne:
         raise Refusal(number(items[0]["seq"]), "the vehicle is on the ground and the mission has no NAV_TAKEOFF")
-    doc = {"name": "autopilot", "frame": "local", "land": b.land_item is not None, "legs": b.legs}
+    doc = {"name": "autopilot", "frame": "local", "land": b.land_item is not None and b.handback_item is None,
+           "legs": b.legs}
     if b.takeoff is not None:
         doc["takeoff"] = round(b.takeoff, 3)
     try:
@@ -251,7 +259,8 @@ def convert(dl: dict, here, heading_deg: float | None = None, airborne: bool = F
         leg = next((int(w[5:].split("]")[0]) for w in str(e).split() if w.startswith("legs[")), None)
         raise Refusal(None if leg is None else number(b.leg_items[leg]), str(e)) from None
     out = Converted(mission, b.leg_items, {it["seq"]: number(it["seq"]) for it in items},
-                    {it["seq"]: command_name(it["command"]) for it in items}, b.takeoff_item, len(dl["items"]))
+                    {it["seq"]: command_name(it["command"]) for it in items}, b.takeoff_item, len(dl["items"]),
+                    b.handback_item, dl["dialect"])
     _check_fence(out, dl.get("fence"), b.start)
     return out
 

@@ -56,9 +56,10 @@ def _airborne(link) -> bool:
     return bool(st.get("armed")) and st.get("landed_state") in (None, IN_AIR)
 
 
-def read_and_convert(link, bridge: MissionRequests, speed: float, here=None, start_from_current=False):
-    """The autopilot's mission as a plan, flown from `here` (default: where the vehicle is)."""
-    dl = bridge.download()
+def read_and_convert(link, bridge: MissionRequests, speed: float, here=None, start_from_current=False, dl=None):
+    """The autopilot's mission (`dl`, else read now) as a plan, flown from `here` (default:
+    where the vehicle is)."""
+    dl = bridge.download() if dl is None else dl
     h = link.heading()
     start = dl.get("current") if start_from_current else None
     return ap_plan.convert(dl, link.position() if here is None else here,
@@ -80,8 +81,7 @@ class AutopilotRunner(Runner):
             seq = self.conv.leg_items[i]
             if seq != self.current:
                 self.current = seq
-                n = self.conv.numbers[seq]
-                self.bridge.ask(f"mission current {seq} mppid: item {n} {self.conv.names[seq]}")
+                self._show_item(seq, f"mppid: item {self.conv.numbers[seq]} {self.conv.names[seq]}")
             ok, here = self._fly_leg(i, here, origin)
             if not ok:
                 return self._stopped(seq)
@@ -92,8 +92,29 @@ class AutopilotRunner(Runner):
                 if not self._reload(here):
                     return "refused in flight: holding"
                 i = 0
-        self.bridge.ask("mission say mppid: mission done" + (", landing" if self.m.land else ""))
-        return "done"
+        return self._finished()
+
+    def _show_item(self, seq, text):
+        """The item flown now: the autopilot's current item follows (MISSION_SET_CURRENT)."""
+        self.bridge.ask(f"mission current {seq} {text}")
+
+    def _finished(self) -> str:
+        """The mission's end (docs/missions.md): a landing is the bridge's `land` (the runner's);
+        a NAV_RETURN_TO_LAUNCH the autopilot's own (ArduPilot: AUTO from that item, PX4:
+        AUTO.RTL); no landing: the autopilot's hold (PX4 Hold, ArduPilot BRAKE)."""
+        seq = self.conv.handback_item
+        if seq is not None:
+            n = self.conv.numbers[seq]
+            self.bridge.ask(f"mission say mppid: mission flown to item {n} NAV_RETURN_TO_LAUNCH: the autopilot's own")
+            r = self.bridge.ask(f"resume {seq}" if self.conv.dialect == "ardupilot" else "rtl")
+        elif not self.m.land:
+            self.bridge.ask("mission say mppid: mission done, the autopilot holds")
+            r = self.bridge.ask("hold")
+        else:
+            self.bridge.ask("mission say mppid: mission done, landing")
+            return "done"
+        self.say(r.get("message", ""))
+        return "done" if r.get("ok") else f"hand-back failed: {r.get('message')}"
 
     def interrupted(self) -> str:
         """The operator took the vehicle back (a mode switch: the bridge disengaged)."""
@@ -156,7 +177,9 @@ def wait_armed(link, say, poll_s=0.2):
 
 
 def run(link, speed: float, seed: int, out, say, wait_for_arming=False) -> int:
-    """Reads, checks and flies the autopilot's mission; the exit status."""
+    """Reads, checks and flies the autopilot's mission (ArduPilot, with NAV_GUIDED_ENABLE
+    items: only its guided segments, guided_segments.py); the exit status."""
+    from . import guided_segments
     if link.socket is None:
         say("from-autopilot needs the bridge (--bridge SOCKET)")
         return 2
@@ -165,7 +188,9 @@ def run(link, speed: float, seed: int, out, say, wait_for_arming=False) -> int:
         link.wait_state()
         if wait_for_arming:
             wait_armed(link, say)
-        conv = read_and_convert(link, bridge, speed)
+        dl = bridge.download()
+        segments = guided_segments.check(dl) if guided_segments.find(dl) else None
+        conv = None if segments else read_and_convert(link, bridge, speed, dl=dl)
     except ap_plan.Refusal as e:
         bridge.refuse(str(e))
         say(f"mppid refuses the mission: {e}")
@@ -173,6 +198,10 @@ def run(link, speed: float, seed: int, out, say, wait_for_arming=False) -> int:
     except FlightError as e:
         say(f"mission not started: {e}")
         return 1
+    if segments:
+        say(f"the autopilot's mission: {len(dl['items'])} items, {len(segments)} guided segments for mppid "
+            f"(NAV_GUIDED_ENABLE at items {', '.join(str(g.enable) for g in segments)}); AUTO flies the rest")
+        return guided_segments.fly(link, bridge, dl, segments, speed, seed, out, say)
     say(f"the autopilot's mission: {conv.count} items, {len(conv.mission.legs)} legs"
         + (f", take-off to {conv.mission.takeoff:g} m" if conv.mission.takeoff else ""))
     summary = AutopilotRunner(conv, link, bridge, speed, seed=seed, out=out, say=say).run()

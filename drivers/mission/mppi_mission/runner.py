@@ -35,6 +35,7 @@ class Runner:
         self.heading = 0.0        # rad, ENU: the yaw of the reference flown last
         self.stop = threading.Event()
         self.summary = {"mission": mission.name, "seed": seed, "legs": [], "outcome": None}
+        self.start_kw = {}        # the link's start(): how it engages (the bridge's `offboard` by default)
 
     # ---- the reference, at the link's rate --------------------------------------------------
     def _publisher(self):
@@ -96,7 +97,7 @@ class Runner:
                          "trees": self.trees, "vehicle_radius": self.m.vehicle_radius, "clock": self.link.clock,
                          "settle": self.m.settle})
             pub.start()
-            self.link.start(self.m.takeoff, self.hold_here, self.say)
+            self.link.start(self.m.takeoff, self.hold_here, self.say, **self.start_kw)
             if self.step is None:
                 self.hold_here()
             here = np.asarray(self.step.ref["center"], float)

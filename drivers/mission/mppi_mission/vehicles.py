@@ -168,9 +168,10 @@ class MppidLink(StateClock):
         from mppi_mavlink import control
         return control.request(self.socket, "status", 5.0).get("status", {})
 
-    def start(self, takeoff: float | None, hold_here, say):
-        """Arm, the autopilot's take-off, then `offboard` with mppid asked to hold where the
-        vehicle is (mppid's hold point would otherwise be its first state: the ground)."""
+    def start(self, takeoff: float | None, hold_here, say, engage="offboard"):
+        """Arm, the autopilot's take-off, then `offboard` (or `engage`: the bridge's `segment`)
+        with mppid asked to hold where the vehicle is (mppid's hold point would otherwise be
+        its first state: the ground)."""
         if self.socket is None:
             return
         _wait(lambda: not self.bridge_status().get("refusal"), 60, "the bridge's flight checks")
@@ -182,7 +183,7 @@ class MppidLink(StateClock):
                            and self.bridge_status().get("landed_state") in (None, IN_AIR)), 60,
                   f"the take-off to {takeoff:g} m")
         hold_here()
-        say(self.request("offboard", timeout=90.0))
+        say(self.request(engage, timeout=90.0))
 
     def finish(self, land: bool, say):
         if self.socket is None or not land:

@@ -38,6 +38,7 @@ class MissionStore:
         self.upload = None          # (count, items so far, last request time) while one runs
         self.dropped = []            # the seqs of the answers lost (SIM_MIS_DROP)
         self.home_enu = (0.0, 0.0, 0.0)
+        self.on_current = lambda seq: None   # the vehicle's: MISSION_SET_CURRENT taken (AUTO starts it)
 
     @property
     def first(self) -> int:
@@ -119,6 +120,7 @@ class MissionStore:
         if self.first <= m.seq < len(self.items):
             self.current = m.seq
             self.event("mission_set_current", seq=m.seq, src=m.get_srcComponent())
+            self.on_current(m.seq)
         self.send_current()
 
     def _on_reached(self, m, now):

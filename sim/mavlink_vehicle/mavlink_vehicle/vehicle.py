@@ -25,19 +25,21 @@ from pymavlink import mavutil  # noqa: E402
 
 from mppi_mavlink.layout import QuadrotorRate as Q  # noqa: E402
 
-from . import missions as missions_mod, ned, plant as pl  # noqa: E402
+from . import auto as auto_mod, missions as missions_mod, ned, plant as pl  # noqa: E402
 
 mavlink = mavutil.mavlink
 
 # PX4 custom mode: main mode in bits 16..23, sub mode in bits 24..31.
 PX4_MODES = {"MANUAL": (1, 0), "POSCTL": (3, 0), "OFFBOARD": (6, 0), "AUTO.TAKEOFF": (4, 2),
-             "AUTO.LOITER": (4, 3), "AUTO.LAND": (4, 6)}
+             "AUTO.LOITER": (4, 3), "AUTO.MISSION": (4, 4), "AUTO.RTL": (4, 5), "AUTO.LAND": (4, 6)}
 # PX4's COM_OBL_RC_ACT values this stand-in has (others: land).
 OFFBOARD_LOSS_ACTIONS = {0: "POSCTL", 4: "AUTO.LAND", 5: "AUTO.LOITER"}
 # PX4's NAV_DLL_ACT (data link lost) values this stand-in has (0: disabled; others: land).
 DATALINK_LOSS_ACTIONS = {1: "AUTO.LOITER", 3: "AUTO.LAND"}
 # ArduPilot Copter custom modes.
-APM_MODES = {"STABILIZE": 0, "GUIDED": 4, "LOITER": 5, "LAND": 9, "BRAKE": 17}
+APM_MODES = {"STABILIZE": 0, "AUTO": 3, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
+# The modes that fly the stored mission (auto.py).
+MISSION_MODES = ("AUTO", "AUTO.MISSION")
 
 
 def wall_us():
@@ -72,7 +74,7 @@ def default_params(offboard_loss_s):
             "SIM_BATT_DRAIN": 0.0, "FS_GCS_ENABLE": 0.0, "FS_GCS_TIMEOUT": 5.0,
             "NAV_DLL_ACT": 0.0, "COM_DL_LOSS_T": 10.0,
             "SIM_RC_THROTTLE": 0.0, "PILOT_SPEED_DN": 0.0, "PILOT_SPEED_UP": 250.0, "SIM_MIS_DROP": -1.0,
-            "SIM_MIS_DROP_N": 1.0}
+            "SIM_MIS_DROP_N": 1.0, "WPNAV_SPEED": 500.0, "MPC_XY_CRUISE": 5.0, "GUID_TIMEOUT": 3.0}
 
 
 class Vehicle:
@@ -127,6 +129,8 @@ class Vehicle:
         # The mission protocol (missions.py): the mission a ground station uploaded; home where it starts.
         self.missions = missions_mod.MissionStore(self.conn, autopilot, self.event, self.params)
         self.missions.home_enu = tuple(float(c) for c in start)
+        self.missions.on_current = self.on_mission_current
+        self.auto = auto_mod.Auto(self)   # AUTO / AUTO.MISSION: the stored mission flown by the autopilot
 
     # ---- helpers ------------------------------------------------------------------------
     def event(self, what, **kw):
@@ -153,7 +157,16 @@ class Vehicle:
         return APM_MODES[self.mode]
 
     def offboard_mode(self):
+        """Where companion targets are flown: PX4 OFFBOARD; ArduCopter GUIDED and AUTO's
+        guided sub-mode (a NAV_GUIDED_ENABLE item: auto.py)."""
+        if self.ap == "ardupilot" and self.mode == "AUTO":
+            return self.auto.guided
         return self.mode == "OFFBOARD" or (self.ap == "ardupilot" and self.mode == "GUIDED")
+
+    def on_mission_current(self, seq):
+        """MISSION_SET_CURRENT in AUTO: that item starts at once (both autopilots)."""
+        if self.mode in MISSION_MODES:
+            self.auto.start(seq)
 
     def fresh_setpoint(self, age=None):
         age = self.params["COM_OF_LOSS_T"] if age is None else age
@@ -324,11 +337,15 @@ class Vehicle:
             return self.ack(c, mavlink.MAV_RESULT_UNSUPPORTED, "Mode not supported")
         if mode == "OFFBOARD" and not self.fresh_setpoint():
             return self.ack(c, mavlink.MAV_RESULT_TEMPORARILY_REJECTED, "Offboard denied: no setpoints")
-        if mode in ("AUTO.LOITER", "LOITER", "BRAKE", "AUTO.LAND", "LAND"):
+        if mode in MISSION_MODES and len(self.missions.items) <= self.missions.first:
+            return self.ack(c, mavlink.MAV_RESULT_DENIED, "Mode change failed: no mission")
+        if mode in ("AUTO.LOITER", "LOITER", "BRAKE", "AUTO.LAND", "LAND", "GUIDED"):
             self.hold_sp = list(self.plant.x[Q.POS])
-        if mode == "GUIDED":
-            self.hold_sp = list(self.plant.x[Q.POS])
+        if mode in ("AUTO.RTL", "RTL"):   # above home at the altitude flown, then down
+            self.hold_sp = [*self.missions.home_enu[:2], float(self.plant.x[Q.PZ])]
         self.set_mode(mode, "command")
+        if mode in MISSION_MODES:
+            self.auto.start(self.missions.current)
         return self.ack(c, mavlink.MAV_RESULT_ACCEPTED)
 
     def on_takeoff(self, m):
@@ -418,12 +435,21 @@ class Vehicle:
         self.conn.mav.param_value_send(name.encode(), float(v), ptype, len(names), names.index(name))
 
     # ---- the autopilot's own controllers ------------------------------------------------
-    def position_control(self, p_sp, vz_sp=None, yaw_sp=0.0):
-        """Cascaded P position -> P velocity -> thrust direction -> body rates (FLU)."""
+    def position_control(self, p_sp, vz_sp=None, yaw_sp=0.0, vmax=None, level=False):
+        """Cascaded P position -> P velocity -> thrust direction -> body rates (FLU); the
+        horizontal speed up to 2 m/s an axis, or `vmax` along the line (a mission's legs);
+        `level`: no horizontal acceleration (level, drifting)."""
         x = self.plant.x
-        vs = [min(max(1.0 * (p_sp[i] - x[Q.PX + i]), -2.0), 2.0) for i in range(2)]
+        err = [p_sp[i] - x[Q.PX + i] for i in range(2)]
+        if vmax is None:
+            vs = [min(max(1.0 * e, -2.0), 2.0) for e in err]
+        else:
+            scale = min(1.0, vmax / max(math.hypot(*err), 1e-9))
+            vs = [e * scale for e in err]
         vs.append(vz_sp if vz_sp is not None else min(max(1.5 * (p_sp[2] - x[Q.PZ]), -1.0), 1.5))
         a = [min(max(3.0 * (vs[i] - x[Q.VX + i]), -4.0), 4.0) for i in range(3)]
+        if level:
+            a[0] = a[1] = 0.0
         f = [self.pp.mass * a[0], self.pp.mass * a[1], self.pp.mass * (a[2] + self.pp.gravity)]
         fn = math.sqrt(sum(c * c for c in f))
         bz_des = [c / fn for c in f]
@@ -452,12 +478,16 @@ class Vehicle:
                 u = self.position_control(list(x[Q.POS]), vz_sp=(th - 0.5) * 5.0)
                 return [u[Q.THRUST], p, -q, -r]
             return [th / hover * self.pp.mass * self.pp.gravity, p, -q, -r]  # FRD -> FLU
+        if self.mode in MISSION_MODES:
+            return self.auto_control()
         if self.mode == "OFFBOARD" or (self.mode == "GUIDED" and self.setpoint_t is not None):
             # Setpoints late: hold level where it is until they return or the failsafe engages.
             if self.stale_hold is None:
                 self.stale_hold = list(x[Q.POS])
             return self.position_control(self.stale_hold)
-        if self.mode in ("AUTO.LAND", "LAND"):
+        if self.mode in ("AUTO.LAND", "LAND", "AUTO.RTL", "RTL"):
+            if self.mode.endswith("RTL") and math.dist(self.hold_sp[:2], x[Q.PX:Q.PX + 2]) > 0.5:
+                return self.position_control(self.hold_sp, vmax=self.params["MPC_XY_CRUISE"])
             if self.hold_sp is None or len(self.hold_sp) != 3:
                 self.hold_sp = list(x[Q.POS])
             return self.position_control([self.hold_sp[0], self.hold_sp[1], 0.0], vz_sp=-0.8 if x[Q.PZ] > 0.6 else -0.4)
@@ -468,6 +498,20 @@ class Vehicle:
         if self.ap == "ardupilot" and self.mode == "LOITER":
             return self.position_control(self.hold_sp, vz_sp=self.pilot_climb_rate())
         return self.position_control(self.hold_sp)
+
+    def auto_control(self):
+        """AUTO / AUTO.MISSION, setpoints not fresh: the vehicle's own controller; in the guided
+        sub-mode, held where the last target left it, level after GUID_TIMEOUT (auto.py)."""
+        u = self.auto.control()
+        if u is not None:
+            return u
+        if self.setpoint_t is None:
+            return self.position_control(self.auto.target)
+        if self.t - self.setpoint_t > self.params["GUID_TIMEOUT"]:
+            return self.auto.guided_timeout()
+        if self.stale_hold is None:
+            self.stale_hold = list(self.plant.x[Q.POS])
+        return self.position_control(self.stale_hold)
 
     def pilot_climb_rate(self) -> float:
         """ArduCopter's LOITER (and ALT_HOLD, POSHOLD) read the throttle stick as a climb rate:
@@ -529,7 +573,10 @@ class Vehicle:
         if self.taking_off and (self.mode != "GUIDED" or abs(self.plant.x[Q.PZ] - self.takeoff_alt) < 0.15):
             self.taking_off = False  # ArduPilot stays in GUIDED, holding where the take-off ended
             self.event("takeoff_complete", z=round(self.plant.x[Q.PZ], 3))
-        if self.armed and self.plant.on_ground and self.mode in ("AUTO.LAND", "LAND"):
+        if self.mode in MISSION_MODES and self.armed:
+            self.auto.verify()
+        if self.armed and self.plant.on_ground and (self.mode in ("AUTO.LAND", "LAND", "AUTO.RTL", "RTL")
+                                                    or (self.mode in MISSION_MODES and self.auto.landed())):
             self.landed_since = self.landed_since if self.landed_since is not None else self.t
             if self.t - self.landed_since > self.params["COM_DISARM_LAND"]:
                 self.disarm("landed")

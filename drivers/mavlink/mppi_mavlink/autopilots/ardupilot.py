@@ -9,14 +9,20 @@ in GUIDED may have its stick anywhere, or no RC at all. ArduCopter SITL (no RC: 
 its minimum), handed to LOITER at 3 m/s in mid-circle, braked and then sank at 2.4 m/s into the
 ground 1.7 s later (tools/ardupilot/package-flights.sh, docs/ardupilot.md). BRAKE stops the
 vehicle and holds its position and altitude whatever the sticks do, until the pilot or the
-ground station changes mode."""
+ground station changes mode.
+
+AUTO's guided sub-mode (a NAV_GUIDED_ENABLE item with param1 > 0 current in AUTO: ArduCopter's
+mode_auto.cpp nav_guided_start) takes attitude targets as GUIDED does (in_guided_mode()), so
+the bridge engages there without a mode change (`segment`); AUTO stays the operator's mode."""
 from __future__ import annotations
 
 from .base import CUSTOM, AutopilotProfile, mavlink
 
+AUTO = 3
 GUIDED = 4
 BRAKE = 17
 LAND = 9
+RTL = 6
 GUID_OPTIONS_THRUST_AS_THRUST = 8
 
 
@@ -26,6 +32,7 @@ class ArduPilot(AutopilotProfile):
     hover_param = "MOT_THST_HOVER"
     prestream = False
     obstacle_distance_3d = True
+    guided_segments = True    # NAV_GUIDED_ENABLE inside AUTO (the module doc)
     # ArduPilot sends no ODOMETRY: the bridge pairs the attitude with the latest position.
     state_messages = (mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED)
 
@@ -58,6 +65,16 @@ class ArduPilot(AutopilotProfile):
         self._guided(ap)
         ap.wait_mode(lambda: ap.custom_mode == GUIDED, "mode GUIDED")
         return "GUIDED, attitude/rate targets"
+
+    def in_mission_mode(self, custom_mode) -> bool:
+        return custom_mode == AUTO
+
+    def mission_mode(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, AUTO], "mode AUTO")
+        ap.wait_mode(lambda: ap.custom_mode == AUTO, "mode AUTO")
+
+    def rtl(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, RTL], "mode RTL")
 
     def land(self, ap) -> None:
         ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, LAND], "mode LAND")

@@ -29,6 +29,7 @@ class AutopilotProfile:
     # offboard-loss timeout (PX4: COM_OF_LOSS_T): a paused stream then ends with one setpoint
     # of zero body rates at the last thrust (forwarding.py).
     flies_last_setpoint = False
+    guided_segments = False   # the autopilot hands parts of its own mission to mppid (ArduPilot NAV_GUIDED_ENABLE)
     # The autopilot's offboard-loss failsafe is a fallback that ends by itself when setpoints
     # arrive again (PX4: OFFBOARD stays the intended mode): after the bridge's own failsafe
     # disengaged it, nothing may be pre-streamed until `offboard` (engagement.py).
@@ -63,6 +64,18 @@ class AutopilotProfile:
         raise NotImplementedError
 
     def hold(self, ap) -> None:
+        raise NotImplementedError
+
+    def in_mission_mode(self, custom_mode) -> bool:
+        """Whether the autopilot flies its stored mission itself (ArduPilot AUTO, PX4 AUTO.MISSION)."""
+        raise NotImplementedError
+
+    def mission_mode(self, ap) -> None:
+        """Switches to the mode that flies the stored mission from its current item."""
+        raise NotImplementedError
+
+    def rtl(self, ap) -> None:
+        """The autopilot's own return to launch."""
         raise NotImplementedError
 
     def hand_back(self, ap) -> str:

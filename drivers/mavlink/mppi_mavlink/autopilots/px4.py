@@ -12,6 +12,8 @@ from .base import CUSTOM, AutopilotProfile, mavlink
 MAIN_OFFBOARD = 6
 MAIN_AUTO = 4
 SUB_LOITER = 3
+SUB_MISSION = 4
+SUB_RTL = 5
 INTEGER_TYPES = (mavlink.MAV_PARAM_TYPE_INT32, mavlink.MAV_PARAM_TYPE_UINT32, mavlink.MAV_PARAM_TYPE_INT16,
                  mavlink.MAV_PARAM_TYPE_UINT16, mavlink.MAV_PARAM_TYPE_INT8, mavlink.MAV_PARAM_TYPE_UINT8)
 
@@ -57,6 +59,16 @@ class Px4(AutopilotProfile):
         ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, MAIN_OFFBOARD, 0], "mode OFFBOARD")
         ap.wait_mode(lambda: self.offboard_mode(ap.custom_mode), "mode OFFBOARD")
         return "OFFBOARD"
+
+    def in_mission_mode(self, custom_mode) -> bool:
+        return custom_mode is not None and main_mode(custom_mode) == MAIN_AUTO and (custom_mode >> 24) == SUB_MISSION
+
+    def mission_mode(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, MAIN_AUTO, SUB_MISSION], "mode AUTO.MISSION")
+        ap.wait_mode(lambda: self.in_mission_mode(ap.custom_mode), "mode AUTO.MISSION")
+
+    def rtl(self, ap) -> None:
+        ap.command_long(mavlink.MAV_CMD_DO_SET_MODE, [CUSTOM, MAIN_AUTO, SUB_RTL], "mode AUTO.RTL")
 
     def land(self, ap) -> None:
         ap.command_long(mavlink.MAV_CMD_NAV_LAND, [0, 0, 0, math.nan, math.nan, math.nan, math.nan], "land")
