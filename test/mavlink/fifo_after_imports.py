@@ -18,7 +18,9 @@ def main() -> None:
     if spec is None:
         sys.exit(f"fifo_after_imports.py: no module {module!r}")
     # The module's own imports (a package: its __main__, whose main() runs only as __main__).
-    importlib.import_module(module + ".__main__" if spec.submodule_search_locations else module)
+    main_name = module + ".__main__" if spec.submodule_search_locations else module
+    importlib.import_module(main_name)
+    sys.modules.pop(main_name, None)  # run afresh as __main__ below; what it imported stays loaded
     os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
     sys.argv = [module, *sys.argv[3:]]
     runpy.run_module(module, run_name="__main__", alter_sys=True)

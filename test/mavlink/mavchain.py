@@ -44,13 +44,15 @@ class Chain:
 
     # ---- processes ----------------------------------------------------------------------
     def _take_turn(self):
-        """A real-time mppid: one at a time on the machine's cores, never beside a real-time
-        SITL flight (turns.py). The link's processes alone do not take it: at SCHED_FIFO 85
-        only after their imports (fifo_after_imports.py), they are short I/O work."""
+        """The link's processes at SCHED_FIFO 85, the test's stand-in controller answering each
+        state, a real-time mppid: one such test at a time on the machine's cores, never beside a
+        real-time SITL flight (turns.py), whose SCHED_FIFO simulator and daemon held the
+        stand-in's answers off for 200 ms and more."""
         if RT:
             self.procs.turn.acquire()
 
     def start_vehicle(self, url=None):
+        self._take_turn()
         url = url or f"udpout:127.0.0.1:{ROUTER_IN if self.router else VEHICLE_PORT}"
         cmd = IO_LAUNCH + ["mavlink_vehicle", "--url", url, "--autopilot", self.autopilot, "--out", self.out,
                "--lcm-url", LCM_URL]
@@ -61,6 +63,7 @@ class Chain:
         return self.procs.start("vehicle", cmd + self.vehicle_args)
 
     def start_router(self, extra_outs=()):
+        self._take_turn()
         cmd = IO_LAUNCH + ["MAVProxy.mavproxy", f"--master=udpin:127.0.0.1:{ROUTER_IN}",
                f"--out=udpout:127.0.0.1:{VEHICLE_PORT}", "--daemon", "--non-interactive", "--nowait",
                f"--state-basedir={self.out}", "--default-modules=", "--streamrate=-1"]
@@ -69,6 +72,7 @@ class Chain:
         return self.procs.start("mavproxy", cmd)
 
     def start_bridge(self, url=None):
+        self._take_turn()
         # The simulated autopilot sends to the bridge's UDP port whatever the config names.
         url = url or f"udpin:127.0.0.1:{VEHICLE_PORT}"
         cmd = IO_LAUNCH + ["mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,

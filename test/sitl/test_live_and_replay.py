@@ -138,15 +138,16 @@ def test_measured_latency_lockstep_flight_replays_bit_for_bit(mppid_binary, tmp_
     out = tmp_path / "measured"
     # (A floor of 0.1 ms: the estimate follows the compute times of K = 512, ~1 ms.) The charged
     # latency is this machine's compute time, so the flight itself differs from machine to
-    # machine (CI's AVX-512 lanes once met a trunk at K = 512): what is checked is the replay of
-    # whatever was flown, ended by the goal or by a collision, never by an error.
+    # machine (CI's AVX-512 lanes once met a trunk at K = 512; down to the floor of 128 it may
+    # not reach the goal in time): what is checked is the replay of whatever was flown, ended
+    # by the goal, a collision or the scenario's time limit, never by an error.
     p = sitl("run", "--scenario", "forest_4m", "--seed", 5, "--out", out, "--no-plots", "--set", "mppi.rollouts=512",
              "--set", "daemon.latency.floor_ms=0.1", "--set", "daemon.work.target=0.02",
              "--set", "daemon.work.grow_below=0.01", "--set", "daemon.work.floor=128", "--set", "daemon.work.window=10",
              timeout=300)
     assert p.returncode in (0, 1), p.stdout + p.stderr
     score = json.loads((out / "score.json").read_text())
-    assert score["success"] or score["reason"].startswith("collision"), score["reason"]
+    assert score["success"] or score["reason"].startswith(("collision", "goal not reached")), score["reason"]
     assert score["commands"] > 100, score  # at least two seconds of flight to replay
     cmds = [m for _, m in logs.read_lcm_log(out / "flight.lcmlog", {"MPPI_COMMAND"})["MPPI_COMMAND"]]
     leads = {m.lead_us for m in cmds}
