@@ -119,13 +119,9 @@ def main(argv=None) -> int:
     except (plan_mod.PlanError, OSError, yaml.YAMLError) as e:
         print(f"mppid-mission: {e}", file=sys.stderr)
         return 2
-    if a.out:
-        a.out.mkdir(parents=True, exist_ok=True)
-    # SIGTERM (systemd, the harness) as Ctrl-C: the vehicle is left holding, the record written.
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    say = _start_flying(a)
     from .runner import Runner
     from .vehicles import FlightError, GuidedLink, MppidLink
-    say = (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
     try:
         channels = {"obstacles": mission.trees_channel} if mission.trees_channel else None
         link = GuidedLink(a.guided) if a.guided else MppidLink(a.lcm_url, a.bridge, channels)
@@ -139,6 +135,15 @@ def main(argv=None) -> int:
     return 0 if summary["outcome"] == "done" else 1
 
 
+def _start_flying(a):
+    """The record's folder made, SIGTERM (systemd, the harness) taken as Ctrl-C (the vehicle
+    is left holding, the record written); returns the progress printer (--quiet: none)."""
+    if a.out:
+        a.out.mkdir(parents=True, exist_ok=True)
+    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    return (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
+
+
 def _from_autopilot(a) -> int:
     if not a.bridge or a.guided:
         print("mppid-mission from-autopilot: --bridge SOCKET (the bridge reads the mission), without --guided",
@@ -147,12 +152,9 @@ def _from_autopilot(a) -> int:
     if not 0.05 <= a.speed <= 30:
         print(f"mppid-mission from-autopilot: --speed {a.speed:g}: m/s in [0.05, 30]", file=sys.stderr)
         return 2
-    if a.out:
-        a.out.mkdir(parents=True, exist_ok=True)
-    signal.signal(signal.SIGTERM, lambda *_: (_ for _ in ()).throw(KeyboardInterrupt()))
+    say = _start_flying(a)
     from .from_autopilot import run
     from .vehicles import MppidLink
-    say = (lambda s: None) if a.quiet else (lambda s: print(f"{time.strftime('%H:%M:%S')} {s}", flush=True))
     link = MppidLink(a.lcm_url, a.bridge)
     try:
         return run(link, a.speed, a.seed, a.out, say, a.wait_armed)
