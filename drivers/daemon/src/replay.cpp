@@ -266,6 +266,7 @@ class Replay {
   }
 
   std::int64_t cycles() const { return cycles_; }
+  bool log_ended() const { return log_ended_; }
   std::int64_t compared() const { return compared_; }
   const char* backend() const { return loop_.controller().backend(); }
 
@@ -316,6 +317,12 @@ class Replay {
     for (; checked_ < tx_.out.size(); ++checked_) {
       const Command& run = tx_.out[checked_];
       auto c = rec_.commands.find(run.seq);
+      if (c == rec_.commands.end() && run.seq > rec_.commands.rbegin()->first) {
+        // The recording stopped between this cycle's state and its command: the log ends here.
+        std::printf("replay: the log ends before command seq %" PRId64 " (the recording stopped first)\n", run.seq);
+        log_ended_ = true;
+        return true;
+      }
       if (c == rec_.commands.end()) {
         std::printf("replay: cycle %" PRId64 " published command seq %" PRId64 ", which the log does not hold\n",
                     cycle, run.seq);
@@ -347,6 +354,7 @@ class Replay {
   std::atomic<bool> stop_{false};
   std::int64_t cycles_ = 0, compared_ = 0;
   std::size_t checked_ = 0;  // tx_.out entries compared so far
+  bool log_ended_ = false;   // a cycle past the log's last command: the recording stopped first
 };
 
 // The flight's events, the daemon's settings, the log's index (which points into `events`)
@@ -368,6 +376,7 @@ int replay_flight(const Options& o, const std::vector<Event>& events, const Reco
   for (const Event& e : events) {
     if (o.max_cycles >= 0 && replay.cycles() >= o.max_cycles) break;
     if (!replay.feed(e)) return 1;
+    if (replay.log_ended()) break;
   }
   std::int64_t unreplayed = 0;
   for (const auto& [seq, c] : rec.commands)
