@@ -19,17 +19,19 @@ for the referee (mission.jsonl), so the sensed trees, the scored trees and rate_
 list.
 
 The sensors run as the simulator's do, above mppid (SCHED_FIFO 90 where allowed: the world is
-not the flight computer's load); the referee, now the camera's pose source, as the logger (79).
+not the flight computer's load); the referee, now the camera's pose source, at 79 (below mppid).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 from .. import paths
-from .base import LOGGER_FIFO_PRIORITY, LOGGER_RECV_BUF, SIM_FIFO_PRIORITY, FlightError, FlightSpec, sensor_bus
+from .base import LOGGER_RECV_BUF, SIM_FIFO_PRIORITY, FlightError, FlightSpec, sensor_bus
 from .sim import log_exclusions as _log_exclusions
 from .sim import mapper_command, realtime_priorities
 from .sim import sensed as _sensed
+
+REFEREE_FIFO_PRIORITY = 79  # the referee (the camera's pose source): below the daemon
 
 TREE_HEIGHT = 10.0  # m: a mission's forest with no `height`
 
@@ -67,5 +69,5 @@ def add_sensing(spec: FlightSpec, mission_path: Path, mission: dict, out: Path, 
         return cmds
     cmds = {**cmds, **realtime_priorities({"mapper": cmds["mapper"]})}
     cmds["sensors"] = ["chrt", "-f", str(SIM_FIFO_PRIORITY)] + cmds["sensors"]
-    cmds["recorder"] = ["chrt", "-f", str(LOGGER_FIFO_PRIORITY)] + cmds["recorder"]
+    cmds["recorder"] = ["chrt", "-f", str(REFEREE_FIFO_PRIORITY)] + cmds["recorder"]
     return cmds

@@ -126,9 +126,10 @@ def mission_command(spec: FlightSpec, mission: Path, out: Path) -> list[str]:
 def realtime_priorities(cmds: dict) -> dict:
     """The simulator stands in for the physical world: the controller's CPU load must not
     slow its physics down, nor other load its clock and the latency it measures (the daemon
-    runs SCHED_FIFO 80, the simulator above). The logger just below the daemon: a lock-step
-    flight runs many times faster than real time and a logger starved meanwhile loses
-    datagrams. The parameter injector as the logger: at the normal policy a lock-step flight
+    runs SCHED_FIFO 80, the simulator above). The logger above both: a lock-step flight runs
+    many times faster than real time and a logger starved meanwhile loses datagrams
+    (LOGGER_FIFO_PRIORITY says what it lost). The parameter injector as the logger: at the
+    normal policy a lock-step flight
     (SCHED_FIFO, both cores) would starve it of every state until the flight ends. The mapper
     below the daemon (its maps feed the next cycles, but never before this one's command) and
     above the machine's other work: at the normal policy, on a loaded 2-core machine, its maps
