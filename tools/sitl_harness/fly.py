@@ -3,7 +3,6 @@ for the view, score it and plot it; and the process-level duties of a flight pro
 (stop signals, the parent watch)."""
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -41,7 +40,7 @@ def fly(spec: FlightSpec) -> dict:
         return result
     info = {}
     try:
-        with RealtimeTurn() if spec.realtime else contextlib.nullcontext():
+        with RealtimeTurn():  # real time or lock-step: both hold the cores (turns.py)
             info = flight.run()
     except FlightError as e:
         info = {"harness_outcome": "error", "error": str(e)}

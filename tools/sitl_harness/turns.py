@@ -1,11 +1,13 @@
-"""Real-time flights that take turns on one machine.
+"""Flights that take turns on one machine.
 
-With $MPPID_REALTIME_LOCK naming a file, a real-time flight holds an exclusive lock on it
-(flock) while it flies: flights started on this machine with the same file fly one after
-another. The Python tests set it (test/conftest.py): two test workers flying two SCHED_FIFO
-daemons on the same two cores at once starved each other's simulators (stale states, the
-daemons' failsafe, both vehicles on the ground). A campaign's pinned flights
-(--realtime-jobs N) have cores of their own and do not take turns."""
+With $MPPID_REALTIME_LOCK naming a file, a flight (real time or lock-step: its simulator,
+daemon and recorder run SCHED_FIFO, and a lock-step flight keeps every core busy until it
+ends) holds an exclusive lock on it (flock) while it flies: flights started on this machine
+with the same file fly one after another. The Python tests set it (test/conftest.py), and the
+MAVLink tests' chains hold it too: beside another worker's flight, a real-time mppid lost a
+third of a second of commands, a chain's stand-in controller stopped answering for 200 ms, a
+flight's recorder lost states from its log. A campaign's pinned flights (--realtime-jobs N)
+have cores of their own and do not take turns."""
 from __future__ import annotations
 
 import fcntl
