@@ -247,6 +247,19 @@ def test_a_downloaded_mission_is_flown_to_its_end(netns, procs, tmp_path, tap, d
         ctl.close()
 
 
+def _fly_until(procs, tmp_path, tap, seq, what, *extra_waypoints):
+    """ArduPilot: take-off, waypoints (3, 0) and (6, 0), `extra_waypoints`, land uploaded by a
+    ground station; the tool flying it until the autopilot's current item is `seq`."""
+    c = _chain(procs, tmp_path, "ardupilot")
+    gcs = Gcs(tap)
+    assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
+                              (M.MAV_CMD_NAV_WAYPOINT, 3.0, 0.0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 6.0, 0.0, 2.0),
+                              *extra_waypoints, (M.MAV_CMD_NAV_LAND,))) == 0
+    p = tool(c, tmp_path / "fly", wait=False)
+    wait_for(lambda: seq in seqs(c, "mission_set_current"), 60, what)
+    return c, gcs, p
+
+
 def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_path, tap):
     """ArduPilot: while the second waypoint is flown the ground station uploads a shorter
     mission: at the end of that leg it is read again and flown from the autopilot's current
@@ -254,14 +267,9 @@ def test_a_mission_changed_in_flight_is_read_again_and_flown(netns, procs, tmp_p
     which is ArduPilot's own: AUTO from that item (MISSION_SET_CURRENT, then the mode) flies
     home and lands."""
     ctl = TrackingController()
-    c = _chain(procs, tmp_path, "ardupilot")
-    gcs = Gcs(tap)
     try:
-        assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
-                                  (M.MAV_CMD_NAV_WAYPOINT, 3.0, 0.0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 6.0, 0.0, 2.0),
-                                  (M.MAV_CMD_NAV_WAYPOINT, 6.0, 3.0, 2.0), (M.MAV_CMD_NAV_LAND,))) == 0
-        p = tool(c, tmp_path / "fly", wait=False)
-        wait_for(lambda: 3 in seqs(c, "mission_set_current"), 60, "the second waypoint flown")
+        c, gcs, p = _fly_until(procs, tmp_path, tap, 3, "the second waypoint flown",
+                               (M.MAV_CMD_NAV_WAYPOINT, 6.0, 3.0, 2.0))
         assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
                                   (M.MAV_CMD_NAV_WAYPOINT, 0.0, 3.0, 2.0),
                                   (M.MAV_CMD_NAV_RETURN_TO_LAUNCH, {"frame": M.MAV_FRAME_MISSION}))) == 0
@@ -284,14 +292,8 @@ def test_a_mission_changed_in_flight_to_one_refused_holds(netns, procs, tmp_path
     """The new mission has an item mppid cannot fly: refused (named on the ground station),
     mppid holds where the vehicle is, nothing lands, the vehicle stays with mppid."""
     ctl = TrackingController()
-    c = _chain(procs, tmp_path, "ardupilot")
-    gcs = Gcs(tap)
     try:
-        assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
-                                  (M.MAV_CMD_NAV_WAYPOINT, 3.0, 0.0, 2.0), (M.MAV_CMD_NAV_WAYPOINT, 6.0, 0.0, 2.0),
-                                  (M.MAV_CMD_NAV_LAND,))) == 0
-        p = tool(c, tmp_path / "fly", wait=False)
-        wait_for(lambda: 2 in seqs(c, "mission_set_current"), 60, "the first waypoint flown")
+        c, gcs, p = _fly_until(procs, tmp_path, tap, 2, "the first waypoint flown")
         assert gcs.upload(mission("ardupilot", (M.MAV_CMD_NAV_TAKEOFF, 0, 0, 2.0),
                                   (M.MAV_CMD_NAV_SPLINE_WAYPOINT, 0.0, 3.0, 2.0))) == 0
         out = p.communicate(timeout=60)[0]
