@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from mppi_mavlink.layout import QuadrotorRate as Q
 
-from . import paths
+from . import paths, survey
 from .logs import read_jsonl
 
 CRASH_TILT_DEG = 80.0
@@ -27,7 +27,7 @@ GROUND_Z = 0.05
 
 
 # The controllers that are the autopilot's own (no mppid, no LCM log to time).
-AUTOPILOT_CONTROLLERS = ("guided", "px4")
+AUTOPILOT_CONTROLLERS = ("guided", "px4", "auto")
 
 
 def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> dict:
@@ -44,16 +44,21 @@ def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> d
         res["reason"] = info.get("error") or "no truth or mission record"
         return res
     head = next((m for m in mission if m.get("event") == "mission"), {})
+    world = survey.load_world(out)  # a survey uploaded to the autopilot: the world's trees
+    if world:
+        head = {**head, "trees": world["trees"], "vehicle_radius": world["vehicle_radius"]}
     clock = head.get("clock", "state")
     t_truth = _truth_clock(truth, clock)
     X = np.array([r["x"] for r in truth])
     est = np.array([r["est"] if r.get("est") else [np.nan] * 3 for r in truth])
     flying = np.array([r.get("armed", False) for r in truth])
     res.update(_legs(mission, t_truth, X, est, settle=float(head.get("settle", 3.0))))
-    res.update(_safety(truth, events, X, flying, head))
+    if world:
+        res.update(survey.figures(world, t_truth * 1e-6, X[:, Q.PX:Q.PZ + 1], np.array([r["v"] for r in truth])))
+    res.update(_safety(truth, events, X, flying, head, res.get("last_item_index")))
     res.update(_timing(out) if spec.controller not in AUTOPILOT_CONTROLLERS else {})
     res.update(_sensing(out, head, t_truth, X))
-    done = summary.get("outcome") == "done"
+    done = summary.get("outcome") == "done" and (not world or res["waypoints_reached"] == res["waypoints"])
     res["success"] = bool(done and not res["crashes"] and (res.get("min_clearance") is None or res["min_clearance"] > 0))
     res["reason"] = ("mission done" if res["success"] else
                      res["crashes"][0] if res["crashes"] else
@@ -111,7 +116,9 @@ def _legs(mission, t_truth, X, est, settle) -> dict:
     return out
 
 
-def _safety(truth, events, X, flying, head) -> dict:
+def _safety(truth, events, X, flying, head, end: int | None = None) -> dict:
+    """Crashes between the first take-off and the landing: the mode LAND, or `end` (a survey's
+    last waypoint: its NAV_LAND lands in AUTO)."""
     crashes = []
     tilt = np.array([r.get("tilt_deg", 0.0) for r in truth])
     airborne = np.flatnonzero(X[:, Q.PZ] > 0.5)
@@ -119,7 +126,7 @@ def _safety(truth, events, X, flying, head) -> dict:
         # After the first take-off and before the last landing began (the mode left GUIDED).
         lo = airborne[0]
         land = [i for i, r in enumerate(truth) if i > lo and r.get("mode") == "LAND"]
-        hi = land[0] if land else len(truth)
+        hi = min(land[0] if land else len(truth), len(truth) if end is None else end + 1)
         low = np.flatnonzero((X[lo:hi, Q.PZ] < GROUND_Z) & flying[lo:hi])
         if low.size:
             crashes.append(f"ground contact while flying, {X[lo + low[0], Q.PX:Q.PY + 1].round(2).tolist()}")

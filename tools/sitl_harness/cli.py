@@ -12,8 +12,8 @@ from pathlib import Path
 from . import paths
 
 # --controller: mppid, its DDP baseline, the hover stand-in, and the autopilots' own (guided:
-# ArduCopter's GUIDED; px4: PX4's offboard position control).
-CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4"]
+# ArduCopter's GUIDED; px4: PX4's offboard position control; auto: ArduCopter's AUTO with BendyRuler).
+CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto"]
 
 
 class UsageError(Exception):
@@ -67,7 +67,8 @@ def _add_run_parser(sub):
     r.add_argument("--controller", choices=CONTROLLERS, default="mppid",
                    help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the "
                         "simulator without the daemon); guided: ArduCopter's own position controller (--autopilot "
-                        "ardupilot); px4: PX4's own offboard position control (--autopilot px4)")
+                        "ardupilot); px4: PX4's own offboard position control (--autopilot px4); auto: a mission "
+                        "uploaded to ArduCopter flown in AUTO with BendyRuler (config/missions/survey_*.yaml)")
     _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
@@ -196,13 +197,13 @@ def _autopilot_args(p):
 # ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
-    own = {"ardupilot": "guided", "px4": "px4"}  # each autopilot's own position controller
-    for autopilot, ctrl in own.items():
-        if a.controller == ctrl and a.autopilot != autopilot:
-            return f"--controller {ctrl} is {autopilot}'s own controller: it needs --autopilot {autopilot}"
+    own = {"ardupilot": ("guided", "auto"), "px4": ("px4",)}  # each autopilot's own controllers
+    for autopilot, ctrls in own.items():
+        if a.controller in ctrls and a.autopilot != autopilot:
+            return f"--controller {a.controller} is {autopilot}'s own controller: it needs --autopilot {autopilot}"
     if a.autopilot in own:
-        if a.controller not in ("mppid", own[a.autopilot]):
-            return f"--autopilot {a.autopilot} flies --controller mppid or {own[a.autopilot]}"
+        if a.controller not in ("mppid",) + own[a.autopilot]:
+            return f"--autopilot {a.autopilot} flies --controller {' or '.join(('mppid',) + own[a.autopilot])}"
         if not a.realtime:
             return f"--autopilot {a.autopilot} flies in real time (its SITL runs on the wall clock): add --realtime"
     return ""

@@ -64,7 +64,7 @@ LEG_KEYS = {
     "figure_eight": {"center", "radius", "speed", "ramp", "laps", "yaw"},
 }
 TOP_KEYS = {"name", "description", "task", "mppid", "frame", "takeoff", "land", "vehicle_radius", "obstacles", "legs",
-            "score", "fence", "yaw", "sensing", "mapper"}
+            "score", "fence", "yaw", "sensing", "mapper", "autopilot_mission", "wall_timeout"}
 WORLD_CHANNEL = "MPPI_WORLD"  # a sensed mission's trees: the world's, which only the sensors see
 CURVES = ("circle", "figure_eight")
 TRANSIT_SPEED = 2.0  # m/s: the line to a curve's start point, when the vehicle is off it

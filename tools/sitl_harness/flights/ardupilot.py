@@ -42,6 +42,10 @@ PARAMS = paths.ROOT / "config" / "ardupilot" / "copter_mppid.parm"
 # The GUIDED baseline's position-controller tuning (argued in the file): loaded for every flight,
 # mppid's too, so both controllers take off and are scored on the same vehicle.
 BASELINE = paths.ROOT / "config" / "ardupilot" / "guided_baseline.parm"
+# The autopilot's own avoidance for `--controller auto` (a survey flown in AUTO with BendyRuler,
+# the mapper's map through the bridge's OBSTACLE_DISTANCE): argued in the file.
+BENDYRULER = paths.ROOT / "config" / "ardupilot" / "bendyruler.parm"
+GCS_URL = "tcp:127.0.0.1:5763"  # the SITL's third serial port: the ground station's
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
 IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
 # mppid's settings through ArduCopter, over the task file (argued there), then the mission's
@@ -67,9 +71,9 @@ def ardupilot_defaults(binary: Path) -> Path:
     return p
 
 
-def sitl_command(binary: Path, ap_dir: Path, fifo: bool) -> list[str]:
+def sitl_command(binary: Path, ap_dir: Path, fifo: bool, extra_params: tuple = ()) -> list[str]:
     """The SITL in its own folder (EEPROM, dataflash logs); the world, above the controller."""
-    defaults = f"{ardupilot_defaults(binary)},{PARAMS},{BASELINE}"
+    defaults = ",".join(map(str, (ardupilot_defaults(binary), PARAMS, BASELINE) + tuple(extra_params)))
     sim = ["sh", "-c", f'cd "{ap_dir}" && exec "$0" "$@"', str(binary), "--model", "quad", "--speedup", "1",
            "--home", HOME, "--defaults", defaults, "-I0", "--wipe"]
     if fifo:
@@ -126,12 +130,15 @@ class ArduPilotFlight(Flight):
         fifo = fifo_allowed()
         ap_dir = self.out / "ardupilot"
         ap_dir.mkdir(exist_ok=True)
+        uploaded = "autopilot_mission" in mission
         cmds = {
             "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
-            "sim": sitl_command(self.binary, ap_dir, fifo),
+            "sim": sitl_command(self.binary, ap_dir, fifo, (BENDYRULER,) if spec.controller == "auto" else ()),
             "recorder": [sys.executable, "-m", "sitl_harness.ap_truth", "--url", "tcp:127.0.0.1:5762",
                          f"--home={HOME}", "--out", str(self.out)],
         }
+        if uploaded:
+            return self._survey_commands(mission_path, mission, cmds, fifo)
         mission_cmd = mission_command(spec, mission_path, self.out)
         if spec.controller == "guided":
             cmds["mission"] = mission_cmd + ["--guided", "tcp:127.0.0.1:5760"]
@@ -142,6 +149,27 @@ class ArduPilotFlight(Flight):
             cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
         return cmds
 
+    def _survey_commands(self, mission_path: Path, mission: dict, cmds: dict, fifo: bool) -> dict:
+        """A mission uploaded to the autopilot by the ground station (ap_gcs.py), which also
+        publishes the world's trees: flown by mppid (`mppid-mission from-autopilot`) or, with
+        --controller auto, by ArduCopter's AUTO with BendyRuler; the bridge and the mapper run
+        either way (the map goes to the autopilot as OBSTACLE_DISTANCE)."""
+        spec = self.spec
+        if spec.controller not in ("mppid", "auto"):
+            raise FlightError(f"{mission_path.name}: an uploaded mission is flown by mppid or --controller auto")
+        gcs = [sys.executable, "-m", "sitl_harness.ap_gcs", "--url", GCS_URL, "--mission", str(mission_path),
+               "--seed", str(spec.seed), f"--home={HOME}", "--lcm-url", spec.lcm_url,
+               "--out", str(self.out)]
+        ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo)
+        cmds.update(bridge=bridge)
+        if spec.controller == "auto":
+            cmds["mission"] = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
+        else:
+            cmds.update(gcs=gcs, controller=ctrl,
+                        mission=[sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock),
+                                 "--seed", str(spec.seed), "--out", str(self.out), "--lcm-url", spec.lcm_url])
+        return sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
+
     def start(self, plan: Plan) -> None:
         sb, cmds = self.sandbox, plan.commands
         sb.spawn("logger", cmds["logger"])
@@ -150,9 +178,12 @@ class ArduPilotFlight(Flight):
         for name in ("sensors", "mapper"):  # a sensed mission's: up before the world's trees come
             if name in cmds:
                 sb.spawn(name, cmds[name])
-        if self.spec.controller != "guided":
-            sb.spawn("controller", cmds["controller"])
-            sb.spawn("bridge", cmds["bridge"])
+        for name in ("controller", "bridge"):
+            if name in cmds:
+                sb.spawn(name, cmds[name])
+        if "gcs" in cmds:  # the operator's upload first: the mission tool reads it at once
+            sb.spawn("gcs", cmds["gcs"])
+            sb.wait_ready("gcs", 120.0)
         sb.spawn("mission", cmds["mission"])
         # The SITL boots once serial 0 (the bridge, or the mission tool's GUIDED link) connects.
         sb.wait_ready("recorder", 60.0)
@@ -160,7 +191,7 @@ class ArduPilotFlight(Flight):
     def watch(self, plan: Plan, t0: float) -> str | None:
         """Until the mission tool exits (the flight is over: landed, or given up), or
         something it needs dies, or the wall-clock limit."""
-        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger", "sensors", "mapper")
+        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger", "sensors", "mapper", "gcs")
                    if n in self.sandbox.procs]
         while True:
             time.sleep(0.1)

@@ -1,0 +1,193 @@
+"""The ground station of a flight through an autopilot's SITL whose mission names an
+`autopilot_mission` (config/missions/survey_forest_sensed.yaml): the operator's part.
+
+    python -m sitl_harness.ap_gcs --url tcp:127.0.0.1:5763 --mission FILE --seed N --home LAT,LON,ALT,HDG
+        --lcm-url URL --out DIR [--fly-auto]
+
+1. Uploads the mission's legs to the autopilot by the mission protocol, as QGroundControl does
+   (MISSION_COUNT, the autopilot's MISSION_REQUEST_INT answered with MISSION_ITEM_INT, MISSION_ACK):
+   ArduPilot's home as item 0, NAV_TAKEOFF, DO_CHANGE_SPEED, a NAV_WAYPOINT per goal leg (its
+   radius the acceptance radius), NAV_LAND at the last one; positions from the legs' local ENU
+   metres about home (pymavlink's gps_offset). Then `{"event": "ready"}` on stdout.
+2. Publishes the world: the mission's trees (its forest for the seed) as obstacles_t on
+   MPPI_WORLD, which only the sensors read, twice a second; world.json records them, the
+   waypoints and the forest's extent for the score (survey.py).
+3. With --fly-auto (the autopilot's own controller, `--controller auto`): AUTO, arm, MISSION_START,
+   then MISSION_ITEM_REACHED followed to the last waypoint and the landing; mission.jsonl and
+   mission_summary.json as the mission tool writes them (the score reads both).
+Without --fly-auto it publishes until it is stopped: `mppid-mission from-autopilot` flies.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavextra, mavutil, mavwp  # noqa: E402
+
+M = mavutil.mavlink
+REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+WORLD_HZ = 2.0
+AUTO_MODE = 3              # ArduCopter's AUTO custom mode
+
+
+def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
+    lat, lon = (0.0, 0.0) if (east, north) == (0.0, 0.0) else mavextra.gps_offset(home[0], home[1], east, north)
+    return M.MAVLink_mission_item_int_message(1, 1, seq, frame, cmd, 0, 1, *p, int(round(lat * 1e7)),
+                                              int(round(lon * 1e7)), z, M.MAV_MISSION_TYPE_MISSION)
+
+
+def mission_items(doc: dict, home) -> list:
+    """The legs as a ground station writes them (ArduPilot's numbering: home is item 0)."""
+    goals = [leg["goal"] for leg in doc["legs"] if "goal" in leg]
+    if len(goals) != len(doc["legs"]):
+        raise ValueError("autopilot_mission: every leg a goal (each a NAV_WAYPOINT)")
+    items = [_item(0, M.MAV_CMD_NAV_WAYPOINT, home, z=home[2], frame=M.MAV_FRAME_GLOBAL_INT)]
+
+    def add(cmd, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0)):
+        items.append(_item(len(items), cmd, home, east, north, z, p))
+    add(M.MAV_CMD_NAV_TAKEOFF, z=float(doc["takeoff"]))
+    add(M.MAV_CMD_DO_CHANGE_SPEED, p=(1, float(doc["autopilot_mission"]["speed"]), -1, 0))
+    for g in goals:
+        add(M.MAV_CMD_NAV_WAYPOINT, *map(float, g["at"]), p=(0, float(g.get("radius", 1.0)), 0, 0))
+    if doc.get("land", True):
+        add(M.MAV_CMD_NAV_LAND, float(goals[-1]["at"][0]), float(goals[-1]["at"][1]))
+    return items
+
+
+def last_waypoint(items) -> int:
+    return max(m.seq for m in items if m.command == M.MAV_CMD_NAV_WAYPOINT)
+
+
+def upload(conn, items, timeout=30.0) -> int:
+    """The mission protocol's upload; the MISSION_ACK's type."""
+    wp = mavwp.MAVWPLoader(target_system=1, target_component=1)
+    for m in items:
+        wp.add(m)
+    conn.mav.mission_count_send(1, 1, wp.count(), M.MAV_MISSION_TYPE_MISSION)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        m = conn.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=1)
+        if m is None or getattr(m, "target_system", 255) != 255:
+            continue
+        if m.get_type() == "MISSION_ACK":
+            return m.type
+        conn.mav.send(wp.wp(m.seq))
+    raise TimeoutError("the autopilot never acknowledged the mission")
+
+
+def publish_world(lcm_url: str, trees, stop: threading.Event):
+    import lcm
+    from mppi_lcm import cylinder_t, obstacles_t
+    lc, seq = lcm.LCM(lcm_url), 0
+    while not stop.wait(1.0 / WORLD_HZ):
+        o, seq = obstacles_t(), seq + 1
+        o.utime, o.seq = int(time.time() * 1e6), seq
+        cyl = []
+        for x, y, r in trees:
+            c = cylinder_t()
+            c.x, c.y, c.radius, c.vx, c.vy = x, y, r, 0.0, 0.0
+            cyl.append(c)
+        o.n, o.cylinders = len(cyl), cyl
+        lc.publish("MPPI_WORLD", o.encode())
+
+
+def _command(conn, cmd, *params, timeout=5.0) -> bool:
+    conn.mav.command_long_send(1, 1, cmd, 0, *(list(params) + [0] * (7 - len(params))))
+    ack = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=timeout,
+                          condition=f"COMMAND_ACK.command=={cmd}")
+    return ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
+
+
+def fly_auto(conn, last_wp: int, log, say, timeout: float) -> dict:
+    """ArduCopter flies the uploaded mission in AUTO; the summary (outcome 'done' when the last
+    waypoint was reached and the vehicle landed and disarmed)."""
+    reached, t0 = [], time.monotonic()
+    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, AUTO_MODE)
+    while not _command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1):
+        if time.monotonic() - t0 > 90:
+            return {"outcome": "not armed in 90 s", "reached": reached}
+        time.sleep(1.0)
+    say("armed in AUTO")
+    _command(conn, M.MAV_CMD_MISSION_START, 0, 0)
+    while time.monotonic() - t0 < timeout:
+        m = conn.recv_match(type=["MISSION_ITEM_REACHED", "HEARTBEAT", "STATUSTEXT"], blocking=True, timeout=1)
+        if m is None:
+            continue
+        if m.get_type() == "MISSION_ITEM_REACHED" and m.seq not in reached:
+            reached.append(m.seq)
+            log({"event": "reached", "seq": m.seq, "wall_us": int(time.time() * 1e6)})
+            say(f"item {m.seq} reached")
+        elif m.get_type() == "STATUSTEXT":
+            log({"event": "statustext", "text": m.text})
+        elif m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1 and m.type == M.MAV_TYPE_QUADROTOR:
+            if last_wp in reached and not m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+                return {"outcome": "done", "reached": reached}
+    return {"outcome": f"not finished in {timeout:g} s (items reached: {reached})", "reached": reached}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--url", required=True)
+    ap.add_argument("--mission", type=Path, required=True)
+    ap.add_argument("--seed", type=int, required=True)
+    ap.add_argument("--home", required=True, help="lat,lon,alt,heading (the SITL's --home)")
+    ap.add_argument("--lcm-url", required=True)
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--fly-auto", action="store_true", help="fly it with the autopilot's AUTO")
+    ap.add_argument("--timeout", type=float, default=180.0)
+    a = ap.parse_args(argv)
+    import yaml
+    from mppi_mission import plan
+    doc = yaml.safe_load(a.mission.read_text())
+    home = [float(v) for v in a.home.split(",")]
+    trees = plan.from_dict(doc).trees((0.0, 0.0), a.seed)
+    f = doc["obstacles"]["forest"]
+    waypoints = [leg["goal"]["at"] for leg in doc["legs"]]
+    (a.out / "world.json").write_text(json.dumps({
+        "trees": trees, "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "waypoints": waypoints,
+        "acceptance": [float(leg["goal"].get("radius", 1.0)) for leg in doc["legs"]],
+        "forest_box": [f["x_range"], f["y_range"]]}))
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+
+    def say(text):
+        print(f"[gcs] {text}", flush=True)
+
+    conn = mavutil.mavlink_connection(a.url, source_system=255, source_component=190, autoreconnect=True)
+    conn.wait_heartbeat(timeout=120)
+    items = mission_items(doc, home)
+    result = upload(conn, items)
+    if result != M.MAV_MISSION_ACCEPTED:
+        say(f"the autopilot refused the mission: MISSION_ACK type {result}")
+        return 1
+    say(f"mission uploaded: {len(items)} items ({len(waypoints)} waypoints), {len(trees)} trees in the world")
+    world = threading.Thread(target=publish_world, args=(a.lcm_url, trees, stop), daemon=True)
+    world.start()
+    print(json.dumps({"event": "ready"}), flush=True)
+    if not a.fly_auto:
+        while not stop.wait(0.5):
+            pass
+        return 0
+    with open(a.out / "mission.jsonl", "w", buffering=1) as f_log:
+        def log(rec):
+            f_log.write(json.dumps(rec) + "\n")
+        log({"event": "mission", "name": doc["name"], "seed": a.seed, "origin": [0.0, 0.0, 0.0], "trees": trees,
+             "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "clock": "boot", "settle": 3.0})
+        summary = {"mission": doc["name"], "seed": a.seed, "controller": "auto",
+                   **fly_auto(conn, last_waypoint(items), log, say, a.timeout)}
+        log({"event": "end", **summary})
+    (a.out / "mission_summary.json").write_text(json.dumps(summary, indent=1))
+    say(f"outcome: {summary['outcome']}")
+    stop.set()
+    return 0 if summary["outcome"] == "done" else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
