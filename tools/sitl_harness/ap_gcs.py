@@ -39,8 +39,9 @@ AUTO_MODE = 3              # ArduCopter's AUTO custom mode
 
 def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
     lat, lon = (0.0, 0.0) if (east, north) == (0.0, 0.0) else mavextra.gps_offset(home[0], home[1], east, north)
-    return M.MAVLink_mission_item_int_message(1, 1, seq, frame, cmd, 0, 1, *p, int(round(lat * 1e7)),
-                                              int(round(lon * 1e7)), z, M.MAV_MISSION_TYPE_MISSION)
+    cls = M.MAVLink_mission_item_int_message
+    kind = [M.MAV_MISSION_TYPE_MISSION] if "mission_type" in cls.fieldnames else []  # MAVLink 2's extension
+    return cls(1, 1, seq, frame, cmd, 0, 1, *p, int(round(lat * 1e7)), int(round(lon * 1e7)), z, *kind)
 
 
 def mission_items(doc: dict, home) -> list:
