@@ -86,3 +86,19 @@ def test_the_survey_is_scored_in_order_from_the_take_off():
     t, X, V = _truth([[0, 0, 0], [0, 0, 2], [10, 6, 2], [10, 0, 2]])
     f = survey.figures(WORLD, t, X, V)
     assert f["waypoints_reached"] == 1 and f["time_to_last_item_s"] is None
+
+
+def test_a_guided_segment_is_bracketed_for_mppid_and_auto_flies_the_rest(mppid_binary, tmp_path):
+    doc = yaml.safe_load((paths.MISSIONS / "survey_guided_segment.yaml").read_text())
+    cmds = [m.command for m in ap_gcs.mission_items(doc, HOME_LLA)]
+    enable = cmds.index(M.MAV_CMD_NAV_GUIDED_ENABLE)
+    assert cmds[enable - 1] == M.MAV_CMD_DO_GUIDED_LIMITS                 # a timeout, so AUTO goes on
+    assert cmds[enable + 1:enable + 3] == [M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_GUIDED_ENABLE]
+    assert cmds.count(M.MAV_CMD_NAV_WAYPOINT) == 1 + len(doc["legs"])     # home, then the legs
+    spec = FlightSpec(scenario="survey_guided_segment", seed=51, out=tmp_path / "o", realtime=True,
+                      autopilot="ardupilot", ardupilot_bin=str(fake_ardupilot(tmp_path)))
+    flight = ArduPilotFlight.create(spec)
+    flight.out.mkdir(parents=True)
+    plan = flight.plan().commands
+    assert "--fly-auto" in plan["mission"] and "from-autopilot" in plan["segments"]   # AUTO, mppid inside it
+    assert str(BENDYRULER) not in " ".join(plan["sim"])

@@ -8,11 +8,14 @@
    (MISSION_COUNT, the autopilot's MISSION_REQUEST_INT answered with MISSION_ITEM_INT, MISSION_ACK):
    ArduPilot's home as item 0, NAV_TAKEOFF, DO_CHANGE_SPEED, a NAV_WAYPOINT per goal leg (its
    radius the acceptance radius), NAV_LAND at the last one; positions from the legs' local ENU
-   metres about home (pymavlink's gps_offset). Then `{"event": "ready"}` on stdout.
+   metres about home (pymavlink's gps_offset). The legs named in `guided_legs` are a guided
+   segment for the companion computer: DO_GUIDED_LIMITS (a 60 s timeout) and NAV_GUIDED_ENABLE 1
+   before them, NAV_GUIDED_ENABLE 0 after. Then `{"event": "ready"}` on stdout.
 2. Publishes the world: the mission's trees (its forest for the seed) as obstacles_t on
    MPPI_WORLD, which only the sensors read, twice a second; world.json records them, the
    waypoints and the forest's extent for the score (survey.py).
-3. With --fly-auto (the autopilot's own controller, `--controller auto`): AUTO, arm, MISSION_START,
+3. With --fly-auto (the autopilot's own controller, `--controller auto`, and a mission with guided
+   segments, which mppid flies inside AUTO): AUTO, arm, MISSION_START,
    then MISSION_ITEM_REACHED followed to the last waypoint and the landing; mission.jsonl and
    mission_summary.json as the mission tool writes them (the score reads both).
 Without --fly-auto it publishes until it is stopped: `mppid-mission from-autopilot` flies.
@@ -35,6 +38,7 @@ M = mavutil.mavlink
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 WORLD_HZ = 2.0
 AUTO_MODE = 3              # ArduCopter's AUTO custom mode
+GUIDED_TIMEOUT_S = 60.0    # DO_GUIDED_LIMITS before each guided segment: AUTO goes on after it
 
 
 def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
@@ -55,8 +59,14 @@ def mission_items(doc: dict, home) -> list:
         items.append(_item(len(items), cmd, home, east, north, z, p))
     add(M.MAV_CMD_NAV_TAKEOFF, z=float(doc["takeoff"]))
     add(M.MAV_CMD_DO_CHANGE_SPEED, p=(1, float(doc["autopilot_mission"]["speed"]), -1, 0))
-    for g in goals:
+    guided = set(doc["autopilot_mission"].get("guided_legs", []))
+    for i, g in enumerate(goals):
+        if i in guided and i - 1 not in guided:  # a segment for the companion: limits, then enable
+            add(M.MAV_CMD_DO_GUIDED_LIMITS, p=(GUIDED_TIMEOUT_S, 0, 0, 0))
+            add(M.MAV_CMD_NAV_GUIDED_ENABLE, p=(1, 0, 0, 0))
         add(M.MAV_CMD_NAV_WAYPOINT, *map(float, g["at"]), p=(0, float(g.get("radius", 1.0)), 0, 0))
+        if i in guided and i + 1 not in guided:
+            add(M.MAV_CMD_NAV_GUIDED_ENABLE, p=(0, 0, 0, 0))
     if doc.get("land", True):
         add(M.MAV_CMD_NAV_LAND, float(goals[-1]["at"][0]), float(goals[-1]["at"][1]))
     return items

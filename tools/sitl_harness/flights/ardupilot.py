@@ -162,12 +162,15 @@ class ArduPilotFlight(Flight):
                "--out", str(self.out)]
         ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo)
         cmds.update(bridge=bridge)
+        auto = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
+        tool = [sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock), "--seed", str(spec.seed),
+                "--out", str(self.out), "--lcm-url", spec.lcm_url]
         if spec.controller == "auto":
-            cmds["mission"] = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
+            cmds["mission"] = auto
+        elif mission["autopilot_mission"].get("guided_legs"):  # AUTO flies, mppid its guided segments
+            cmds.update(controller=ctrl, segments=tool, mission=auto)
         else:
-            cmds.update(gcs=gcs, controller=ctrl,
-                        mission=[sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock),
-                                 "--seed", str(spec.seed), "--out", str(self.out), "--lcm-url", spec.lcm_url])
+            cmds.update(gcs=gcs, controller=ctrl, mission=tool)
         return sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
 
     def start(self, plan: Plan) -> None:
@@ -185,6 +188,9 @@ class ArduPilotFlight(Flight):
             sb.spawn("gcs", cmds["gcs"])
             sb.wait_ready("gcs", 120.0)
         sb.spawn("mission", cmds["mission"])
+        if "segments" in cmds:  # the ground station's upload first, then the tool reads it
+            sb.wait_ready("mission", 120.0)
+            sb.spawn("segments", cmds["segments"])
         # The SITL boots once serial 0 (the bridge, or the mission tool's GUIDED link) connects.
         sb.wait_ready("recorder", 60.0)
 
