@@ -171,6 +171,9 @@ def _timing(out: Path) -> dict:
         return {}
     msgs = logs.read_lcm_log(log, {"MPPI_COMMAND", "MPPI_STATUS"})
     commands = [m for _, m in msgs.get("MPPI_COMMAND", [])]
-    t = timing.flight_timing([m for _, m in msgs.get("MPPI_STATUS", [])], commands)
+    status = [m for _, m in msgs.get("MPPI_STATUS", [])]
+    t = timing.flight_timing(status, commands)
     t.pop("compute_samples_ms", None)
+    if status:
+        t["deadline_misses"] = int(max(m.misses for m in status))
     return t

@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from statistics import mean
 
+from . import survey
 from .results import load_campaign
 
 
@@ -31,6 +32,12 @@ def _load(rs) -> str:
 def table(folders: list[Path], labels: list[str]) -> str:
     camps = [(label, load_campaign(f).runs) for f, label in zip(folders, labels)]
     missions = list(dict.fromkeys(r["scenario"] for _, runs in camps for r in runs))  # first-seen order, once each
+    surveys = [m for m in missions if any("waypoints_reached" in r for _, runs in camps for r in runs
+                                          if r["scenario"] == m)]
+    missions = [m for m in missions if m not in surveys]
+    survey_lines = survey.TABLE_HEAD + [row for m in surveys for row in survey.table_rows(m, camps)] if surveys else []
+    if not missions:
+        return "\n".join(survey_lines) + "\n"
     with_load = any(r.get("load_avg") for _, runs in camps for r in runs)
     lines = ["| mission | controller | flights | success | RMS error [m] | largest error [m] | RMS, estimate [m] "
              "| largest tilt [deg] | failures |" + (" load |" if with_load else ""),
@@ -49,4 +56,4 @@ def table(folders: list[Path], labels: list[str]) -> str:
                          f"{_m([leg['rmse_estimate'] for leg in legs])} | "
                          f"{_m([r.get('max_tilt_deg') for r in rs], '{:.0f}', max)} | {fails} |"
                          + (f" {_load(rs)} |" if with_load else ""))
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + ([""] + survey_lines if survey_lines else [])) + "\n"

@@ -11,6 +11,7 @@ truth, the same for every controller:
 from __future__ import annotations
 
 import json
+import statistics
 from pathlib import Path
 
 import numpy as np
@@ -46,3 +47,31 @@ def figures(world: dict, t_s: np.ndarray, X: np.ndarray, V: np.ndarray) -> dict:
     if inside.any():
         res["forest_mean_speed"] = float(np.mean(np.linalg.norm(V[inside], axis=1)))
     return res
+
+
+def _median(vals, fmt="{:.1f}"):
+    vals = [v for v in vals if isinstance(v, (int, float))]
+    return fmt.format(statistics.median(vals)) if vals else "-"
+
+
+def table_rows(mission: str, camps) -> list[str]:
+    """One markdown row per controller for a survey mission: success, the time to the last
+    waypoint and the mean speed among the trees (medians over the successful flights), the
+    closest trunk (the least over all flights), deadline misses, the failures' reasons."""
+    rows = []
+    for label, runs in camps:
+        rs = [r for r in runs if r["scenario"] == mission]
+        if not rs:
+            continue
+        ok = [r for r in rs if r.get("success")]
+        closest = [r["min_clearance"] for r in rs if isinstance(r.get("min_clearance"), (int, float))]
+        misses = [r.get("deadline_misses") for r in rs if isinstance(r.get("deadline_misses"), int)]
+        fails = "; ".join(sorted({str(r.get("reason")) for r in rs if not r.get("success")})) or "-"
+        rows.append(f"| {mission} | {label} | {len(ok)}/{len(rs)} | {_median([r.get('time_to_last_item_s') for r in ok])} | "
+                    f"{_median([r.get('forest_mean_speed') for r in ok], '{:.2f}')} | "
+                    f"{f'{min(closest):.2f}' if closest else '-'} | {sum(misses) if misses else '-'} | {fails} |")
+    return rows
+
+
+TABLE_HEAD = ["| mission | controller | success | time to the last waypoint [s] | mean speed among the trees [m/s] "
+              "| closest trunk [m] | deadline misses | failures |", "|---|---|---:|---:|---:|---:|---:|---|"]
