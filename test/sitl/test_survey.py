@@ -102,3 +102,18 @@ def test_a_guided_segment_is_bracketed_for_mppid_and_auto_flies_the_rest(mppid_b
     plan = flight.plan().commands
     assert "--fly-auto" in plan["mission"] and "from-autopilot" in plan["segments"]   # AUTO, mppid inside it
     assert str(BENDYRULER) not in " ".join(plan["sim"])
+
+
+def test_loiter_pushed_at_a_trunk_runs_the_map_to_arducopter_with_mppid_not_flying(mppid_binary, tmp_path):
+    spec = FlightSpec(scenario="loiter_toward_trunk", seed=51, out=tmp_path / "o", realtime=True,
+                      autopilot="ardupilot", controller="loiter", ardupilot_bin=str(fake_ardupilot(tmp_path)))
+    flight = ArduPilotFlight.create(spec)
+    flight.out.mkdir(parents=True)
+    cmds = flight.plan().commands
+    assert "controller" not in cmds and {"bridge", "sensors", "mapper"} <= set(cmds)
+    assert "--loiter-push" in cmds["mission"]
+    assert "loiter_avoid.parm" in " ".join(cmds["sim"]) and str(BENDYRULER) not in " ".join(cmds["sim"])
+    world = ap_gcs.write_world(yaml.safe_load((paths.MISSIONS / "loiter_toward_trunk.yaml").read_text()), 51,
+                               flight.out)
+    heading = np.degrees(np.arctan2(world[0][0], world[0][1])) % 360    # the trunk ahead of the home heading
+    assert len(world) == 1 and heading == pytest.approx(float(HOME.split(",")[3]), abs=1.0)

@@ -18,7 +18,9 @@
    segments, which mppid flies inside AUTO): AUTO, arm, MISSION_START,
    then MISSION_ITEM_REACHED followed to the last waypoint and the landing; mission.jsonl and
    mission_summary.json as the mission tool writes them (the score reads both).
-Without --fly-auto it publishes until it is stopped: `mppid-mission from-autopilot` flies.
+   With --loiter-push S (`--controller loiter`, a mission with no `autopilot_mission`): GUIDED
+   take-off, Loiter, the pitch stick pushed forward for S s towards what is ahead, LAND.
+Without either it publishes until it is stopped: `mppid-mission from-autopilot` flies.
 """
 from __future__ import annotations
 
@@ -37,7 +39,8 @@ from pymavlink import mavextra, mavutil, mavwp  # noqa: E402
 M = mavutil.mavlink
 REL = M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 WORLD_HZ = 2.0
-AUTO_MODE = 3              # ArduCopter's AUTO custom mode
+AUTO_MODE, GUIDED_MODE, LOITER_MODE, LAND_MODE = 3, 4, 5, 9   # ArduCopter's custom modes
+PUSH_PWM = 1200            # the pitch stick pushed forward (1500 centred, 1000 full forward)
 GUIDED_TIMEOUT_S = 60.0    # DO_GUIDED_LIMITS before each guided segment: AUTO goes on after it
 
 
@@ -120,11 +123,8 @@ def fly_auto(conn, last_wp: int, log, say, timeout: float) -> dict:
     """ArduCopter flies the uploaded mission in AUTO; the summary (outcome 'done' when the last
     waypoint was reached and the vehicle landed and disarmed)."""
     reached, t0 = [], time.monotonic()
-    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, AUTO_MODE)
-    while not _command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1):
-        if time.monotonic() - t0 > 90:
-            return {"outcome": "not armed in 90 s", "reached": reached}
-        time.sleep(1.0)
+    if not _arm(conn, AUTO_MODE):
+        return {"outcome": "not armed in 90 s", "reached": reached}
     say("armed in AUTO")
     _command(conn, M.MAV_CMD_MISSION_START, 0, 0)
     while time.monotonic() - t0 < timeout:
@@ -143,7 +143,47 @@ def fly_auto(conn, last_wp: int, log, say, timeout: float) -> dict:
     return {"outcome": f"not finished in {timeout:g} s (items reached: {reached})", "reached": reached}
 
 
-def main(argv=None) -> int:
+def _arm(conn, mode, timeout=90.0) -> bool:
+    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+    t0 = time.monotonic()
+    while not _command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1):
+        if time.monotonic() - t0 > timeout:
+            return False
+        time.sleep(1.0)
+    return True
+
+
+def fly_loiter_push(conn, log, say, seconds: float, altitude: float) -> dict:
+    """With mppid not flying: the pilot's stick pushes ArduCopter in Loiter towards what is ahead
+    of its nose (RC_CHANNELS_OVERRIDE, pitch forward, throttle centred) for `seconds`; its simple
+    avoidance, fed by the mapper through the bridge's OBSTACLE_DISTANCE, should stop it short."""
+    if not _arm(conn, GUIDED_MODE):
+        return {"outcome": "not armed in 90 s"}
+    _command(conn, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude)
+    up = conn.recv_match(type="GLOBAL_POSITION_INT", blocking=True, timeout=30,
+                         condition=f"GLOBAL_POSITION_INT.relative_alt>{900 * altitude}")
+    if up is None:
+        return {"outcome": f"the take-off to {altitude:g} m did not end in 30 s"}
+
+    def sticks(pitch):
+        conn.mav.rc_channels_override_send(1, 1, 1500, pitch, 1500, 1500, 0, 0, 0, 0)
+    sticks(1500)
+    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, LOITER_MODE)
+    say(f"Loiter, the pitch stick at {PUSH_PWM} for {seconds:g} s")
+    log({"event": "push", "wall_us": int(time.time() * 1e6), "pwm": PUSH_PWM})
+    t_end = time.monotonic() + seconds
+    while time.monotonic() < t_end:
+        sticks(PUSH_PWM)
+        time.sleep(0.1)
+    sticks(1500)
+    log({"event": "released", "wall_us": int(time.time() * 1e6)})
+    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, LAND_MODE)
+    down = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=60,
+                           condition="HEARTBEAT.type==2 and not HEARTBEAT.base_mode & 128")
+    return {"outcome": "done" if down is not None else "not landed in 60 s"}
+
+
+def _args(argv):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--url", required=True)
     ap.add_argument("--mission", type=Path, required=True)
@@ -152,19 +192,50 @@ def main(argv=None) -> int:
     ap.add_argument("--lcm-url", required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--fly-auto", action="store_true", help="fly it with the autopilot's AUTO")
+    ap.add_argument("--loiter-push", type=float, default=0.0, metavar="SECONDS",
+                    help="instead: take off, Loiter, the pitch stick pushed forward this long, land")
     ap.add_argument("--timeout", type=float, default=180.0)
-    a = ap.parse_args(argv)
-    import yaml
+    return ap.parse_args(argv)
+
+
+def write_world(doc: dict, seed: int, out: Path) -> list:
+    """The world's trees (the mission's, for the seed); world.json for the score: the trees, and
+    for a survey its waypoints and the forest's extent."""
     from mppi_mission import plan
+    trees = plan.from_dict(doc).trees((0.0, 0.0), seed)
+    world = {"trees": trees, "vehicle_radius": float(doc.get("vehicle_radius", 0.2))}
+    forest = (doc.get("obstacles") or {}).get("forest")
+    if forest and "autopilot_mission" in doc:
+        world.update(waypoints=[leg["goal"]["at"] for leg in doc["legs"]],
+                     acceptance=[float(leg["goal"].get("radius", 1.0)) for leg in doc["legs"]],
+                     forest_box=[forest["x_range"], forest["y_range"]])
+    (out / "world.json").write_text(json.dumps(world))
+    return trees
+
+
+def _fly(a, doc, conn, items, trees, say) -> dict:
+    """The ground station flies (AUTO, or the Loiter push), recording as the mission tool does."""
+    with open(a.out / "mission.jsonl", "w", buffering=1) as f_log:
+        def log(rec):
+            f_log.write(json.dumps(rec) + "\n")
+        log({"event": "mission", "name": doc["name"], "seed": a.seed, "origin": [0.0, 0.0, 0.0], "trees": trees,
+             "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "clock": "boot", "settle": 3.0})
+        if a.loiter_push > 0:
+            flown = fly_loiter_push(conn, log, say, a.loiter_push, float(doc.get("takeoff", 2.0)))
+        else:
+            flown = fly_auto(conn, last_waypoint(items), log, say, a.timeout)
+        summary = {"mission": doc["name"], "seed": a.seed, "controller": "loiter" if a.loiter_push > 0 else "auto", **flown}
+        log({"event": "end", **summary})
+    (a.out / "mission_summary.json").write_text(json.dumps(summary, indent=1))
+    say(f"outcome: {summary['outcome']}")
+    return summary
+
+
+def main(argv=None) -> int:
+    a = _args(argv)
+    import yaml
     doc = yaml.safe_load(a.mission.read_text())
-    home = [float(v) for v in a.home.split(",")]
-    trees = plan.from_dict(doc).trees((0.0, 0.0), a.seed)
-    f = doc["obstacles"]["forest"]
-    waypoints = [leg["goal"]["at"] for leg in doc["legs"]]
-    (a.out / "world.json").write_text(json.dumps({
-        "trees": trees, "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "waypoints": waypoints,
-        "acceptance": [float(leg["goal"].get("radius", 1.0)) for leg in doc["legs"]],
-        "forest_box": [f["x_range"], f["y_range"]]}))
+    trees = write_world(doc, a.seed, a.out)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
 
@@ -173,29 +244,20 @@ def main(argv=None) -> int:
 
     conn = mavutil.mavlink_connection(a.url, source_system=255, source_component=190, autoreconnect=True)
     conn.wait_heartbeat(timeout=120)
-    items = mission_items(doc, home)
-    result = upload(conn, items)
-    if result != M.MAV_MISSION_ACCEPTED:
-        say(f"the autopilot refused the mission: MISSION_ACK type {result}")
-        return 1
-    say(f"mission uploaded: {len(items)} items ({len(waypoints)} waypoints), {len(trees)} trees in the world")
-    world = threading.Thread(target=publish_world, args=(a.lcm_url, trees, stop), daemon=True)
-    world.start()
+    items = mission_items(doc, [float(v) for v in a.home.split(",")]) if "autopilot_mission" in doc else []
+    if items:
+        result = upload(conn, items)
+        if result != M.MAV_MISSION_ACCEPTED:
+            say(f"the autopilot refused the mission: MISSION_ACK type {result}")
+            return 1
+        say(f"mission uploaded: {len(items)} items, {len(trees)} trees in the world")
+    threading.Thread(target=publish_world, args=(a.lcm_url, trees, stop), daemon=True).start()
     print(json.dumps({"event": "ready"}), flush=True)
-    if not a.fly_auto:
+    if not (a.fly_auto or a.loiter_push > 0):
         while not stop.wait(0.5):
             pass
         return 0
-    with open(a.out / "mission.jsonl", "w", buffering=1) as f_log:
-        def log(rec):
-            f_log.write(json.dumps(rec) + "\n")
-        log({"event": "mission", "name": doc["name"], "seed": a.seed, "origin": [0.0, 0.0, 0.0], "trees": trees,
-             "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "clock": "boot", "settle": 3.0})
-        summary = {"mission": doc["name"], "seed": a.seed, "controller": "auto",
-                   **fly_auto(conn, last_waypoint(items), log, say, a.timeout)}
-        log({"event": "end", **summary})
-    (a.out / "mission_summary.json").write_text(json.dumps(summary, indent=1))
-    say(f"outcome: {summary['outcome']}")
+    summary = _fly(a, doc, conn, items, trees, say)
     stop.set()
     return 0 if summary["outcome"] == "done" else 1
 

@@ -27,7 +27,7 @@ GROUND_Z = 0.05
 
 
 # The controllers that are the autopilot's own (no mppid, no LCM log to time).
-AUTOPILOT_CONTROLLERS = ("guided", "px4", "auto")
+AUTOPILOT_CONTROLLERS = ("guided", "px4", "auto", "loiter")
 
 
 def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> dict:

@@ -12,8 +12,9 @@ from pathlib import Path
 from . import paths
 
 # --controller: mppid, its DDP baseline, the hover stand-in, and the autopilots' own (guided:
-# ArduCopter's GUIDED; px4: PX4's offboard position control; auto: ArduCopter's AUTO with BendyRuler).
-CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto"]
+# ArduCopter's GUIDED; px4: PX4's offboard position control; auto: ArduCopter's AUTO with
+# BendyRuler; loiter: its Loiter, pushed towards a trunk).
+CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto", "loiter"]
 
 
 class UsageError(Exception):
@@ -68,7 +69,8 @@ def _add_run_parser(sub):
                    help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the "
                         "simulator without the daemon); guided: ArduCopter's own position controller (--autopilot "
                         "ardupilot); px4: PX4's own offboard position control (--autopilot px4); auto: a mission "
-                        "uploaded to ArduCopter flown in AUTO with BendyRuler (config/missions/survey_*.yaml)")
+                        "uploaded to ArduCopter flown in AUTO with BendyRuler (config/missions/survey_*.yaml); loiter: "
+                        "ArduCopter's Loiter pushed towards a sensed trunk, mppid not flying (loiter_toward_trunk)")
     _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
@@ -197,7 +199,7 @@ def _autopilot_args(p):
 # ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
-    own = {"ardupilot": ("guided", "auto"), "px4": ("px4",)}  # each autopilot's own controllers
+    own = {"ardupilot": ("guided", "auto", "loiter"), "px4": ("px4",)}  # each autopilot's own controllers
     for autopilot, ctrls in own.items():
         if a.controller in ctrls and a.autopilot != autopilot:
             return f"--controller {a.controller} is {autopilot}'s own controller: it needs --autopilot {autopilot}"

@@ -45,6 +45,8 @@ BASELINE = paths.ROOT / "config" / "ardupilot" / "guided_baseline.parm"
 # The autopilot's own avoidance for `--controller auto` (a survey flown in AUTO with BendyRuler,
 # the mapper's map through the bridge's OBSTACLE_DISTANCE): argued in the file.
 BENDYRULER = paths.ROOT / "config" / "ardupilot" / "bendyruler.parm"
+LOITER_AVOID = paths.ROOT / "config" / "ardupilot" / "loiter_avoid.parm"  # --controller loiter
+LOITER_PUSH_S = 12.0  # the pitch stick held forward in Loiter (--controller loiter)
 GCS_URL = "tcp:127.0.0.1:5763"  # the SITL's third serial port: the ground station's
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
 IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
@@ -130,10 +132,11 @@ class ArduPilotFlight(Flight):
         fifo = fifo_allowed()
         ap_dir = self.out / "ardupilot"
         ap_dir.mkdir(exist_ok=True)
-        uploaded = "autopilot_mission" in mission
+        uploaded = "autopilot_mission" in mission or spec.controller == "loiter"
+        extra = {"auto": (BENDYRULER,), "loiter": (LOITER_AVOID,)}.get(spec.controller, ())
         cmds = {
             "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
-            "sim": sitl_command(self.binary, ap_dir, fifo, (BENDYRULER,) if spec.controller == "auto" else ()),
+            "sim": sitl_command(self.binary, ap_dir, fifo, extra),
             "recorder": [sys.executable, "-m", "sitl_harness.ap_truth", "--url", "tcp:127.0.0.1:5762",
                          f"--home={HOME}", "--out", str(self.out)],
         }
@@ -155,7 +158,7 @@ class ArduPilotFlight(Flight):
         --controller auto, by ArduCopter's AUTO with BendyRuler; the bridge and the mapper run
         either way (the map goes to the autopilot as OBSTACLE_DISTANCE)."""
         spec = self.spec
-        if spec.controller not in ("mppid", "auto"):
+        if spec.controller not in ("mppid", "auto", "loiter"):
             raise FlightError(f"{mission_path.name}: an uploaded mission is flown by mppid or --controller auto")
         gcs = [sys.executable, "-m", "sitl_harness.ap_gcs", "--url", GCS_URL, "--mission", str(mission_path),
                "--seed", str(spec.seed), f"--home={HOME}", "--lcm-url", spec.lcm_url,
@@ -165,9 +168,11 @@ class ArduPilotFlight(Flight):
         auto = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
         tool = [sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock), "--seed", str(spec.seed),
                 "--out", str(self.out), "--lcm-url", spec.lcm_url]
-        if spec.controller == "auto":
+        if spec.controller == "loiter":  # the map to ArduCopter's simple avoidance, mppid not flying
+            cmds["mission"] = gcs + ["--loiter-push", f"{LOITER_PUSH_S:g}"]
+        elif spec.controller == "auto":
             cmds["mission"] = auto
-        elif mission["autopilot_mission"].get("guided_legs"):  # AUTO flies, mppid its guided segments
+        elif (mission.get("autopilot_mission") or {}).get("guided_legs"):  # AUTO flies, mppid its guided segments
             cmds.update(controller=ctrl, segments=tool, mission=auto)
         else:
             cmds.update(gcs=gcs, controller=ctrl, mission=tool)
