@@ -121,8 +121,9 @@ def _add_campaign_parser(sub):
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=CONTROLLERS, default="mppid",
                    help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, guided "
-                        "(ArduCopter's position controller, --autopilot ardupilot) or px4 (PX4's offboard position "
-                        "control, --autopilot px4)")
+                        "(ArduCopter's position controller, --autopilot ardupilot), auto (ArduCopter's AUTO with "
+                        "BendyRuler, an uploaded survey), loiter (ArduCopter's Loiter pushed at a trunk) or px4 "
+                        "(PX4's offboard position control, --autopilot px4)")
     _autopilot_args(c)
     c.add_argument("--realtime", action="store_true")
     clat = c.add_mutually_exclusive_group()
