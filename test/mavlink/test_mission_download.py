@@ -95,3 +95,26 @@ def test_answers_to_a_ground_station_are_not_taken_for_ours():
     cur.pack(ap.ap_mav)
     m.on_message("MISSION_CURRENT", cur)
     assert "5 items now, 2 were read" in m.execute(["status"])["mission_status"]["changed"]
+
+
+def test_arducopters_total_leaves_out_home_and_a_late_item_is_ignored():
+    """ArduPilot's MISSION_CURRENT counts the items without its home (item 0): 1 after a
+    download of 2 is the same mission; 2 is a changed one. A MISSION_ITEM_INT arriving after the
+    download (a repeat) changes nothing."""
+    def answer(msg):
+        if msg.get_type() == "MISSION_REQUEST_LIST":
+            return [M.MAVLink_mission_count_message(1, 191, 2, 0)]
+        return [item(msg.seq)] if msg.get_type() == "MISSION_REQUEST_INT" else []
+    ap = ScriptedAutopilot(answer)
+    ap.m = m = missions.Missions({**SETTINGS, "mavlink": {**SETTINGS["mavlink"], "dialect": "ardupilot"}}, ap, ap,
+                                 Notices(ap))
+    m.execute(["download"])
+    for total, changed in ((1, ""), (2, "3 items now, 2 were read")):
+        cur = M.MAVLink_mission_current_message(0, total, 0, 0)
+        cur.pack(ap.ap_mav)
+        late = item(1)
+        late.pack(ap.ap_mav)
+        m.on_message("MISSION_ITEM_INT", late)
+        m.on_message("MISSION_CURRENT", cur)
+        assert changed in m.execute(["status"])["mission_status"]["changed"]
+        assert bool(changed) == bool(m.execute(["status"])["mission_status"]["changed"])

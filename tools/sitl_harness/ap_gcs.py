@@ -88,8 +88,8 @@ def upload(conn, items, timeout=30.0) -> int:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         m = conn.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True, timeout=1)
-        if m is None or getattr(m, "target_system", 255) != 255:
-            continue
+        if m is None or (getattr(m, "target_system", 255), getattr(m, "target_component", 190)) != (255, 190):
+            continue  # another link's exchange
         if m.get_type() == "MISSION_ACK":
             return m.type
         conn.mav.send(wp.wp(m.seq))
@@ -246,7 +246,10 @@ def main(argv=None) -> int:
     conn.wait_heartbeat(timeout=120)
     items = mission_items(doc, [float(v) for v in a.home.split(",")]) if "autopilot_mission" in doc else []
     if items:
-        result = upload(conn, items)
+        result, t0 = upload(conn, items), time.monotonic()
+        while result == M.MAV_MISSION_NO_SPACE and time.monotonic() - t0 < 60:  # mission storage not up yet
+            time.sleep(1.0)
+            result = upload(conn, items)
         if result != M.MAV_MISSION_ACCEPTED:
             say(f"the autopilot refused the mission: MISSION_ACK type {result}")
             return 1

@@ -83,7 +83,7 @@ class Missions:
                 self._on_current(msg)
             elif t == "HOME_POSITION":
                 self.home = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
-            else:
+            elif t == "GPS_GLOBAL_ORIGIN":
                 self.origin = (msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
             self.cond.notify_all()
         return True
@@ -99,8 +99,10 @@ class Missions:
     def _on_current(self, msg):
         self.current = msg.seq
         expected = self.count if self.reading else self.total
-        if expected is not None and msg.total != expected and not self.changed_why:
-            self.changed_why = (f"the autopilot's mission has {msg.total} items now, {expected} "
+        # ArduPilot's `total` leaves out its home, item 0 (GCS_Common.cpp); PX4 stores no home.
+        total = msg.total + (1 if self.s["mavlink"]["dialect"] == "ardupilot" and msg.total else 0)
+        if expected is not None and total != expected and not self.changed_why:
+            self.changed_why = (f"the autopilot's mission has {total} items now, {expected} "
                                 + ("while it was read" if self.reading else "were read"))
         mission_id = getattr(msg, "mission_id", None)   # MAVLink's newer MISSION_CURRENT (with pymavlink's newer)
         if mission_id is not None:

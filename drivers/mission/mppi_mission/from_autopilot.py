@@ -94,6 +94,15 @@ class AutopilotRunner(Runner):
                 i = 0
         return self._finished()
 
+    def reached_early(self, step, i, p) -> bool:
+        """A NAV_WAYPOINT's line ends where the autopilot counts the waypoint reached: within its
+        acceptance radius of the end (its goal leg, next), wherever the reference is by then; a
+        goal-seeking task (the forest's) flies ahead of the line's reference."""
+        legs, items = self.m.legs, self.conv.leg_items
+        if step.kind != "line" or i + 1 >= len(legs) or "goal" not in legs[i + 1] or items[i + 1] != items[i]:
+            return False
+        return float(np.linalg.norm(p - np.asarray(step.end, float))) <= float(legs[i + 1]["goal"]["radius"])
+
     def _show_item(self, seq, text):
         """The item flown now: the autopilot's current item follows (MISSION_SET_CURRENT)."""
         self.bridge.ask(f"mission current {seq} {text}")

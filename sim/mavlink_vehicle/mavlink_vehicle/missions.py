@@ -128,7 +128,8 @@ class MissionStore:
 
     def send_current(self):
         state = mavlink.MISSION_STATE_NO_MISSION if not self.items else mavlink.MISSION_STATE_NOT_STARTED
-        self.conn.mav.mission_current_send(self.current, len(self.items), state, 0)
+        # `total` leaves out a home stored as item 0, as ArduPilot's does (GCS_Common.cpp).
+        self.conn.mav.mission_current_send(self.current, max(len(self.items) - self.first, 0), state, 0)
 
     def _ack(self, m, result):
         self.conn.mav.mission_ack_send(m.get_srcSystem(), m.get_srcComponent(), result, MISSION)
