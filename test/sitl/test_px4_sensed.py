@@ -55,6 +55,7 @@ def test_a_sensed_mission_through_px4_flies_mppid_on_the_mappers_map(mppid_binar
     spec, cmds = _commands(tmp_path, "rate_forest_sensed")
     _wiring(spec, cmds)
     assert {"sim", "controller", "bridge", "mission", "sensors", "mapper"} <= set(cmds) and "gcs" not in cmds
+    assert "--gcs-port" not in cmds["recorder"]             # PX4's GCS link's messages: the referee's
     ctrl = cmds["controller"]
     assert _arg(ctrl, "--lcm-url").endswith("&recv_buf_size=4194304")      # 1 MB maps
     assert "config/vehicles/px4_sih_identified.yaml" in _arg(ctrl, "--vehicle")
@@ -74,6 +75,7 @@ def test_the_uploaded_survey_through_px4(mppid_binary, tmp_path):
     gcs = cmds["gcs"]
     assert "sitl_harness.ap_gcs" in gcs and _arg(gcs, "--dialect") == "px4" and _arg(gcs, "--url") == GCS_URL
     assert not any(c.startswith("--home") for c in gcs)     # PX4's positions: about its estimator's origin
+    assert _arg(cmds["recorder"], "--gcs-port") == "0"      # the port is the ground station's
     assert "--fly-auto" not in gcs
     mission = cmds["mission"]
     assert "from-autopilot" in mission and f"control.socket={_arg(mission, '--bridge')}" in cmds["bridge"]
@@ -157,6 +159,23 @@ def test_the_px4_referee_asks_px4_for_its_streams_on_the_display_link(tmp_path):
     assert asked == {(M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 1e6 / 50),
                      (M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_HIL_STATE_QUATERNION, 1e6 / 50),
                      (M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0)}
+
+
+def test_the_px4_referee_takes_the_messages_from_the_gcs_link_where_px4_forwards_the_bridges(tmp_path):
+    rec = px4_truth.Recorder(tmp_path, _free_udp_port(), gcs_port=_free_udp_port())
+    gcs_port = rec.gcs.port.getsockname()[1]
+    px4 = mavutil.mavlink_connection(f"udpout:127.0.0.1:{gcs_port}", source_system=1, source_component=1)
+    rec.handle(M.MAVLink_statustext_message(6, b"on the display link"))   # the same text twice: once kept
+    deadline = time.monotonic() + 10.0
+    t = threading.Thread(target=rec.run_texts, args=(lambda: time.monotonic() > deadline
+                                                     or "disengaged" in (tmp_path / "truth_raw.jsonl").read_text(),))
+    t.start()
+    while t.is_alive():
+        px4.mav.statustext_send(4, b"mppid: disengaged")
+        t.join(0.2)
+    rec.f.close()
+    texts = [ln for ln in (tmp_path / "truth_raw.jsonl").read_text().splitlines() if "statustext" in ln]
+    assert texts and all("mppid: disengaged" in ln for ln in texts)
 
 
 def test_the_px4_referee_publishes_the_truth_in_the_states_frame_and_clock(tmp_path):

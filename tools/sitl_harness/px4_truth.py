@@ -9,7 +9,10 @@ attitude, body rates; `time_usec` on PX4's clock; 25 Hz as PX4 starts it, `--tru
 another rate), HEARTBEAT and STATUSTEXT as on every link; the referee asks it for
 LOCAL_POSITION_NED (PX4's estimate, 50 Hz) and GPS_GLOBAL_ORIGIN (the estimator's local frame)
 by MAV_CMD_SET_MESSAGE_INTERVAL / MAV_CMD_REQUEST_MESSAGE, again every 2 s until they come.
-PX4's GCS link (14550) is left to a ground station (ap_gcs.py uploads a survey there). Lines:
+The messages (STATUSTEXT) come from PX4's GCS link (PX4 sends it to 14550), listened to and never
+written to: PX4 forwards the bridge's there too, not to the display link. With --gcs-port 0 a
+ground station has that port (ap_gcs.py uploads a survey there) and the display link's (PX4's
+own) are recorded. Lines:
     {"truth": 1, "boot_us", "wall_us", "lat", "lon" (1e-7 deg), "alt" (mm AMSL), "v" (ENU m/s),
      "q" (w, x, y, z, NED/FRD)}
     {"est": [e, n, u], "boot_us", "wall_us"}          (LOCAL_POSITION_NED, ENU)
@@ -21,7 +24,8 @@ SIH's position projected as PX4 projects GPS (px4_score.project) about that orig
 mppid's states and the mission's trees; its time PX4's boot clock mapped onto this host's wall
 clock by mppi_mavlink.clock_sync, as the bridge maps the states' (SIH's clock runs ~1 % slow).
 
-    python -m sitl_harness.px4_truth --out DIR [--truth-port 19410] [--truth-hz HZ] [--lcm-url URL]
+    python -m sitl_harness.px4_truth --out DIR [--truth-port 19410] [--gcs-port 14550|0] [--truth-hz HZ]
+        [--lcm-url URL]
 """
 from __future__ import annotations
 
@@ -44,6 +48,7 @@ from .truth_bus import TruthPublisher  # noqa: E402
 
 mavlink = mavutil.mavlink
 TRUTH_PORT = 19410   # PX4's SIH display link sends here (px4-rc.mavlink)
+GCS_PORT = 14550     # PX4's GCS link sends here
 ESTIMATE_HZ = 50.0   # LOCAL_POSITION_NED asked for (the rate PX4's GCS link streams it at)
 ASK_EVERY_S = 2.0
 # PX4's modes by (main, sub) of the custom mode (px4_custom_mode.h); LAND as ArduPilot's, so
@@ -60,10 +65,12 @@ def px4_mode(custom_mode: int) -> str:
 
 class Recorder:
     def __init__(self, out: Path, truth_port: int, truth_hz: float | None = None, lcm_url: str | None = None,
-                 link=None):
+                 gcs_port: int = 0):
         self.f = open(out / "truth_raw.jsonl", "w", buffering=1)
-        self.link = link if link is not None else mavutil.mavlink_connection(
-            f"udpin:127.0.0.1:{truth_port}", source_system=253, source_component=191)
+        self.lock = threading.Lock()
+        self.link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{truth_port}", source_system=253,
+                                               source_component=191)
+        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{gcs_port}") if gcs_port else None
         self.truth_hz = truth_hz
         self.truth_out = TruthPublisher(lcm_url) if lcm_url else None
         self.sync = ClockSync()
@@ -73,7 +80,8 @@ class Recorder:
 
     def write(self, doc: dict, wall_us: int | None = None):
         doc["wall_us"] = time.time_ns() // 1000 if wall_us is None else wall_us
-        self.f.write(json.dumps(doc) + "\n")
+        with self.lock:
+            self.f.write(json.dumps(doc) + "\n")
 
     def _command(self, cmd: int, *params):
         self.link.mav.command_long_send(1, 1, cmd, 0, *(list(params) + [0] * (7 - len(params))))
@@ -118,9 +126,19 @@ class Recorder:
         elif t == "GPS_GLOBAL_ORIGIN" and self.origin is None:
             self.origin = (m.latitude, m.longitude, m.altitude)
             self.write({"event": "origin", "lat_e7": m.latitude, "lon_e7": m.longitude, "alt_mm": m.altitude}, wall_us)
-        elif t == "STATUSTEXT":
-            self.write({"event": "statustext", "text": m.text.rstrip("\x00") if isinstance(m.text, str)
-                        else str(m.text), "severity": m.severity}, wall_us)
+        elif t == "STATUSTEXT" and self.gcs is None:
+            self.text(m, wall_us)
+
+    def text(self, m, wall_us: int | None = None):
+        self.write({"event": "statustext", "text": m.text.rstrip("\x00") if isinstance(m.text, str)
+                    else str(m.text), "severity": m.severity}, wall_us)
+
+    def run_texts(self, stop):
+        """PX4's GCS link's STATUSTEXT (its own and those it forwards), listened to only."""
+        while not stop():
+            m = self.gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=0.2)
+            if m is not None:
+                self.text(m)
 
     def on_truth(self, m, wall_us: int):
         if not self.said_ready:
@@ -142,6 +160,8 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--truth-port", type=int, default=TRUTH_PORT)
+    ap.add_argument("--gcs-port", type=int, default=GCS_PORT,
+                    help="PX4's GCS link, for its messages (0: a ground station has it; the display link's)")
     ap.add_argument("--truth-hz", type=float, help="ask PX4 for SIH's truth at this rate (PX4 starts it at 25 Hz)")
     ap.add_argument("--lcm-url", help="publish the truth (vehicle_state_t on SIM_TRUTH) on this bus")
     a = ap.parse_args(argv)
@@ -150,10 +170,16 @@ def main(argv=None) -> int:
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())
-    rec = Recorder(a.out, a.truth_port, a.truth_hz, a.lcm_url)
+    rec = Recorder(a.out, a.truth_port, a.truth_hz, a.lcm_url, a.gcs_port)
+    texts = threading.Thread(target=rec.run_texts, args=(done.is_set,), daemon=True) if rec.gcs else None
+    if texts:
+        texts.start()
     try:
         rec.run(done.is_set)
     finally:
+        done.set()
+        if texts:
+            texts.join(1.0)
         rec.f.close()
     return 0
 

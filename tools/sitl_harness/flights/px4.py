@@ -131,6 +131,7 @@ class Px4Flight(Flight):
             "sim": px4_command(self.binary, work, fifo, params),
         }
         if "autopilot_mission" in mission:
+            cmds["recorder"] += ["--gcs-port", "0"]   # the ground station's port: PX4's messages from the display link
             gcs = gcs_command(spec, mission_path, self.out, GCS_URL, "px4")
             return survey_commands(spec, mission_path, mission, self.out, cmds, fifo, gcs, self._mppid(mission, fifo))
         if spec.controller == "auto":
