@@ -162,6 +162,7 @@ def test_the_px4_referee_asks_px4_for_its_streams_on_the_display_link(tmp_path):
 
 
 def test_the_px4_referee_takes_the_messages_from_the_gcs_link_where_px4_forwards_the_bridges(tmp_path):
+    """And claims the link (PX4 answers its first sender): a later sender does not take it away."""
     rec = px4_truth.Recorder(tmp_path, _free_udp_port(), gcs_port=_free_udp_port())
     gcs_port = rec.gcs.port.getsockname()[1]
     px4 = mavutil.mavlink_connection(f"udpout:127.0.0.1:{gcs_port}", source_system=1, source_component=1)
@@ -176,6 +177,8 @@ def test_the_px4_referee_takes_the_messages_from_the_gcs_link_where_px4_forwards
     rec.f.close()
     texts = [ln for ln in (tmp_path / "truth_raw.jsonl").read_text().splitlines() if "statustext" in ln]
     assert texts and all("mppid: disengaged" in ln for ln in texts)
+    claim = px4.recv_match(type="COMMAND_LONG", blocking=True, timeout=5.0)   # PX4's partner on that link now
+    assert claim is not None and claim.command == M.MAV_CMD_REQUEST_MESSAGE
 
 
 def test_the_px4_referee_publishes_the_truth_in_the_states_frame_and_clock(tmp_path):

@@ -9,10 +9,12 @@ attitude, body rates; `time_usec` on PX4's clock; 25 Hz as PX4 starts it, `--tru
 another rate), HEARTBEAT and STATUSTEXT as on every link; the referee asks it for
 LOCAL_POSITION_NED (PX4's estimate, 50 Hz) and GPS_GLOBAL_ORIGIN (the estimator's local frame)
 by MAV_CMD_SET_MESSAGE_INTERVAL / MAV_CMD_REQUEST_MESSAGE, again every 2 s until they come.
-The messages (STATUSTEXT) come from PX4's GCS link (PX4 sends it to 14550), listened to and never
-written to: PX4 forwards the bridge's there too, not to the display link. With --gcs-port 0 a
-ground station has that port (ap_gcs.py uploads a survey there) and the display link's (PX4's
-own) are recorded. Lines:
+The messages (STATUSTEXT) come from PX4's GCS link (PX4 sends it to 14550): PX4 forwards the
+bridge's there too, not to the display link. The referee sends it one request as PX4 is heard
+there, which makes it the link's partner, as a ground station is: PX4's UDP link answers the
+first sender, and another one (px4_faults.py's mode change) would otherwise take the link's
+messages away. With --gcs-port 0 a ground station has that port (ap_gcs.py uploads a survey
+there) and the display link's (PX4's own) are recorded. Lines:
     {"truth": 1, "boot_us", "wall_us", "lat", "lon" (1e-7 deg), "alt" (mm AMSL), "v" (ENU m/s),
      "q" (w, x, y, z, NED/FRD)}
     {"est": [e, n, u], "boot_us", "wall_us"}          (LOCAL_POSITION_NED, ENU)
@@ -70,7 +72,8 @@ class Recorder:
         self.lock = threading.Lock()
         self.link = mavutil.mavlink_connection(f"udpin:127.0.0.1:{truth_port}", source_system=253,
                                                source_component=191)
-        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{gcs_port}") if gcs_port else None
+        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{gcs_port}", source_system=253,
+                                              source_component=191) if gcs_port else None
         self.truth_hz = truth_hz
         self.truth_out = TruthPublisher(lcm_url) if lcm_url else None
         self.sync = ClockSync()
@@ -134,10 +137,17 @@ class Recorder:
                     else str(m.text), "severity": m.severity}, wall_us)
 
     def run_texts(self, stop):
-        """PX4's GCS link's STATUSTEXT (its own and those it forwards), listened to only."""
+        """PX4's GCS link's STATUSTEXT (its own and those it forwards); the link claimed once."""
+        claimed = False
         while not stop():
-            m = self.gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=0.2)
-            if m is not None:
+            m = self.gcs.recv_match(blocking=True, timeout=0.2)
+            if m is None:
+                continue
+            if not claimed:
+                self.gcs.mav.command_long_send(1, 1, mavlink.MAV_CMD_REQUEST_MESSAGE, 0,
+                                               mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0, 0, 0, 0, 0, 0)
+                claimed = True
+            if m.get_type() == "STATUSTEXT":
                 self.text(m)
 
     def on_truth(self, m, wall_us: int):
