@@ -3,16 +3,20 @@ autopilot: the ground station's items read back by the mission tool as the missi
 flight's processes for mppid and for ArduCopter's AUTO, and the survey's figures from a truth."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import yaml
-from pymavlink import mavutil
 
-from mppi_mission import autopilot_plan
-from sitl_helpers import fake_ardupilot
-from sitl_harness import ap_gcs, paths, survey
-from sitl_harness.flights.ardupilot import BENDYRULER, HOME, ArduPilotFlight
-from sitl_harness.flights.base import FlightError, FlightSpec
+os.environ.setdefault("MAVLINK20", "1")  # before pymavlink: MAVLink 1 would be the process's for the tests after
+from pymavlink import mavutil  # noqa: E402
+
+from mppi_mission import autopilot_plan  # noqa: E402
+from sitl_helpers import fake_ardupilot  # noqa: E402
+from sitl_harness import ap_gcs, paths, survey  # noqa: E402
+from sitl_harness.flights.ardupilot import BENDYRULER, HOME, ArduPilotFlight  # noqa: E402
+from sitl_harness.flights.base import FlightError, FlightSpec  # noqa: E402
 
 M = mavutil.mavlink
 SURVEY = paths.MISSIONS / "survey_forest_sensed.yaml"

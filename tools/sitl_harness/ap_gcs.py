@@ -1,21 +1,28 @@
 """The ground station of a flight through an autopilot's SITL whose mission names an
 `autopilot_mission` (config/missions/survey_forest_sensed.yaml): the operator's part.
 
-    python -m sitl_harness.ap_gcs --url tcp:127.0.0.1:5763 --mission FILE --seed N --home LAT,LON,ALT,HDG
-        --lcm-url URL --out DIR [--fly-auto]
+    python -m sitl_harness.ap_gcs --url URL [--dialect ardupilot|px4] --mission FILE --seed N
+        [--home LAT,LON,ALT,HDG] --lcm-url URL --out DIR [--fly-auto]
+
+ArduCopter SITL: `--url tcp:127.0.0.1:5763` (its third serial port), `--home` the SITL's.
+PX4 SITL: `--dialect px4 --url udpin:127.0.0.1:14550` (PX4's GCS link, where QGroundControl
+listens); no --home: the positions are placed about the estimator's origin (GPS_GLOBAL_ORIGIN,
+asked for until PX4 has one), the frame of the legs, the trees and the score.
 
 1. Uploads the mission's legs to the autopilot by the mission protocol, as QGroundControl does
    (MISSION_COUNT, the autopilot's MISSION_REQUEST_INT answered with MISSION_ITEM_INT, MISSION_ACK):
-   ArduPilot's home as item 0, NAV_TAKEOFF, DO_CHANGE_SPEED, a NAV_WAYPOINT per goal leg (its
-   radius the acceptance radius), NAV_LAND at the last one; positions from the legs' local ENU
-   metres about home (pymavlink's gps_offset). The legs named in `guided_legs` are a guided
-   segment for the companion computer: DO_GUIDED_LIMITS (a 60 s timeout) and NAV_GUIDED_ENABLE 1
-   before them, NAV_GUIDED_ENABLE 0 after. Then `{"event": "ready"}` on stdout.
+   NAV_TAKEOFF, DO_CHANGE_SPEED, a NAV_WAYPOINT per goal leg (its radius the acceptance radius),
+   NAV_LAND at the last one; ArduPilot's numbering puts home first as item 0, PX4's numbers the
+   items from 0 with no home item; positions from the legs' local ENU metres (pymavlink's
+   gps_offset). The legs named in `guided_legs` (ArduPilot) are a guided segment for the
+   companion computer: DO_GUIDED_LIMITS (a 60 s timeout) and NAV_GUIDED_ENABLE 1 before them,
+   NAV_GUIDED_ENABLE 0 after. Then `{"event": "ready"}` on stdout.
 2. Publishes the world: the mission's trees (its forest for the seed) as obstacles_t on
    MPPI_WORLD, which only the sensors read, twice a second; world.json records them, the
    waypoints and the forest's extent for the score (survey.py).
 3. With --fly-auto (the autopilot's own controller, `--controller auto`, and a mission with guided
-   segments, which mppid flies inside AUTO): AUTO, arm, MISSION_START,
+   segments, which mppid flies inside AUTO): the autopilot's mission mode (ArduCopter AUTO, PX4
+   AUTO.MISSION), arm, MISSION_START,
    then MISSION_ITEM_REACHED followed to the last waypoint and the landing; mission.jsonl and
    mission_summary.json as the mission tool writes them (the score reads both).
    With --loiter-push S (`--controller loiter`, a mission with no `autopilot_mission`): GUIDED
@@ -42,6 +49,11 @@ WORLD_HZ = 2.0
 AUTO_MODE, GUIDED_MODE, LOITER_MODE, LAND_MODE = 3, 4, 5, 9   # ArduCopter's custom modes
 PUSH_PWM = 1200            # the pitch stick pushed forward (1500 centred, 1000 full forward)
 GUIDED_TIMEOUT_S = 60.0    # DO_GUIDED_LIMITS before each guided segment: AUTO goes on after it
+DIALECTS = ("ardupilot", "px4")
+# PX4's AUTO.MISSION as SET_MODE's custom mode: main mode 4 (bits 16-23), sub mode 4 (bits 24-31),
+# px4_custom_mode.h.
+PX4_AUTO_MISSION = (4 << 16) | (4 << 24)
+ORIGIN_TIMEOUT_S = 120.0
 
 
 def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
@@ -51,18 +63,31 @@ def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL)
     return cls(1, 1, seq, frame, cmd, 0, 1, *p, int(round(lat * 1e7)), int(round(lon * 1e7)), z, *kind)
 
 
-def mission_items(doc: dict, home) -> list:
-    """The legs as a ground station writes them (ArduPilot's numbering: home is item 0)."""
+def mission_items(doc: dict, home, dialect: str = "ardupilot") -> list:
+    """The legs as a ground station writes them for the dialect: ArduPilot's home is item 0
+    (`home` lat, lon, alt AMSL), PX4's first item is 0 and has no home before it; positions
+    about `home`'s latitude and longitude."""
+    if dialect not in DIALECTS:
+        raise ValueError(f"dialect {dialect!r}: one of {', '.join(DIALECTS)}")
     goals = [leg["goal"] for leg in doc["legs"] if "goal" in leg]
     if len(goals) != len(doc["legs"]):
         raise ValueError("autopilot_mission: every leg a goal (each a NAV_WAYPOINT)")
-    items = [_item(0, M.MAV_CMD_NAV_WAYPOINT, home, z=home[2], frame=M.MAV_FRAME_GLOBAL_INT)]
-
-    def add(cmd, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0)):
-        items.append(_item(len(items), cmd, home, east, north, z, p))
-    add(M.MAV_CMD_NAV_TAKEOFF, z=float(doc["takeoff"]))
-    add(M.MAV_CMD_DO_CHANGE_SPEED, p=(1, float(doc["autopilot_mission"]["speed"]), -1, 0))
     guided = set(doc["autopilot_mission"].get("guided_legs", []))
+    if guided and dialect == "px4":
+        raise ValueError("autopilot_mission.guided_legs: ArduPilot's NAV_GUIDED_ENABLE, which PX4 has not")
+    items = []
+    if dialect == "ardupilot":
+        items.append(_item(0, M.MAV_CMD_NAV_WAYPOINT, home, z=home[2], frame=M.MAV_FRAME_GLOBAL_INT))
+
+    def add(cmd, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
+        items.append(_item(len(items), cmd, home, east, north, z, p, frame))
+    add(M.MAV_CMD_NAV_TAKEOFF, z=float(doc["takeoff"]))
+    if dialect == "px4":  # where the vehicle stands, as QGroundControl writes it (lat, lon 0 is a place)
+        items[-1].x, items[-1].y = int(round(home[0] * 1e7)), int(round(home[1] * 1e7))
+    # PX4 takes a command item in MAV_FRAME_MISSION only (in a global frame its lat, lon 0 must be
+    # INT32_MAX, "unset"): as QGroundControl writes it. ArduPilot reads either.
+    add(M.MAV_CMD_DO_CHANGE_SPEED, p=(1, float(doc["autopilot_mission"]["speed"]), -1, 0),
+        frame=M.MAV_FRAME_MISSION if dialect == "px4" else REL)
     for i, g in enumerate(goals):
         if i in guided and i - 1 not in guided:  # a segment for the companion: limits, then enable
             add(M.MAV_CMD_DO_GUIDED_LIMITS, p=(GUIDED_TIMEOUT_S, 0, 0, 0))
@@ -119,13 +144,26 @@ def _command(conn, cmd, *params, timeout=5.0) -> bool:
     return ack is not None and ack.result == M.MAV_RESULT_ACCEPTED
 
 
-def fly_auto(conn, last_wp: int, log, say, timeout: float) -> dict:
-    """ArduCopter flies the uploaded mission in AUTO; the summary (outcome 'done' when the last
-    waypoint was reached and the vehicle landed and disarmed)."""
+def origin_of(conn, timeout: float = ORIGIN_TIMEOUT_S) -> list[float]:
+    """The estimator's origin (lat, lon deg, alt m AMSL), asked for until the autopilot has one."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        conn.mav.command_long_send(1, 1, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN,
+                                   0, 0, 0, 0, 0, 0)
+        m = conn.recv_match(type="GPS_GLOBAL_ORIGIN", blocking=True, timeout=2.0)
+        if m is not None:
+            return [m.latitude * 1e-7, m.longitude * 1e-7, m.altitude * 1e-3]
+    raise TimeoutError(f"the autopilot had no estimator origin (GPS_GLOBAL_ORIGIN) in {timeout:g} s")
+
+
+def fly_auto(conn, last_wp: int, log, say, timeout: float, dialect: str = "ardupilot") -> dict:
+    """The autopilot flies the uploaded mission in its mission mode (ArduCopter AUTO, PX4
+    AUTO.MISSION); the summary (outcome 'done' when the last waypoint was reached and the
+    vehicle landed and disarmed)."""
     reached, t0 = [], time.monotonic()
-    if not _arm(conn, AUTO_MODE):
+    if not _arm(conn, AUTO_MODE if dialect == "ardupilot" else PX4_AUTO_MISSION):
         return {"outcome": "not armed in 90 s", "reached": reached}
-    say("armed in AUTO")
+    say("armed in the mission mode")
     _command(conn, M.MAV_CMD_MISSION_START, 0, 0)
     while time.monotonic() - t0 < timeout:
         m = conn.recv_match(type=["MISSION_ITEM_REACHED", "HEARTBEAT", "STATUSTEXT"], blocking=True, timeout=1)
@@ -186,16 +224,20 @@ def fly_loiter_push(conn, log, say, seconds: float, altitude: float) -> dict:
 def _args(argv):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--url", required=True)
+    ap.add_argument("--dialect", choices=DIALECTS, default="ardupilot")
     ap.add_argument("--mission", type=Path, required=True)
     ap.add_argument("--seed", type=int, required=True)
-    ap.add_argument("--home", required=True, help="lat,lon,alt,heading (the SITL's --home)")
+    ap.add_argument("--home", help="lat,lon,alt,heading (the SITL's --home; ArduPilot)")
     ap.add_argument("--lcm-url", required=True)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--fly-auto", action="store_true", help="fly it with the autopilot's AUTO")
     ap.add_argument("--loiter-push", type=float, default=0.0, metavar="SECONDS",
                     help="instead: take off, Loiter, the pitch stick pushed forward this long, land")
     ap.add_argument("--timeout", type=float, default=180.0)
-    return ap.parse_args(argv)
+    a = ap.parse_args(argv)
+    if a.dialect == "ardupilot" and not a.home:
+        ap.error("--home: ArduPilot's mission starts with its home (the SITL's --home)")
+    return a
 
 
 def write_world(doc: dict, seed: int, out: Path) -> list:
@@ -223,7 +265,7 @@ def _fly(a, doc, conn, items, trees, say) -> dict:
         if a.loiter_push > 0:
             flown = fly_loiter_push(conn, log, say, a.loiter_push, float(doc.get("takeoff", 2.0)))
         else:
-            flown = fly_auto(conn, last_waypoint(items), log, say, a.timeout)
+            flown = fly_auto(conn, last_waypoint(items), log, say, a.timeout, a.dialect)
         summary = {"mission": doc["name"], "seed": a.seed, "controller": "loiter" if a.loiter_push > 0 else "auto", **flown}
         log({"event": "end", **summary})
     (a.out / "mission_summary.json").write_text(json.dumps(summary, indent=1))
@@ -244,7 +286,10 @@ def main(argv=None) -> int:
 
     conn = mavutil.mavlink_connection(a.url, source_system=255, source_component=190, autoreconnect=True)
     conn.wait_heartbeat(timeout=120)
-    items = mission_items(doc, [float(v) for v in a.home.split(",")]) if "autopilot_mission" in doc else []
+    items = []
+    if "autopilot_mission" in doc:
+        home = [float(v) for v in a.home.split(",")] if a.home else origin_of(conn)
+        items = mission_items(doc, home, a.dialect)
     if items:
         result, t0 = upload(conn, items), time.monotonic()
         while result == M.MAV_MISSION_NO_SPACE and time.monotonic() - t0 < 60:  # mission storage not up yet

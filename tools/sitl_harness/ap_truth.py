@@ -17,12 +17,10 @@ receipt. Events: {"event": "mode"|"armed"|"disarmed"|"statustext"|
 for), else the --home given to the SITL.
 
 With --lcm-url (a sensed mission: the sensors' bus), each paired truth is also published, once
-the EKF's origin is known, as vehicle_state_t on SIM_TRUTH for mppid-sensors (sim/sensor_node.hpp),
-which ray-casts the world from it: the rate quadrotor's 13 states (position and velocity ENU in
-the frame above, the bridge's, attitude body FLU -> ENU by the bridge's own conversion
-(mppi_mavlink.frames), body rates FLU), sampled at the autopilot's time of its burst mapped onto
-this host's wall clock as the referee's score maps it (boot time + the smallest receipt delay
-seen so far): the clock of mppid's states.
+the EKF's origin is known, as vehicle_state_t on SIM_TRUTH for mppid-sensors (truth_bus.py: the
+frame above, the bridge's), sampled at the autopilot's time of its burst mapped onto this host's
+wall clock as the referee's score maps it (boot time + the smallest receipt delay seen so far):
+the clock of mppid's states.
 
     python -m sitl_harness.ap_truth --url tcp:127.0.0.1:5762 --home LAT,LON,ALT --out DIR [--lcm-url URL]
 """
@@ -40,6 +38,8 @@ from pathlib import Path
 os.environ.setdefault("MAVLINK20", "1")
 from mppi_mavlink import frames  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
+
+from .truth_bus import TruthPublisher  # noqa: E402
 
 mavlink = mavutil.mavlink
 # ArduPilot's Location: metres per 1e-7 degree of latitude (LOCATION_SCALING_FACTOR).
@@ -74,35 +74,6 @@ def tilt_deg(q) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
 
 
-class TruthPublisher:
-    """The paired truths as vehicle_state_t on SIM_TRUTH (the module's docstring)."""
-    CHANNEL = "SIM_TRUTH"
-
-    def __init__(self, lcm_url: str):
-        import lcm
-        from mppi_mavlink import lcm_types
-        self.t = lcm_types.import_mppi_lcm()
-        self.lc = lcm.LCM(lcm_url)
-        self.seq = 0
-        self.offset_us = None  # wall - boot: the smallest receipt delay seen
-
-    def clock(self, boot_us: int, wall_us: int) -> int:
-        """A boot time on this host's wall clock (each LOCAL_POSITION_NED's receipt refines it)."""
-        d = wall_us - boot_us
-        self.offset_us = d if self.offset_us is None else min(self.offset_us, d)
-        return boot_us + self.offset_us
-
-    def publish(self, m, x_enu, sample_us: int):
-        from mppi_mavlink import frames
-        st = self.t.vehicle_state_t()
-        self.seq += 1
-        st.utime, st.seq, st.sample_utime = time.time_ns() // 1000, self.seq, int(sample_us)
-        st.model, st.vehicle_count, st.nx, st.n = st.MODEL_QUADROTOR_RATE, 1, 13, 13
-        q = frames.q_ned_frd_to_enu_flu((m.q1, m.q2, m.q3, m.q4))
-        st.x = [*x_enu, m.ve, m.vn, -m.vd, *q, *frames.frd_to_flu((m.xgyro, m.ygyro, m.zgyro))]
-        self.lc.publish(self.CHANNEL, st.encode())
-
-
 class Recorder:
     truth_out: TruthPublisher | None = None
     have_origin = False
@@ -128,7 +99,8 @@ class Recorder:
         q = (m.q1, m.q2, m.q3, m.q4)
         x = to_local(m.lat_int, m.lon_int, m.alt, self.origin)
         if paired and self.truth_out is not None and self.have_origin:
-            self.truth_out.publish(m, x, self.truth_out.clock(self.boot_us, self.position_wall_us))
+            self.truth_out.publish(x, (m.ve, m.vn, -m.vd), q, (m.xgyro, m.ygyro, m.zgyro),
+                                   self.truth_out.clock(self.boot_us, self.position_wall_us))
         self.f.write(json.dumps({
             "boot_us": self.boot_us, "paired": paired, "wall_us": wall,
             "x": [round(c, 4) for c in x],

@@ -12,8 +12,9 @@ from pathlib import Path
 from . import paths
 
 # --controller: mppid, its DDP baseline, the hover stand-in, and the autopilots' own (guided:
-# ArduCopter's GUIDED; px4: PX4's offboard position control; auto: ArduCopter's AUTO with
-# BendyRuler; loiter: its Loiter, pushed towards a trunk).
+# ArduCopter's GUIDED; px4: PX4's offboard position control; auto: an uploaded mission in the
+# autopilot's own mission mode, ArduCopter's AUTO with BendyRuler or PX4's AUTO.MISSION; loiter:
+# ArduCopter's Loiter, pushed towards a trunk).
 CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto", "loiter"]
 
 
@@ -69,7 +70,8 @@ def _add_run_parser(sub):
                    help="ddp: mppid --controller ddp, the MPC-DDP baseline; standin: a hover stand-in (tests the "
                         "simulator without the daemon); guided: ArduCopter's own position controller (--autopilot "
                         "ardupilot); px4: PX4's own offboard position control (--autopilot px4); auto: a mission "
-                        "uploaded to ArduCopter flown in AUTO with BendyRuler (config/missions/survey_*.yaml); loiter: "
+                        "uploaded to the autopilot flown in its own mission mode (ArduCopter's AUTO with BendyRuler, "
+                        "PX4's AUTO.MISSION; config/missions/survey_*.yaml); loiter: "
                         "ArduCopter's Loiter pushed towards a sensed trunk, mppid not flying (loiter_toward_trunk)")
     _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
@@ -121,8 +123,8 @@ def _add_campaign_parser(sub):
     c.add_argument("--backend", choices=["cpu", "cuda", "auto"], default="cpu")
     c.add_argument("--controller", choices=CONTROLLERS, default="mppid",
                    help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, guided "
-                        "(ArduCopter's position controller, --autopilot ardupilot), auto (ArduCopter's AUTO with "
-                        "BendyRuler, an uploaded survey), loiter (ArduCopter's Loiter pushed at a trunk) or px4 "
+                        "(ArduCopter's position controller, --autopilot ardupilot), auto (an uploaded survey in the "
+                        "autopilot's mission mode: ArduCopter's AUTO with BendyRuler, PX4's AUTO.MISSION), loiter (ArduCopter's Loiter pushed at a trunk) or px4 "
                         "(PX4's offboard position control, --autopilot px4)")
     _autopilot_args(c)
     c.add_argument("--realtime", action="store_true")
@@ -200,10 +202,11 @@ def _autopilot_args(p):
 # ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
-    own = {"ardupilot": ("guided", "auto", "loiter"), "px4": ("px4",)}  # each autopilot's own controllers
-    for autopilot, ctrls in own.items():
-        if a.controller in ctrls and a.autopilot != autopilot:
-            return f"--controller {a.controller} is {autopilot}'s own controller: it needs --autopilot {autopilot}"
+    own = {"ardupilot": ("guided", "auto", "loiter"), "px4": ("px4", "auto")}  # each autopilot's own controllers
+    owners = [autopilot for autopilot, ctrls in own.items() if a.controller in ctrls]
+    if owners and a.autopilot not in owners:
+        return (f"--controller {a.controller} is {' or '.join(owners)}'s own controller: it needs --autopilot "
+                f"{' or '.join(owners)}")
     if a.autopilot in own:
         if a.controller not in ("mppid",) + own[a.autopilot]:
             return f"--autopilot {a.autopilot} flies --controller {' or '.join(('mppid',) + own[a.autopilot])}"

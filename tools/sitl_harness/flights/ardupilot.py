@@ -111,6 +111,35 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bri
     return ctrl, bridge, sock
 
 
+def gcs_command(spec: FlightSpec, mission_path: Path, out: Path, url: str, dialect: str) -> list[str]:
+    """The ground station (ap_gcs.py) on the autopilot's GCS link: the upload, the world's trees."""
+    return [sys.executable, "-m", "sitl_harness.ap_gcs", "--url", url, "--dialect", dialect, "--mission",
+            str(mission_path), "--seed", str(spec.seed), "--lcm-url", spec.lcm_url, "--out", str(out)]
+
+
+def survey_commands(spec: FlightSpec, mission_path: Path, mission: dict, out: Path, cmds: dict, fifo: bool,
+                    gcs: list[str], mppid_bridge: tuple) -> dict:
+    """A mission uploaded to the autopilot by the ground station (`gcs`, ap_gcs.py), which also
+    publishes the world's trees: flown by mppid (`mppid-mission from-autopilot` through the
+    bridge), or with --controller auto by the autopilot's own mission mode, or (`guided_legs`:
+    ArduPilot's guided segments) by AUTO with mppid flying the segments; the bridge and the
+    mapper run either way (the map goes to the autopilot as OBSTACLE_DISTANCE)."""
+    if spec.controller not in ("mppid", "auto"):
+        raise FlightError(f"{mission_path.name}: an uploaded mission is flown by mppid or --controller auto")
+    ctrl, bridge, sock = mppid_bridge
+    cmds = {**cmds, "bridge": bridge}
+    auto = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
+    tool = [sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock), "--seed", str(spec.seed),
+            "--out", str(out), "--lcm-url", spec.lcm_url]
+    if spec.controller == "auto":
+        cmds["mission"] = auto
+    elif (mission.get("autopilot_mission") or {}).get("guided_legs"):  # AUTO flies, mppid its guided segments
+        cmds.update(controller=ctrl, segments=tool, mission=auto)
+    else:
+        cmds.update(gcs=gcs, controller=ctrl, mission=tool)
+    return sensed_mod.add_sensing(spec, mission_path, mission, out, cmds, fifo)
+
+
 class ArduPilotFlight(Flight):
     def __init__(self, spec: FlightSpec, binary: Path):
         super().__init__(spec)
@@ -153,30 +182,16 @@ class ArduPilotFlight(Flight):
         return cmds
 
     def _survey_commands(self, mission_path: Path, mission: dict, cmds: dict, fifo: bool) -> dict:
-        """A mission uploaded to the autopilot by the ground station (ap_gcs.py), which also
-        publishes the world's trees: flown by mppid (`mppid-mission from-autopilot`) or, with
-        --controller auto, by ArduCopter's AUTO with BendyRuler; the bridge and the mapper run
-        either way (the map goes to the autopilot as OBSTACLE_DISTANCE)."""
+        """The survey uploaded on the SITL's third serial port (survey_commands), flown by mppid,
+        with --controller auto by ArduCopter's AUTO with BendyRuler; or, --controller loiter,
+        ArduCopter's Loiter pushed towards a trunk, mppid not flying."""
         spec = self.spec
-        if spec.controller not in ("mppid", "auto", "loiter"):
-            raise FlightError(f"{mission_path.name}: an uploaded mission is flown by mppid or --controller auto")
-        gcs = [sys.executable, "-m", "sitl_harness.ap_gcs", "--url", GCS_URL, "--mission", str(mission_path),
-               "--seed", str(spec.seed), f"--home={HOME}", "--lcm-url", spec.lcm_url,
-               "--out", str(self.out)]
-        ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo)
-        cmds.update(bridge=bridge)
-        auto = gcs + ["--fly-auto", "--timeout", str(float(mission.get("wall_timeout", 200.0)) - 30)]
-        tool = [sys.executable, "-m", "mppi_mission", "from-autopilot", "--bridge", str(sock), "--seed", str(spec.seed),
-                "--out", str(self.out), "--lcm-url", spec.lcm_url]
+        gcs = gcs_command(spec, mission_path, self.out, GCS_URL, "ardupilot") + [f"--home={HOME}"]
+        mppid_bridge = mppid_and_bridge(spec, mission, self.out, fifo)
         if spec.controller == "loiter":  # the map to ArduCopter's simple avoidance, mppid not flying
-            cmds["mission"] = gcs + ["--loiter-push", f"{LOITER_PUSH_S:g}"]
-        elif spec.controller == "auto":
-            cmds["mission"] = auto
-        elif (mission.get("autopilot_mission") or {}).get("guided_legs"):  # AUTO flies, mppid its guided segments
-            cmds.update(controller=ctrl, segments=tool, mission=auto)
-        else:
-            cmds.update(gcs=gcs, controller=ctrl, mission=tool)
-        return sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
+            cmds = {**cmds, "bridge": mppid_bridge[1], "mission": gcs + ["--loiter-push", f"{LOITER_PUSH_S:g}"]}
+            return sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
+        return survey_commands(spec, mission_path, mission, self.out, cmds, fifo, gcs, mppid_bridge)
 
     def start(self, plan: Plan) -> None:
         sb, cmds = self.sandbox, plan.commands

@@ -6,11 +6,22 @@ each:
 
     px4 (SIH, airframe sihsim_quadx)  offboard link udp 14540 <- mppid-mavlink-bridge
                                       (config/bridge/px4_sitl.yaml)
-                                      SIH display port 19410, GCS port 14550 -> px4_truth.py,
-                                      the referee (SIH's truth, PX4's estimate and mode)
+                                      SIH display link 19410 <-> px4_truth.py, the referee (SIH's
+                                      truth, PX4's estimate and mode)
     mppid (the mission's task, --realtime) <-> LCM <-> the bridge
     mppid-mission fly <mission> --bridge <socket>: arm, PX4's take-off, `offboard`, the legs, land
     lcm-logger
+
+A sensed mission (`sensing:` with publish_obstacles: false, config/missions/rate_forest_sensed.yaml)
+adds the sensors and the mapper as through ArduCopter (sensed.py): the referee asks PX4 for SIH's
+truth at TRUTH_HZ and publishes it on the sensors' bus (px4_truth.py --lcm-url).
+
+A survey uploaded to the autopilot (`autopilot_mission:`, config/missions/survey_forest_sensed.yaml):
+ap_gcs.py on PX4's GCS link (udp 14550, where QGroundControl listens) uploads it in PX4's
+numbering and publishes the world's trees; `mppid-mission from-autopilot` reads it through the
+bridge and mppid flies it in OFFBOARD (PX4 lands at its NAV_LAND: the bridge's `land`, AUTO.LAND).
+`--controller auto`: PX4 flies it itself in AUTO.MISSION (no avoidance in PX4's missions at the
+commit flown: collision prevention acts in Position mode only).
 
 `--controller px4` flies the same mission with PX4's own offboard position control
 (px4_offboard.py on the offboard link: SET_POSITION_TARGET_LOCAL_NED with the reference's
@@ -34,7 +45,8 @@ from pathlib import Path
 
 from .. import paths, px4_faults
 from ..sandbox import fifo_allowed
-from .ardupilot import IO_FIFO_PRIORITY, mission_command, mppid_and_bridge
+from . import sensed as sensed_mod
+from .ardupilot import IO_FIFO_PRIORITY, gcs_command, mission_command, mppid_and_bridge, survey_commands
 from .base import Flight, FlightError, FlightSpec, Plan, autopilot_binary, autopilot_plan, load_mission, logger_command
 
 PARAMS = paths.ROOT / "config" / "px4" / "px4_mppid.params"
@@ -48,6 +60,11 @@ OVERLAY = paths.ROOT / "config" / "px4" / "mppid_overlay.yaml"
 # ULog); `--set vehicle=FILE` replaces it for both.
 VEHICLE = paths.ROOT / "config" / "vehicles" / "px4_sih_identified.yaml"
 OFFBOARD_URL = "udpin:127.0.0.1:14540"
+GCS_URL = "udpin:127.0.0.1:14550"   # PX4's GCS link sends here (px4-rc.mavlink), a ground station listens
+# SIH's truth for a sensed flight's camera pose: PX4 starts the display link's HIL_STATE_QUATERNION
+# at 25 Hz, which would make the 30 Hz camera capture at 25; at 50 Hz (ArduCopter's SIM_STATE's
+# rate) each 30 Hz frame is cast on the 20 ms grid of the truths.
+TRUTH_HZ = 50.0
 # A failsafe flight ends this long after its last fault (what PX4 did is seen by then).
 FAULT_WATCH_S = 20.0
 SIH_ENV = {"PX4_SIM_MODEL": "sihsim_quadx", "PX4_SIMULATOR": "sihsim"}
@@ -106,17 +123,25 @@ class Px4Flight(Flight):
         work.mkdir(exist_ok=True)
         params = {**px4_params(PARAMS), **px4_params(BASELINE), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0)),
                   **dict(kv.split("=", 1) for kv in spec.autopilot_params)}
+        sensed = sensed_mod.sensed(mission)
         cmds = {
-            "logger": logger_command(spec, self.out),
-            "recorder": [sys.executable, "-m", "sitl_harness.px4_truth", "--out", str(self.out)],
+            "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
+            "recorder": [sys.executable, "-m", "sitl_harness.px4_truth", "--out", str(self.out)]
+            + (["--truth-hz", f"{TRUTH_HZ:g}"] if sensed else []),
             "sim": px4_command(self.binary, work, fifo, params),
         }
+        if "autopilot_mission" in mission:
+            cmds["recorder"] += ["--gcs-port", "0"]   # the ground station's port: PX4's messages from the display link
+            gcs = gcs_command(spec, mission_path, self.out, GCS_URL, "px4")
+            return survey_commands(spec, mission_path, mission, self.out, cmds, fifo, gcs, self._mppid(mission, fifo))
+        if spec.controller == "auto":
+            raise FlightError(f"{mission_path.name}: --controller auto flies a mission uploaded to PX4 "
+                              f"(autopilot_mission:, config/missions/survey_*.yaml)")
         if spec.controller == "px4":
             cmds["mission"] = [sys.executable, "-m", "sitl_harness.px4_offboard", str(mission_path), "--url",
                                OFFBOARD_URL, "--seed", str(spec.seed), "--out", str(self.out)]
             return cmds
-        ctrl, bridge, sock = mppid_and_bridge(spec, mission, self.out, fifo, bridge_config=BRIDGE_CONFIG,
-                                              vehicle=VEHICLE, overlay=OVERLAY)
+        ctrl, bridge, sock = self._mppid(mission, fifo)
         cmds.update(controller=ctrl, bridge=bridge,
                     mission=mission_command(spec, mission_path, self.out) + ["--bridge", str(sock)])
         cut = [px4_faults.parse_fault(f) for f in spec.faults if f.startswith("link_cut")]
@@ -124,7 +149,14 @@ class Px4Flight(Flight):
             cmds["bridge"] += ["--set", f"mavlink.url=udpin:127.0.0.1:{px4_faults.BRIDGE_PORT}"]
             cmds["relay"] = [sys.executable, "-m", "sitl_harness.px4_faults", "relay", "--out", str(self.out),
                              "--cut-s", str(cut[0][2])]
+        if sensed:
+            cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
         return cmds
+
+    def _mppid(self, mission: dict, fifo: bool) -> tuple:
+        """mppid and the bridge with PX4's configuration, airframe and overlay; the bridge's socket."""
+        return mppid_and_bridge(self.spec, mission, self.out, fifo, bridge_config=BRIDGE_CONFIG, vehicle=VEHICLE,
+                                overlay=OVERLAY)
 
     def start(self, plan: Plan) -> None:
         sb, cmds = self.sandbox, plan.commands
@@ -136,15 +168,19 @@ class Px4Flight(Flight):
         if "relay" in cmds:
             sb.spawn("relay", cmds["relay"])
             sb.wait_ready("relay", 10.0)
-        if self.spec.controller != "px4":
-            sb.spawn("controller", cmds["controller"])
-            sb.spawn("bridge", cmds["bridge"])
+        for name in ("sensors", "mapper", "controller", "bridge"):  # the sensed mission's before the trees come
+            if name in cmds:
+                sb.spawn(name, cmds[name])
+        if "gcs" in cmds:  # the operator's upload first: the mission tool reads it at once
+            sb.spawn("gcs", cmds["gcs"])
+            sb.wait_ready("gcs", 150.0)          # PX4's estimator has its origin, the mission is on PX4
         sb.spawn("mission", cmds["mission"])
 
     def watch(self, plan: Plan, t0: float) -> str | None:
         """Until the mission tool exits, or something it needs dies, or the wall-clock limit;
         a failsafe flight: its faults injected, until FAULT_WATCH_S after the last."""
-        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger") if n in self.sandbox.procs]
+        watched = [n for n in ("sim", "controller", "bridge", "recorder", "logger", "sensors", "mapper", "gcs")
+                   if n in self.sandbox.procs]
         faults = sorted((px4_faults.parse_fault(f) for f in self.spec.faults), key=lambda f: f[1])
         path_t0 = None
         while True:

@@ -1,18 +1,21 @@
-"""A sensed mission flown through an autopilot's SITL (flights/ardupilot.py): the trees exist
-only in the world. What the flight adds to the autopilot's:
+"""A sensed mission flown through an autopilot's SITL (flights/ardupilot.py, flights/px4.py): the
+trees exist only in the world. What the flight adds to the autopilot's:
 
-    ap_truth.py (the referee)  + --lcm-url <sensor bus>: the SITL's truth as vehicle_state_t
-                                 on SIM_TRUTH (ENU, body FLU -> ENU, the states' clock)
+    the referee                + --lcm-url <sensor bus>: the SITL's truth as vehicle_state_t
+                                 on SIM_TRUTH (truth_bus.py: ENU, body FLU -> ENU, the states'
+                                 clock); ap_truth.py (ArduCopter's SIM_STATE, 50 Hz) or
+                                 px4_truth.py (SIH's HIL_STATE_QUATERNION, asked for at 50 Hz)
     mppid-sensors              the simulator's sensors (sim/sensor_node.hpp: the same SensorRig
                                  as mppid-sim's) ray-casting the mission's trees, which the mission
-                                 tool sends on MPPI_WORLD, from that truth; point_cloud_t on the
-                                 sensor bus at the sensors' rates and latency
+                                 tool (or, for an uploaded survey, the ground station) sends on
+                                 MPPI_WORLD, from that truth; point_cloud_t on the sensor bus at
+                                 the sensors' rates and latency
     mppid-mapper               the frames -> local_map_t on MPPI_LOCAL_MAP (flights/sim.py's)
 
-Why the referee publishes the truth: it already reads SIM_STATE on the SITL's second serial port
-and converts it into the bridge's local frame (ap_truth.to_local from the EKF's origin, the
-frame of LOCAL_POSITION_NED, the mission's trees' and mppid's), so the camera's pose and the
-score's come from one conversion; a second MAVLink reader in C++ would repeat it (and the SITL
+Why the referee publishes the truth: it already reads the SITL's truth (ArduCopter: SIM_STATE on
+the SITL's second serial port; PX4: SIH's truth on its display link) and converts it into the
+bridge's local frame (the estimator's origin, the frame of LOCAL_POSITION_NED, the mission's
+trees' and mppid's), so the camera's pose and the score's come from one conversion; a second MAVLink reader in C++ would repeat it (and the SITL
 has no third serial port configured). The trees come from the mission tool because it owns them:
 it places them (the forest of the flight's seed, from where the mission starts) and records them
 for the referee (mission.jsonl), so the sensed trees, the scored trees and rate_forest's are one
