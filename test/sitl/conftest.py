@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import importlib.util
-import os
 import sys
 from pathlib import Path
 
@@ -13,14 +12,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 # The harness (sitl_harness) and the LCM types (mppi_lcm) are the packages installed into the
 # venv by tools/setup.sh.
 from sitl_harness import paths  # noqa: E402
-
-
-def missing(why: str):
-    """Skip with the reason on a developer's partial build; in CI (CI set), where
-    tools/setup.sh builds everything, a missing piece is a failure, never a silent skip."""
-    if os.environ.get("CI"):
-        pytest.fail(why + " (CI builds everything: this is a build problem)")
-    pytest.skip(why)
+from sitl_helpers import missing  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -16,7 +16,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from conftest import missing  # noqa: E402
+from sitl_helpers import missing  # noqa: E402
 from sitl_helpers import ROOT, fake_ardupilot  # noqa: E402
 from sitl_harness import ap_truth, paths  # noqa: E402
 from sitl_harness.flights.ardupilot import ArduPilotFlight  # noqa: E402

@@ -16,7 +16,7 @@ import yaml
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from conftest import missing  # noqa: E402
+from sitl_helpers import missing  # noqa: E402
 from sitl_harness import ap_gcs, cli, paths, px4_score, px4_truth  # noqa: E402
 from sitl_harness.flights.base import FlightError, FlightSpec, sensor_bus  # noqa: E402
 from sitl_harness.flights.px4 import GCS_URL, Px4Flight  # noqa: E402
