@@ -182,19 +182,25 @@ def fly_auto(conn, last_wp: int, log, say, timeout: float, dialect: str = "ardup
 
 
 def _arm(conn, mode, timeout=90.0) -> bool:
-    conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+    """The mode (asked again until the autopilot's heartbeat shows it: a request before its start-up
+    ends is dropped), then armed; False when not within `timeout`."""
     t0 = time.monotonic()
-    while not _command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1):
-        if time.monotonic() - t0 > timeout:
-            return False
+    while time.monotonic() - t0 < timeout:
+        conn.mav.set_mode_send(1, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+        hb = conn.recv_match(type="HEARTBEAT", blocking=True, timeout=2,
+                             condition=f"HEARTBEAT.type=={M.MAV_TYPE_QUADROTOR}")
+        if hb is not None and hb.custom_mode == mode and _command(conn, M.MAV_CMD_COMPONENT_ARM_DISARM, 1):
+            return True
         time.sleep(1.0)
-    return True
+    return False
 
 
 def fly_loiter_push(conn, log, say, seconds: float, altitude: float) -> dict:
     """With mppid not flying: the pilot's stick pushes ArduCopter in Loiter towards what is ahead
     of its nose (RC_CHANNELS_OVERRIDE, pitch forward, throttle centred) for `seconds`; its simple
     avoidance, fed by the mapper through the bridge's OBSTACLE_DISTANCE, should stop it short."""
+    # ArduCopter streams nothing to this link unasked: its altitude, 10 Hz.
+    _command(conn, M.MAV_CMD_SET_MESSAGE_INTERVAL, M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 100000)
     if not _arm(conn, GUIDED_MODE):
         return {"outcome": "not armed in 90 s"}
     _command(conn, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, altitude)

@@ -58,7 +58,7 @@ def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> d
     res.update(_safety(truth, events, X, flying, head, res.get("last_item_index")))
     res.update(_timing(out) if spec.controller not in AUTOPILOT_CONTROLLERS else {})
     res.update(_sensing(out, head, t_truth, X))
-    done = summary.get("outcome") == "done" and (not world or res["waypoints_reached"] == res["waypoints"])
+    done = summary.get("outcome") == "done" and res.get("waypoints_reached") == res.get("waypoints")
     res["success"] = bool(done and not res["crashes"] and (res.get("min_clearance") is None or res["min_clearance"] > 0))
     res["reason"] = ("mission done" if res["success"] else
                      res["crashes"][0] if res["crashes"] else

@@ -25,7 +25,9 @@ def load_world(out: Path) -> dict | None:
 
 
 def figures(world: dict, t_s: np.ndarray, X: np.ndarray, V: np.ndarray) -> dict:
-    """t_s: the truth's times (s), X its positions, V its velocities (ENU)."""
+    """t_s: the truth's times (s), X its positions, V its velocities (ENU); none without waypoints."""
+    if "waypoints" not in world:
+        return {}
     up = np.flatnonzero(X[:, 2] > AIRBORNE_Z)
     res = {"waypoints": len(world["waypoints"]), "waypoints_reached": 0, "time_to_last_item_s": None,
            "forest_mean_speed": None, "last_item_index": None}

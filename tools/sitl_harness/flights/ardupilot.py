@@ -45,6 +45,7 @@ BASELINE = paths.ROOT / "config" / "ardupilot" / "guided_baseline.parm"
 # The autopilot's own avoidance for `--controller auto` (a survey flown in AUTO with BendyRuler,
 # the mapper's map through the bridge's OBSTACLE_DISTANCE): argued in the file.
 BENDYRULER = paths.ROOT / "config" / "ardupilot" / "bendyruler.parm"
+AUTO_START = paths.ROOT / "config" / "ardupilot" / "auto_start.parm"  # the ground station starts AUTO
 LOITER_AVOID = paths.ROOT / "config" / "ardupilot" / "loiter_avoid.parm"  # --controller loiter
 LOITER_PUSH_S = 12.0  # the pitch stick held forward in Loiter (--controller loiter)
 GCS_URL = "tcp:127.0.0.1:5763"  # the SITL's third serial port: the ground station's
@@ -162,7 +163,9 @@ class ArduPilotFlight(Flight):
         ap_dir = self.out / "ardupilot"
         ap_dir.mkdir(exist_ok=True)
         uploaded = "autopilot_mission" in mission or spec.controller == "loiter"
-        extra = {"auto": (BENDYRULER,), "loiter": (LOITER_AVOID,)}.get(spec.controller, ())
+        auto_start = spec.controller == "auto" or bool((mission.get("autopilot_mission") or {}).get("guided_legs"))
+        extra = {"auto": (BENDYRULER,), "loiter": (LOITER_AVOID,)}.get(spec.controller, ()) + \
+            ((AUTO_START,) if auto_start else ())
         cmds = {
             "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
             "sim": sitl_command(self.binary, ap_dir, fifo, extra),
