@@ -138,9 +138,18 @@ if ((do_apt)); then
 fi
 
 # ---- Python venv ----------------------------------------------------------------------
+# uv (PyPI `uv`, pinned) makes the venv and installs into it: its cache (~/.cache/uv) keeps
+# every wheel unpacked, and a venv is hard links into it (seconds where pip took minutes: a
+# CI run starts from a fresh clone). uv itself is pip-installed once into
+# ~/.cache/mppid/uv-VERSION, a venv of its own; a cold cache downloads from PyPI as pip did.
 PY_BASE=/usr/bin/python3
 [[ -x "$PY_BASE" ]] || PY_BASE="$(command -v python3)"
 VENV="$ROOT/.venv"
+UV_VERSION=0.13.9
+UV_HOME="${XDG_CACHE_HOME:-$HOME/.cache}/mppid/uv-$UV_VERSION"
+UV="$UV_HOME/bin/uv"
+# uv checks certificates against the system's store, as pip does here (Debian's ca-certificates).
+export UV_NATIVE_TLS=1
 STAMP="$VENV/.mppid-requirements.sha256"
 FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
 VIEW_STAMP="$VENV/.mppid-view-requirements.sha256"
@@ -151,7 +160,7 @@ ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt
 requirements_hash() {
   { cat "$@"; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
 }
-# pip install -r FILE unless STAMP says it is installed (FILE and what it includes).
+# uv pip install -r FILE unless STAMP says it is installed (FILE and what it includes).
 pip_install() {
   local file="$1" stamp="$2" want
   if [[ "$file" == requirements.txt ]]; then want="$(requirements_hash "${ALL_REQUIREMENTS[@]}")"
@@ -160,20 +169,33 @@ pip_install() {
     log "venv: $file unchanged"
     return
   fi
-  log "pip install -r $file"
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r "$file"
+  # Byte-compiled as pip does (uv's cache holds no .pyc; without them each Python process
+  # compiles what it imports again where PYTHONDONTWRITEBYTECODE is set).
+  local uv_pip=("$UV" pip install -q --python "$VENV/bin/python" --compile-bytecode)
+  log "uv pip install -r $file"
+  "${uv_pip[@]}" -r "$file"
   if [[ "$file" == requirements.txt ]]; then
-    log "pip install --no-deps -r requirements-nodeps.txt"
-    "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps -r requirements-nodeps.txt
+    log "uv pip install --no-deps -r requirements-nodeps.txt"
+    "${uv_pip[@]}" --no-deps -r requirements-nodeps.txt
   fi
   printf '%s\n' "$want" >"$stamp"
 }
 
+# uv, pinned, in a venv of its own under ~/.cache/mppid (once per machine and version).
+ensure_uv() {
+  [[ "$("$UV" --version 2>/dev/null || true)" == "uv $UV_VERSION"* ]] && return
+  log "pip install uv==$UV_VERSION into $UV_HOME"
+  rm -rf "$UV_HOME"
+  "$PY_BASE" -m venv "$UV_HOME"
+  "$UV_HOME/bin/python" -m pip install --disable-pip-version-check -q "uv==$UV_VERSION"
+}
+
 if ((do_venv)); then
+  ensure_uv
   if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
-    log "creating $VENV with $PY_BASE"
+    log "creating $VENV with $PY_BASE (uv venv --seed: pip in it too, which the package stage uses)"
     rm -rf "$VENV"
-    "$PY_BASE" -m venv "$VENV"
+    "$UV" venv -q --seed --python "$PY_BASE" "$VENV"
   fi
   # A flight needs a few packages (requirements-flight.txt, ~20 s), a viewed one rerun too
   # (requirements-view.txt); the tests the rest (requirements.txt includes both). The full
@@ -195,8 +217,8 @@ if ((do_venv)); then
       log "lcm $lcm_version for aarch64 into $VENV/aarch64"
       rm -rf "$VENV/aarch64"
       py_version="$("$VENV/bin/python" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')"
-      "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --only-binary=:all: --upgrade \
-        --platform manylinux_2_28_aarch64 --python-version "$py_version" --implementation cp \
+      "$UV" pip install -q --python "$VENV/bin/python" --no-deps --only-binary :all: \
+        --python-platform aarch64-manylinux_2_28 --python-version "$py_version" \
         --target "$VENV/aarch64" "lcm==$lcm_version"
       printf '%s\n' "$lcm_version" >"$VENV/aarch64/.lcm-version"
     else
@@ -226,7 +248,7 @@ packages_hash() {
     "$VENV/bin/python" -c 'import sys; print(sys.version)'
   } | sha256sum | cut -d' ' -f1
 }
-# pip install -e each folder unless STAMP says these are installed as they are.
+# uv pip install -e each folder unless STAMP says these are installed as they are.
 install_packages() {
   local stamp="$1" want d args=()
   shift
@@ -236,8 +258,8 @@ install_packages() {
     return
   fi
   for d in "$@"; do args+=(-e "./$d"); done
-  log "pip install -e $*"
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation "${args[@]}"
+  log "uv pip install -e $*"
+  "$UV" pip install -q --python "$VENV/bin/python" --no-deps --no-build-isolation "${args[@]}"
   printf '%s\n' "$want" >"$stamp"
 }
 
