@@ -17,6 +17,7 @@
 #include "sim/rng.hpp"
 #include "sim/scenario.hpp"
 #include "sim/sensors.hpp"
+#include "source_dir.hpp"
 
 #ifdef MPPID_WITH_OCTOMAP
 #include <dynamicEDT3D/dynamicEDTOctomap.h>
@@ -151,7 +152,7 @@ void bench_octomap(const Frames& fr, double max_range) {
 int main(int argc, char** argv) {
   int frames = 60;
   bool grid_only = false;
-  std::string scenario = MPPID_SOURCE_DIR "/config/scenarios/forest_4m.yaml";
+  std::string scenario = mppi::testing::source_dir() + "/config/scenarios/forest_4m.yaml";
   unsigned long long seed = 1;
   for (int i = 1; i < argc; i += 2) {
     const std::string k = argv[i];

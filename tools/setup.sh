@@ -138,9 +138,23 @@ if ((do_apt)); then
 fi
 
 # ---- Python venv ----------------------------------------------------------------------
+# uv (PyPI `uv`, pinned) makes the venv and installs into it: its cache (~/.cache/uv) keeps
+# every wheel unpacked, and a venv is hard links into it. uv itself is pip-installed once into
+# ~/.cache/mppid/uv-VERSION, a venv of its own; a cold cache downloads from PyPI as pip did.
+# The full set (requirements.txt) is installed once per requirements into a byte-compiled
+# venv, ~/.cache/mppid/venv-KEY (KEY: the requirements files, the interpreter
+# and uv's version), and a clone's .venv is a hard-linked copy of it (cp -al: seconds where
+# pip took minutes; a CI run starts from a fresh clone); the project's packages are then
+# installed into .venv alone, editable, pointing at the clone's sources.
 PY_BASE=/usr/bin/python3
 [[ -x "$PY_BASE" ]] || PY_BASE="$(command -v python3)"
 VENV="$ROOT/.venv"
+UV_VERSION=0.13.9
+MPPID_CACHE="${XDG_CACHE_HOME:-$HOME/.cache}/mppid"
+UV_HOME="$MPPID_CACHE/uv-$UV_VERSION"
+UV="$UV_HOME/bin/uv"
+# uv checks certificates against the system's store, as pip does here (Debian's ca-certificates).
+export UV_NATIVE_TLS=1
 STAMP="$VENV/.mppid-requirements.sha256"
 FLIGHT_STAMP="$VENV/.mppid-flight-requirements.sha256"
 VIEW_STAMP="$VENV/.mppid-view-requirements.sha256"
@@ -149,42 +163,116 @@ ALL_REQUIREMENTS=(requirements-flight.txt requirements-view.txt requirements.txt
 
 # The stamp of a requirements file: it and the interpreter, so a Python upgrade reinstalls.
 requirements_hash() {
-  { cat "$@"; "$VENV/bin/python" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
+  { cat "$@"; "$PY_BASE" -c 'import sys; print(sys.version)'; } | sha256sum | cut -d' ' -f1
 }
-# pip install -r FILE unless STAMP says it is installed (FILE and what it includes).
+# uv pip install -r FILE into VENV_DIR unless STAMP says it is installed (FILE and what it
+# includes). Byte-compiled as pip does (uv's cache holds no .pyc; without them each Python
+# process compiles what it imports again where PYTHONDONTWRITEBYTECODE is set).
 pip_install() {
-  local file="$1" stamp="$2" want
+  local venv="$1" file="$2" stamp="$3" want
   if [[ "$file" == requirements.txt ]]; then want="$(requirements_hash "${ALL_REQUIREMENTS[@]}")"
   else want="$(requirements_hash "$file")"; fi
   if [[ "$want" == "$(cat "$stamp" 2>/dev/null || true)" ]]; then
     log "venv: $file unchanged"
     return
   fi
-  log "pip install -r $file"
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q -r "$file"
+  local uv_pip=("$UV" pip install -q --python "$venv/bin/python" --compile-bytecode)
+  log "uv pip install -r $file"
+  "${uv_pip[@]}" -r "$file"
   if [[ "$file" == requirements.txt ]]; then
-    log "pip install --no-deps -r requirements-nodeps.txt"
-    "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps -r requirements-nodeps.txt
+    log "uv pip install --no-deps -r requirements-nodeps.txt"
+    "${uv_pip[@]}" --no-deps -r requirements-nodeps.txt
   fi
   printf '%s\n' "$want" >"$stamp"
 }
+# A new venv at $1 (uv venv --seed: pip in it too, which the package stage and
+# test/mavlink/test_install.py use).
+new_venv() {
+  "$UV" venv -q --seed --python "$PY_BASE" "$1"
+}
+# In the copy at $2 of the venv made at $1: each file of bin/ that names $1 (the scripts'
+# #! lines, the activate scripts) written anew naming $2, so they run the copy's python (and
+# a script needs nothing from PATH, as pip's do). A new file, not the hard link's: the cached
+# venv keeps its own.
+retarget_venv() {
+  "$PY_BASE" - "$1" "$2" <<'PY'
+import os, sys
+old, new = (p.encode() for p in sys.argv[1:3])
+bindir = os.path.join(sys.argv[2], "bin")
+for name in os.listdir(bindir):
+    path = os.path.join(bindir, name)
+    if os.path.islink(path) or not os.path.isfile(path):
+        continue
+    with open(path, "rb") as f:
+        data = f.read()
+    if old in data:
+        tmp = path + ".retarget"
+        with open(tmp, "wb") as f:
+            f.write(data.replace(old, new))
+        os.chmod(tmp, os.stat(path).st_mode & 0o7777)
+        os.replace(tmp, path)
+PY
+}
+# .venv as a hard-linked copy of the full set's venv in the cache, made first if missing
+# (in a temporary folder renamed into place: two set-ups at once each get a whole one). The
+# newest three such venvs stay; a venv copied from an older one keeps its files (hard links).
+cached_venv() {
+  echo "$MPPID_CACHE/venv-$({ requirements_hash "${ALL_REQUIREMENTS[@]}"; echo "uv $UV_VERSION, retargeted"; } | sha256sum | cut -c1-16)"
+}
+venv_from_cache() {
+  local tmpl tmp key
+  tmpl="$(cached_venv)"
+  key="${tmpl##*/venv-}"
+  if [[ ! -f "$tmpl/.mppid-requirements.sha256" ]]; then
+    log "making the cached venv $tmpl"
+    mkdir -p "$MPPID_CACHE"
+    find "$MPPID_CACHE" -maxdepth 1 -name 'venv-*.tmp.*' -mmin +60 -exec rm -rf {} +  # a failed one
+    tmp="$(mktemp -d "$MPPID_CACHE/venv-$key.tmp.XXXXXX")"
+    new_venv "$tmp"
+    printf '%s\n' "$tmp" >"$tmp/.mppid-made-at"  # the path its scripts name (retarget_venv)
+    pip_install "$tmp" requirements.txt "$tmp/.mppid-requirements.sha256"
+    mv -T "$tmp" "$tmpl" 2>/dev/null || rm -rf "$tmp"  # another set-up made it meanwhile
+    find "$MPPID_CACHE" -maxdepth 1 -name 'venv-*' ! -name '*.tmp.*' -printf '%T@ %p\n' |
+      sort -rn | tail -n +4 | cut -d' ' -f2- | xargs -r -d '\n' rm -rf
+  fi
+  log "$VENV: hard-linked copy of $tmpl"
+  rm -rf "$VENV"
+  # Hard links where the cache and the clone share a file system, a copy elsewhere.
+  cp -al "$tmpl" "$VENV" 2>/dev/null || { rm -rf "$VENV"; cp -a "$tmpl" "$VENV"; }
+  retarget_venv "$(cat "$tmpl/.mppid-made-at")" "$VENV"
+  # The stamp as a file of its own: nothing written into .venv reaches the cached venv.
+  cp --remove-destination "$tmpl/.mppid-requirements.sha256" "$STAMP"
+}
+
+# uv, pinned, in a venv of its own under ~/.cache/mppid (once per machine and version).
+ensure_uv() {
+  [[ "$("$UV" --version 2>/dev/null || true)" == "uv $UV_VERSION"* ]] && return
+  log "pip install uv==$UV_VERSION into $UV_HOME"
+  rm -rf "$UV_HOME"
+  "$PY_BASE" -m venv "$UV_HOME"
+  "$UV_HOME/bin/python" -m pip install --disable-pip-version-check -q "uv==$UV_VERSION"
+}
 
 if ((do_venv)); then
-  if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then
-    log "creating $VENV with $PY_BASE"
-    rm -rf "$VENV"
-    "$PY_BASE" -m venv "$VENV"
-  fi
-  # A flight needs a few packages (requirements-flight.txt, ~20 s), a viewed one rerun too
-  # (requirements-view.txt); the tests the rest (requirements.txt includes both). The full
-  # set installed covers the flight's.
-  if ((flight)) && [[ "$(requirements_hash "${ALL_REQUIREMENTS[@]}")" != "$(cat "$STAMP" 2>/dev/null || true)" ]]; then
-    pip_install requirements-flight.txt "$FLIGHT_STAMP"
-    ((view)) && pip_install requirements-view.txt "$VIEW_STAMP"
-  elif ((!flight)); then
-    pip_install requirements.txt "$STAMP"
-  else
+  ensure_uv
+  venv_ok=1
+  if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c 'import sys' 2>/dev/null; then venv_ok=0; fi
+  # A flight needs a few packages (requirements-flight.txt, ~30 s), a viewed one rerun too
+  # (requirements-view.txt), installed into a venv of its own unless the cached full set is
+  # there; the tests the rest (requirements.txt includes both): .venv from the cached full
+  # set. The full set installed covers the flight's.
+  if [[ "$(requirements_hash "${ALL_REQUIREMENTS[@]}")" == "$(cat "$STAMP" 2>/dev/null || true)" ]] && ((venv_ok)); then
     log "venv: requirements unchanged"
+  elif ((flight)) && [[ ! -f "$(cached_venv)/.mppid-requirements.sha256" ]]; then
+    if ((!venv_ok)); then
+      log "creating $VENV with $PY_BASE"
+      rm -rf "$VENV"
+      new_venv "$VENV"
+    fi
+    pip_install "$VENV" requirements-flight.txt "$FLIGHT_STAMP"
+    ((view)) && pip_install "$VENV" requirements-view.txt "$VIEW_STAMP"
+  else
+    venv_from_cache
   fi
   # The aarch64 cross build links the lcm wheel for aarch64 (PyPI has it), of the same version
   # as the venv's, unpacked into .venv/aarch64 (its lcm-gen is not run: the venv's generates).
@@ -195,8 +283,8 @@ if ((do_venv)); then
       log "lcm $lcm_version for aarch64 into $VENV/aarch64"
       rm -rf "$VENV/aarch64"
       py_version="$("$VENV/bin/python" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')"
-      "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --only-binary=:all: --upgrade \
-        --platform manylinux_2_28_aarch64 --python-version "$py_version" --implementation cp \
+      "$UV" pip install -q --python "$VENV/bin/python" --no-deps --only-binary :all: \
+        --python-platform aarch64-manylinux_2_28 --python-version "$py_version" \
         --target "$VENV/aarch64" "lcm==$lcm_version"
       printf '%s\n' "$lcm_version" >"$VENV/aarch64/.lcm-version"
     else
@@ -226,7 +314,7 @@ packages_hash() {
     "$VENV/bin/python" -c 'import sys; print(sys.version)'
   } | sha256sum | cut -d' ' -f1
 }
-# pip install -e each folder unless STAMP says these are installed as they are.
+# uv pip install -e each folder unless STAMP says these are installed as they are.
 install_packages() {
   local stamp="$1" want d args=()
   shift
@@ -236,8 +324,8 @@ install_packages() {
     return
   fi
   for d in "$@"; do args+=(-e "./$d"); done
-  log "pip install -e $*"
-  "$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation "${args[@]}"
+  log "uv pip install -e $*"
+  "$UV" pip install -q --python "$VENV/bin/python" --no-deps --no-build-isolation "${args[@]}"
   printf '%s\n' "$want" >"$stamp"
 }
 

@@ -17,10 +17,11 @@
 #include "sim/command_input.hpp"
 #include "sim/plant.hpp"
 #include "sim/scenario.hpp"
+#include "source_dir.hpp"
 
 namespace {
 
-std::string source(const std::string& rel) { return std::string(MPPID_SOURCE_DIR) + "/" + rel; }
+std::string source(const std::string& rel) { return mppi::testing::source_dir() + "/" + rel; }
 
 std::string scenario_error(const std::string& text) {
   try {

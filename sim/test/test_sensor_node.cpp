@@ -15,6 +15,7 @@
 #include "sim/scenario.hpp"
 #include "sim/sensor_node.hpp"
 #include "sim/sensor_rig.hpp"
+#include "source_dir.hpp"
 
 namespace {
 
@@ -232,8 +233,8 @@ TEST(SensorNode, TakesTheWorldAndTheTruthFromTheBus) {
 }
 
 TEST(SensorNode, ReadsAMissionsSensingBlockAsTheSimulatorReadsAScenarios) {
-  const auto m = sim::load_sensing(std::string(MPPID_SOURCE_DIR) + "/config/missions/rate_forest_sensed.yaml");
-  const auto s = sim::load_scenario(std::string(MPPID_SOURCE_DIR) + "/config/scenarios/forest_4m_sensed.yaml", 1);
+  const auto m = sim::load_sensing(mppi::testing::source_dir() + "/config/missions/rate_forest_sensed.yaml");
+  const auto s = sim::load_scenario(mppi::testing::source_dir() + "/config/scenarios/forest_4m_sensed.yaml", 1);
   EXPECT_FALSE(m.publish_obstacles);
   ASSERT_TRUE(m.depth_camera.enabled);
   EXPECT_FALSE(m.lidar.enabled);

@@ -8,6 +8,7 @@
 #include "sim/plant.hpp"
 #include "mppi/rk4.hpp"
 #include "sim/scenario.hpp"
+#include "source_dir.hpp"
 
 namespace {
 
@@ -44,7 +45,7 @@ TEST(Rk4, FreeFallMatchesClosedForm) {
   EXPECT_NEAR(x[mppi::Quadrotor::VZ], -9.81f, 1e-3f);
 }
 
-std::string scenario(const char* name) { return std::string(MPPID_SOURCE_DIR) + "/config/scenarios/" + name + ".yaml"; }
+std::string scenario(const char* name) { return mppi::testing::source_dir() + "/config/scenarios/" + name + ".yaml"; }
 
 TEST(Plant, QuadrotorHoversOnItsHoverCommand) {
   const sim::Scenario s = sim::load_scenario(scenario("forest_4m"), 1);
@@ -89,7 +90,7 @@ TEST(Plant, UnknownParameterIsAnError) {
 
 TEST(Scenario, EveryFileLoads) {
   int n = 0;
-  for (const auto& e : std::filesystem::directory_iterator(std::string(MPPID_SOURCE_DIR) + "/config/scenarios")) {
+  for (const auto& e : std::filesystem::directory_iterator(mppi::testing::source_dir() + "/config/scenarios")) {
     if (e.path().extension() != ".yaml") continue;
     EXPECT_NO_THROW({
       const auto s = sim::load_scenario(e.path().string(), 1);

@@ -16,10 +16,13 @@
 #include <thread>
 #include <vector>
 
+#include "daemon_binary_path.hpp"
+#include "source_dir.hpp"
+
 namespace {
 
-const std::string kBin = MPPID_BIN;
-const std::string kConfig = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
+const std::string kBin = mppi::testing::daemon_binary_path();
+const std::string kConfig = mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml";
 
 struct Proc {
   pid_t pid = -1;

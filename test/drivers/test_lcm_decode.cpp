@@ -14,6 +14,7 @@
 
 #include "../rt/fakes.hpp"
 #include "mppi/transport/lcm_decode.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using transport::decode_message;
@@ -53,7 +54,7 @@ mppi_lcm::vehicle_state_t state16(std::int64_t seq) {
 
 // A crash input the fuzzer saved, minus the target's trailing task byte where it has one.
 std::vector<std::uint8_t> regression(const std::string& target, const std::string& name, bool task_byte) {
-  std::ifstream in(std::string(MPPID_SOURCE_DIR) + "/test/fuzz/regressions/" + target + "/" + name, std::ios::binary);
+  std::ifstream in(mppi::testing::source_dir() + "/test/fuzz/regressions/" + target + "/" + name, std::ios::binary);
   std::vector<std::uint8_t> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_FALSE(b.empty()) << target << "/" << name;
   if (task_byte && !b.empty()) b.pop_back();

@@ -17,6 +17,7 @@
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/transport/lcm_transport.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using mppi::test::FakeClock;
@@ -280,7 +281,7 @@ TEST(LcmTransport, StopReturnsPromptlyOnAQuietBus) {
 // state that arrives over memq is answered by a normal command, finite and inside the limits,
 // that names it (LcmRig: on the fake clock every state is fresh, whatever the load).
 TEST(LcmTransport, RealQuadrotorControllerOverMemq) {
-  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  app::AppConfig cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"});
   auto controller = app::make_controller(cfg);
   LcmRig r(controller.get());
@@ -354,7 +355,7 @@ TEST(LcmTransport, LockstepOverLcmAnswersEachTickFasterThanRealTime) {
 }
 
 TEST(Settings, TheCudaSectionIsWhatTheCudaBackendFliesWith) {
-  const std::string file = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
+  const std::string file = mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml";
   const app::AppConfig c = app::load_config(file, {"cuda.mppi.rollouts=16384", "cuda.cost.w_z=200"});
   ASSERT_NE(c.cuda, nullptr);
   EXPECT_EQ(c.for_backend("cuda").mppi.rollouts, 16384);
@@ -378,7 +379,7 @@ TEST(Settings, TheCudaSectionIsWhatTheCudaBackendFliesWith) {
 // them too, not the cuda: section's (found on the H100: live updates were silently ignored by
 // a CUDA controller whose task file has a cuda: section).
 TEST(Settings, WithMppiReachesTheCudaSectionToo) {
-  const std::string file = std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml";
+  const std::string file = mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml";
   const app::AppConfig c = app::load_config(file, {"cuda.mppi.rollouts=16384"});
   ASSERT_NE(c.cuda, nullptr);
   MppiSettings s = c.for_backend("cuda").mppi;

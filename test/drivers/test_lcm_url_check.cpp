@@ -10,6 +10,7 @@
 
 #include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/daemon/lcm_url_check.hpp"
+#include "source_dir.hpp"
 
 using mppi::daemon::lcm_url_leaves_host;
 
@@ -42,7 +43,7 @@ TEST(LcmUrlCheck, EveryShippedUrlStaysOnTheHost) {
   const std::regex url(R"(\b(?:udpm|mpudpm|tcpq)://[^\s"'`)]+)");
   int seen = 0;
   for (const char* dir : {"config", "drivers", "sim", "tools"}) {
-    for (const auto& e : fs::recursive_directory_iterator(fs::path(MPPID_SOURCE_DIR) / dir)) {
+    for (const auto& e : fs::recursive_directory_iterator(fs::path(mppi::testing::source_dir()) / dir)) {
       if (!e.is_regular_file()) continue;
       const std::string ext = e.path().extension().string();
       if (ext != ".yaml" && ext != ".py" && ext != ".cpp" && ext != ".hpp" && ext != ".sh" && ext != ".service" &&

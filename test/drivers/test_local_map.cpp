@@ -21,6 +21,7 @@
 #include "mppi/tasks.hpp"
 #include "mppi/transport/lcm_decode.hpp"
 #include "mppi/transport/lcm_transport.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using mppi::test::FakeClock;
@@ -192,7 +193,7 @@ struct Statuses {
 
 struct MapRig {
   MapRig()
-      : cfg(app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+      : cfg(app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                              {"mppi.rollouts=64", "mppi.horizon=20", "mppi.threads=1"})),
         controller(app::make_controller(cfg)),
         tx("memq://", {}, &clock, 4096),

@@ -22,6 +22,7 @@
 #include "mppi_lcm/controller_status_t.hpp"
 #include "mppi_lcm/local_map_t.hpp"
 #include "mppi_lcm/vehicle_state_t.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using mppi::test::FakeClock;
@@ -94,7 +95,7 @@ TEST(MapReceiver, TheStatesInstanceTakesNoMapAndTheMapsOneNoState) {
 // place while the maps' thread fills another slot.
 TEST(MapReceiver, StatesAndMapsAtOnceAreAllTakenWhileTheLoopCycles) {
   constexpr int kStates = 300, kMaps = 30;
-  const auto cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  const auto cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                     {"mppi.rollouts=32", "mppi.horizon=10", "mppi.threads=1"});
   const auto controller = app::make_controller(cfg);
   FakeClock clock;

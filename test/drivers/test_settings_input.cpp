@@ -18,6 +18,7 @@
 #include "mppi/settings.hpp"
 #include "mppi/settings_table.hpp"
 #include "mppi/simd.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 
@@ -50,7 +51,7 @@ TEST(SettingsInput, TheBaseFileIsValid) {
 }
 
 TEST(SettingsInput, AListOrMapAsAKeyNamesItsSection) {
-  const std::string found = std::string(MPPID_SOURCE_DIR) + "/test/fuzz/regressions/fuzz_settings/top_level_key_is_a_map.yaml";
+  const std::string found = mppi::testing::source_dir() + "/test/fuzz/regressions/fuzz_settings/top_level_key_is_a_map.yaml";
   try {
     app::parse_config(YAML::LoadFile(found));
     ADD_FAILURE() << "accepted " << found;

@@ -12,6 +12,7 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/app/vehicle.hpp"
+#include "source_dir.hpp"
 
 using mppi::app::ConfigError;
 using mppi::app::load_config;
@@ -19,7 +20,7 @@ using mppi::app::load_vehicle;
 
 namespace {
 
-const std::string kRoot = MPPID_SOURCE_DIR;
+const std::string kRoot = mppi::testing::source_dir();
 const std::string kRateTask = kRoot + "/config/tasks/quadrotor_rate_track.yaml";
 const std::string kShipped = kRoot + "/config/vehicles/sim_rate_1kg.yaml";
 

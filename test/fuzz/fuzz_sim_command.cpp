@@ -12,6 +12,7 @@
 #include "sim/command_input.hpp"
 #include "sim/plant.hpp"
 #include "sim/scenario.hpp"
+#include "source_dir.hpp"
 
 namespace {
 
@@ -20,7 +21,7 @@ const std::vector<sim::Scenario>& scenarios() {
     std::vector<sim::Scenario> out;
     for (const char* name : {"forest_4m", "rate_forest_4m", "rate_forest_4m_body", "team3_fixed", "cartpole_swingup",
                              "racecar_ellipse"})
-      out.push_back(sim::load_scenario(std::string(MPPID_SOURCE_DIR) + "/config/scenarios/" + name + ".yaml", 1));
+      out.push_back(sim::load_scenario(mppi::testing::source_dir() + "/config/scenarios/" + name + ".yaml", 1));
     return out;
   }();
   return s;

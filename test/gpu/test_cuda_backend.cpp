@@ -23,6 +23,7 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/params.hpp"
+#include "source_dir.hpp"
 #endif
 
 namespace mppi {
@@ -213,7 +214,7 @@ TEST(CudaParity, Team3ForestTrajectoryWeighting) {
 TEST(CudaParity, EveryTaskFileAsFlown) {
   SKIP_WITHOUT_CUDA();
   int files = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(MPPID_TASKS_DIR)) {
+  for (const auto& entry : std::filesystem::directory_iterator(mppi::testing::source_dir() + "/config/tasks")) {
     if (entry.path().extension() != ".yaml") continue;
     const app::AppConfig file = app::load_config(entry.path().string());
     if (file.controller != "mppi") continue;

@@ -9,6 +9,7 @@
 
 #include "mppi/app/config.hpp"
 #include "mppi/gpu/cuda_settings.hpp"
+#include "source_dir.hpp"
 
 namespace mppi {
 namespace {
@@ -77,7 +78,7 @@ TEST(CudaSettingsFile, BadValuesNameTheirField) {
 // No task file sets `mppi.cuda`: every one flies the backend's own choices, as before the section.
 TEST(CudaSettingsFile, TaskFilesKeepTheBackendsChoices) {
   int files = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(MPPID_TASKS_DIR)) {
+  for (const auto& entry : std::filesystem::directory_iterator(mppi::testing::source_dir() + "/config/tasks")) {
     if (entry.path().extension() != ".yaml") continue;
     const app::AppConfig c = app::load_config(entry.path().string());
     EXPECT_EQ(c.cuda_launch, CudaSettings{}) << entry.path();

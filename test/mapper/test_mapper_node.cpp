@@ -13,6 +13,7 @@
 #include "mapper/node.hpp"
 #include "sim/rng.hpp"
 #include "sim/sensors.hpp"
+#include "source_dir.hpp"
 
 namespace {
 
@@ -122,7 +123,7 @@ TEST(MapperNode, CountsAndIgnoresUndecodableFrames) {
 }
 
 TEST(MapperSettings, OverridesApplyAndUnknownKeysFail) {
-  const auto s = mapper::load_settings(MPPID_SOURCE_DIR "/config/mapper/mapper.yaml",
+  const auto s = mapper::load_settings(mppi::testing::source_dir() + "/config/mapper/mapper.yaml",
                                        {"map.resolution=0.2", "rate_hz=20", "inputs=[MPPI_LIDAR]"});
   EXPECT_DOUBLE_EQ(s.map.resolution, 0.2);
   EXPECT_DOUBLE_EQ(s.rate_hz, 20.0);
@@ -133,7 +134,7 @@ TEST(MapperSettings, OverridesApplyAndUnknownKeysFail) {
 }
 
 TEST(MapperSettings, TheBusesAreSettingsTheDefaultsLcmsAndTheMapsOnes) {
-  const auto d = mapper::load_settings(MPPID_SOURCE_DIR "/config/mapper/mapper.yaml", {});
+  const auto d = mapper::load_settings(mppi::testing::source_dir() + "/config/mapper/mapper.yaml", {});
   EXPECT_EQ(d.lcm_url, "") << "LCM's default bus";
   EXPECT_EQ(d.sensor_lcm_url, "") << "the maps' bus";
   const auto s = mapper::load_settings("", {"lcm_url=udpm://239.255.76.67:7667?ttl=0", "sensor_lcm_url=memq://"});

@@ -18,6 +18,7 @@
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/identification.hpp"
 #include "mppi/daemon/state_predictor.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 
@@ -26,7 +27,7 @@ constexpr std::int64_t kMs = rt::kNsPerMs;
 
 std::unique_ptr<Controller> controller(const char* task, std::vector<std::string> sets) {
   sets.insert(sets.end(), {"mppi.rollouts=16", "mppi.horizon=5", "mppi.threads=1", "mppi.simd=off"});
-  const auto cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/" + task + ".yaml", sets);
+  const auto cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/" + task + ".yaml", sets);
   return app::make_controller(cfg);
 }
 

@@ -14,6 +14,7 @@
 #include "fakes.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/transport/lcm_decode.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using transport::kMaxUtime;
@@ -71,7 +72,7 @@ TEST(InboxTime, ReferenceEpochOutsideTheRangeIsABadInput) {
 // refused and counted, no cycle runs on it (and nothing overflows under UBSan); a tick in
 // range then runs one.
 TEST(InboxTime, ClockTickThatWouldOverflowTheLoopIsRejected) {
-  std::ifstream f(std::string(MPPID_SOURCE_DIR) + "/test/fuzz/regressions/fuzz_clock/tick_sim_utime_overflows_ns",
+  std::ifstream f(mppi::testing::source_dir() + "/test/fuzz/regressions/fuzz_clock/tick_sim_utime_overflows_ns",
                   std::ios::binary);
   std::vector<std::uint8_t> bytes((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
   ASSERT_FALSE(bytes.empty());

@@ -13,6 +13,7 @@
 #include "mppi/daemon/disturbance_observer.hpp"
 #include "mppi/daemon/state_predictor.hpp"
 #include "mppi/rt/latency_estimator.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using transport::Mode;
@@ -366,13 +367,13 @@ TEST(DisturbanceObserver, RealModelConvergesToTheMismatch) {
   // The 16-state quadrotor at hover in the model; the plant is 5 % heavier: it sinks. The
   // observer, whose estimate enters the model it predicts with, settles at the plant's
   // missing acceleration, -g * 0.05 / 1.05.
-  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  app::AppConfig cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=16", "mppi.horizon=5", "mppi.threads=1", "mppi.simd=off"});
   auto c = app::make_controller(cfg);
   const float hover = cfg.mppi.u_init[0];
   daemon::CommandHistory h(4, cfg.mppi.u_init);
   daemon::DisturbanceObserver obs(daemon::DisturbanceSettings{}, 1, 16);
-  auto plant_cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  auto plant_cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                     {"model.mass=0.2625", "mppi.rollouts=16", "mppi.horizon=5", "mppi.simd=off"});
   auto plant = app::make_controller(plant_cfg);
   float x[16] = {};
@@ -392,7 +393,7 @@ TEST(DisturbanceObserver, RealModelConvergesToTheMismatch) {
 // Controller::positions, the hold before any goal reads it: each vehicle's xyz from a state,
 // vehicle by vehicle (team3: x, y, z at 16 j), for the MPPI and the DDP controllers alike.
 TEST(Controllers, PositionsAreEachVehiclesXyz) {
-  const std::string dir = std::string(MPPID_SOURCE_DIR) + "/config/tasks/";
+  const std::string dir = mppi::testing::source_dir() + "/config/tasks/";
   auto team = app::make_controller(
       app::load_config(dir + "team3_forest.yaml", {"mppi.rollouts=16", "mppi.horizon=5", "mppi.simd=off"}));
   std::vector<float> x(48, 0.0f);

@@ -19,6 +19,7 @@
 #include "mppi/daemon/daemon_settings.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
 #include "mppi/settings_table.hpp"
+#include "source_dir.hpp"
 
 using namespace mppi;
 using daemon::LiveOptimizer;
@@ -395,7 +396,7 @@ TEST(LiveUpdate, BuilderThreadSwapsInAtACycleBoundaryWhileTheLoopCycles) {
 // is bit-identical for any thread count) continues the run exactly, noise counter and plan
 // carried over; a rebuild with new rollouts really changes the optimizer.
 TEST(LiveUpdate, RealControllerContinuesBitForBitAcrossARebuild) {
-  const app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  const app::AppConfig cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                               {"mppi.rollouts=128", "mppi.horizon=30", "mppi.threads=2"});
   auto factory = [cfg](const MppiSettings& s) {
     return app::make_controller(cfg.with_mppi(s));

@@ -15,6 +15,7 @@
 #include "mppi/app/config.hpp"
 #include "mppi/daemon/control_loop.hpp"
 #include "mppi/daemon/live_optimizer.hpp"
+#include "source_dir.hpp"
 
 namespace {
 std::atomic<long> g_allocs{0};
@@ -58,7 +59,7 @@ class NullTransport final : public test::InMemoryTransport {
 // trigger state: each state arrives a period after the last, so each starts its cycle (the
 // wait on the inbox's semaphore is on the path).
 void steady_state_cycles_allocate_nothing(daemon::Trigger trigger, bool rollouts = false) {
-  app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  app::AppConfig cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                         {"mppi.rollouts=128", "mppi.horizon=30"});
   auto controller = app::make_controller(cfg);
   test::FakeClock clock;
@@ -151,7 +152,7 @@ TEST(HotPath, CyclesPublishingRolloutsAllocateNothing) {
 // cycles (plan resampled onto the new horizon) and runs on: zero heap allocations on the
 // loop thread over the forwarding cycle, the swap and the cycles after it.
 TEST(HotPath, LiveOptimizerSwapAllocatesNothingInTheLoop) {
-  const app::AppConfig cfg = app::load_config(std::string(MPPID_SOURCE_DIR) + "/config/tasks/quadrotor_forest.yaml",
+  const app::AppConfig cfg = app::load_config(mppi::testing::source_dir() + "/config/tasks/quadrotor_forest.yaml",
                                               {"mppi.rollouts=128", "mppi.horizon=30"});
   daemon::LiveSettings lim;
   lim.max_horizon = 100;

@@ -282,10 +282,6 @@ CudaSettings read_cuda_settings(const YAML::Node& m, const std::string& task) {
   return s;
 }
 
-std::string default_config_path(const std::string& task) {
-  return std::string(MPPID_SOURCE_DIR) + "/config/tasks/" + task + ".yaml";
-}
-
 namespace {
 
 // A copy of `root` with `section`'s maps merged in, key by key (mppi, model, cost, daemon),
