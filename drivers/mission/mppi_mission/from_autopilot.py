@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from . import autopilot_plan as ap_plan
+from . import reference
 from .runner import Runner
 from .vehicles import FlightError
 
@@ -94,14 +95,17 @@ class AutopilotRunner(Runner):
                 i = 0
         return self._finished()
 
-    def reached_early(self, step, i, p) -> bool:
-        """A NAV_WAYPOINT's line ends where the autopilot counts the waypoint reached: within its
-        acceptance radius of the end (its goal leg, next), wherever the reference is by then; a
-        goal-seeking task (the forest's) flies ahead of the line's reference."""
+    def reached_early(self, step, i, t, p) -> bool:
+        """A NAV_WAYPOINT's line ends where the autopilot counts the waypoint reached, within its
+        acceptance radius of the end (its goal leg, next), when the vehicle gets there ahead of
+        the line's reference: a goal-seeking task (the forest's) flies ahead of it, a tracking
+        task follows it to its end."""
         legs, items = self.m.legs, self.conv.leg_items
         if step.kind != "line" or i + 1 >= len(legs) or "goal" not in legs[i + 1] or items[i + 1] != items[i]:
             return False
-        return float(np.linalg.norm(p - np.asarray(step.end, float))) <= float(legs[i + 1]["goal"]["radius"])
+        end, radius = np.asarray(step.end, float), float(legs[i + 1]["goal"]["radius"])
+        ref = reference.evaluate(step.ref, [t])[0][0]
+        return float(np.linalg.norm(p - end)) <= radius < float(np.linalg.norm(ref - end))
 
     def _show_item(self, seq, text):
         """The item flown now: the autopilot's current item follows (MISSION_SET_CURRENT)."""

@@ -171,7 +171,7 @@ class Runner:
                     return True, ""
                 if t > step.timeout:
                     return False, f"goal not reached in {step.timeout:g} s ({d:.1f} m away)"
-            elif (step.duration is not None and t >= step.duration) or self.reached_early(step, i, p):
+            elif (step.duration is not None and t >= step.duration) or self.reached_early(step, i, t, p):
                 return True, ""
             if time.monotonic() >= next_say:
                 next_say = time.monotonic() + 1.0
@@ -184,8 +184,9 @@ class Runner:
         """Why the mission cannot go on ('' it can), asked once a second during a step."""
         return ""
 
-    def reached_early(self, step, i, p) -> bool:
-        """Whether a path step ends before its reference does (the vehicle at `p`): never here."""
+    def reached_early(self, step, i, t, p) -> bool:
+        """Whether a path step ends before its reference does (at `t` s, the vehicle at `p`):
+        never here."""
         return False
 
     def _progress(self, step, i, t, p):
