@@ -123,18 +123,12 @@ def upload(conn, items, timeout=30.0) -> int:
 
 def publish_world(lcm_url: str, trees, stop: threading.Event):
     import lcm
-    from mppi_lcm import cylinder_t, obstacles_t
-    lc, seq = lcm.LCM(lcm_url), 0
+    from mppi_mavlink import lcm_types
+    from mppi_mission.vehicles import obstacles_message
+    types, lc, seq = lcm_types.import_mppi_lcm(), lcm.LCM(lcm_url), 0
     while not stop.wait(1.0 / WORLD_HZ):
-        o, seq = obstacles_t(), seq + 1
-        o.utime, o.seq = int(time.time() * 1e6), seq
-        cyl = []
-        for x, y, r in trees:
-            c = cylinder_t()
-            c.x, c.y, c.radius, c.vx, c.vy = x, y, r, 0.0, 0.0
-            cyl.append(c)
-        o.n, o.cylinders = len(cyl), cyl
-        lc.publish("MPPI_WORLD", o.encode())
+        seq += 1
+        lc.publish("MPPI_WORLD", obstacles_message(types, trees, time.time() * 1e6, seq).encode())
 
 
 def _command(conn, cmd, *params, timeout=5.0) -> bool:

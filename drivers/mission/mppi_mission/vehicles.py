@@ -209,19 +209,24 @@ class MppidLink(StateClock):
         m.vehicle_count = vehicle_count
         m.goals = [[float(c) for c in goal] for _ in range(vehicle_count)]
         self.lc.publish(self.ch["reference"], m.encode())
-        o = self.t.obstacles_t()
-        o.utime, o.seq = m.utime, self.seq
-        cyl = []
-        for x, y, r in trees:
-            c = self.t.cylinder_t()
-            c.x, c.y, c.radius, c.vx, c.vy = x, y, r, 0.0, 0.0
-            cyl.append(c)
-        o.n, o.cylinders = len(cyl), cyl
-        self.lc.publish(self.ch["obstacles"], o.encode())
+        self.lc.publish(self.ch["obstacles"], obstacles_message(self.t, trees, m.utime, self.seq).encode())
 
     def close(self):
         self.stop.set()
         self.thread.join(2)
+
+
+def obstacles_message(types, trees, utime: int, seq: int):
+    """obstacles_t of standing trees (x, y, radius), `types` the mppi_lcm module."""
+    o = types.obstacles_t()
+    o.utime, o.seq = int(utime), int(seq)
+    cyl = []
+    for x, y, r in trees:
+        c = types.cylinder_t()
+        c.x, c.y, c.radius, c.vx, c.vy = x, y, r, 0.0, 0.0
+        cyl.append(c)
+    o.n, o.cylinders = len(cyl), cyl
+    return o
 
 
 class GuidedLink(StateClock):
