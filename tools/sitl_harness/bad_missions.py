@@ -47,7 +47,8 @@ BAD = (
     # 16-bit number: what it gives back for -1 is a count the tool unrolls past its limit.
     BadMission("endless", (TAKEOFF, (M.MAV_CMD_NAV_WAYPOINT, 4.0, 0.0, 2.0),
                            (M.MAV_CMD_DO_JUMP, 0, 0, 0, (2, -1, 0, 0), MISSION_FRAME)),
-               3, ("repeat -1 loops for ever", "DO_JUMP unrolls the mission past 1000 items"), "a DO_JUMP repeated for ever"),
+               3, ("repeat -1 loops for ever", "DO_JUMP unrolls the mission past 1000 items"),
+               "a DO_JUMP repeated for ever"),
     BadMission("empty", None, None, ("the autopilot's mission is empty",), "no mission (cleared)"),
 )
 

@@ -205,7 +205,8 @@ def _add_refusals_parser(sub):
                                          "each refused before anything flies? (markdown table, refusals.json)")
     rf.set_defaults(func=cmd_refusals)
     rf.add_argument("--autopilot", choices=["ardupilot", "px4"], required=True)
-    rf.add_argument("--out", type=Path, default=None, help="result folder (default results/refusals-<autopilot>-<time>)")
+    rf.add_argument("--out", type=Path, default=None,
+                    help="result folder (default results/refusals-<autopilot>-<time>)")
     rf.add_argument("--ardupilot-bin", default=None, metavar="PATH", help="default $MPPID_ARDUPILOT_BIN")
     rf.add_argument("--px4-bin", default=None, metavar="PATH", help="default $MPPID_PX4_BIN")
 
