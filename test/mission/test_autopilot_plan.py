@@ -83,6 +83,11 @@ def test_flying_from_the_autopilots_current_item():
      "NAV_SPLINE_WAYPOINT: mppid cannot fly it"),
     ([item(1, M.MAV_CMD_NAV_TAKEOFF, z=2.0), item(2, M.MAV_CMD_NAV_WAYPOINT, 5.0, 0.0, 2.0),
       item(3, M.MAV_CMD_DO_JUMP, p=(2, -1, 0, 0), frame=M.MAV_FRAME_MISSION)], 3, "repeat -1 loops for ever"),
+    # PX4 keeps the repeat count in 16 bits: a ground station's -1 comes back 65535 (PX4 SITL, bench/results/
+    # issue38_refusals): refused at the DO_JUMP, not at the waypoint it repeats.
+    ([item(1, M.MAV_CMD_NAV_TAKEOFF, z=2.0), item(2, M.MAV_CMD_NAV_WAYPOINT, 5.0, 0.0, 2.0),
+      item(3, M.MAV_CMD_DO_JUMP, p=(2, 65535, 0, 0), frame=M.MAV_FRAME_MISSION)], 3,
+     "DO_JUMP unrolls the mission past 1000 items"),
     ([item(1, M.MAV_CMD_NAV_TAKEOFF, z=2.0), item(2, M.MAV_CMD_DO_JUMP, p=(9, 1, 0, 0))], 2, "no such item"),
     ([item(1, M.MAV_CMD_NAV_TAKEOFF, z=2.0),
       item(2, M.MAV_CMD_NAV_WAYPOINT, 5.0, 0.0, 2.0, frame=M.MAV_FRAME_LOCAL_NED)], 2, "frame MAV_FRAME_LOCAL_NED"),

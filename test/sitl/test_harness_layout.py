@@ -193,7 +193,7 @@ def test_campaign_results_one_loader(tmp_path):
 def test_every_subcommand_has_its_function():
     sub = next(a for a in cli.build_parser()._actions if a.dest == "cmd")
     names = {"list", "run", "campaign", "compare", "table", "versus", "autopilot-table", "robustness", "overlay",
-             "tune", "plot", "speed-curve"}
+             "tune", "plot", "speed-curve", "refusals"}
     assert set(sub.choices) == names
     for name, p in sub.choices.items():
         assert p.get_default("func") is getattr(cli, "cmd_" + name.replace("-", "_")), name

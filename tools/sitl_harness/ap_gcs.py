@@ -56,7 +56,9 @@ PX4_AUTO_MISSION = (4 << 16) | (4 << 24)
 ORIGIN_TIMEOUT_S = 120.0
 
 
-def _item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
+def item(seq, cmd, home, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
+    """A MISSION_ITEM_INT as a ground station writes it: `east`, `north` metres from `home`
+    (lat, lon deg); lat, lon 0 where both are 0."""
     lat, lon = (0.0, 0.0) if (east, north) == (0.0, 0.0) else mavextra.gps_offset(home[0], home[1], east, north)
     cls = M.MAVLink_mission_item_int_message
     kind = [M.MAV_MISSION_TYPE_MISSION] if "mission_type" in cls.fieldnames else []  # MAVLink 2's extension
@@ -77,10 +79,10 @@ def mission_items(doc: dict, home, dialect: str = "ardupilot") -> list:
         raise ValueError("autopilot_mission.guided_legs: ArduPilot's NAV_GUIDED_ENABLE, which PX4 has not")
     items = []
     if dialect == "ardupilot":
-        items.append(_item(0, M.MAV_CMD_NAV_WAYPOINT, home, z=home[2], frame=M.MAV_FRAME_GLOBAL_INT))
+        items.append(item(0, M.MAV_CMD_NAV_WAYPOINT, home, z=home[2], frame=M.MAV_FRAME_GLOBAL_INT))
 
     def add(cmd, east=0.0, north=0.0, z=0.0, p=(0, 0, 0, 0), frame=REL):
-        items.append(_item(len(items), cmd, home, east, north, z, p, frame))
+        items.append(item(len(items), cmd, home, east, north, z, p, frame))
     add(M.MAV_CMD_NAV_TAKEOFF, z=float(doc["takeoff"]))
     if dialect == "px4":  # where the vehicle stands, as QGroundControl writes it (lat, lon 0 is a place)
         items[-1].x, items[-1].y = int(round(home[0] * 1e7)), int(round(home[1] * 1e7))
@@ -119,6 +121,27 @@ def upload(conn, items, timeout=30.0) -> int:
             return m.type
         conn.mav.send(wp.wp(m.seq))
     raise TimeoutError("the autopilot never acknowledged the mission")
+
+
+def upload_when_ready(conn, items, wait_s: float = 60.0) -> int:
+    """upload(), again while the autopilot's mission storage is not up yet (MAV_MISSION_NO_SPACE
+    for a while after PX4's start); the last MISSION_ACK's type."""
+    result, t0 = upload(conn, items), time.monotonic()
+    while result == M.MAV_MISSION_NO_SPACE and time.monotonic() - t0 < wait_s:
+        time.sleep(1.0)
+        result = upload(conn, items)
+    return result
+
+
+def clear(conn, timeout=10.0) -> int:
+    """MISSION_CLEAR_ALL, as a ground station's "remove all": the MISSION_ACK's type."""
+    conn.mav.mission_clear_all_send(1, 1, M.MAV_MISSION_TYPE_MISSION)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        m = conn.recv_match(type="MISSION_ACK", blocking=True, timeout=1)
+        if m is not None and (m.target_system, m.target_component) == (255, 190):
+            return m.type
+    raise TimeoutError("the autopilot never acknowledged the mission's clearing")
 
 
 def publish_world(lcm_url: str, trees, stop: threading.Event):
@@ -291,10 +314,7 @@ def main(argv=None) -> int:
         home = [float(v) for v in a.home.split(",")] if a.home else origin_of(conn)
         items = mission_items(doc, home, a.dialect)
     if items:
-        result, t0 = upload(conn, items), time.monotonic()
-        while result == M.MAV_MISSION_NO_SPACE and time.monotonic() - t0 < 60:  # mission storage not up yet
-            time.sleep(1.0)
-            result = upload(conn, items)
+        result = upload_when_ready(conn, items)
         if result != M.MAV_MISSION_ACCEPTED:
             say(f"the autopilot refused the mission: MISSION_ACK type {result}")
             return 1

@@ -49,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("plot", help="re-make the plots of a result folder")
     p.add_argument("folder", type=Path)
     p.set_defaults(func=cmd_plot)
+    _add_refusals_parser(sub)
     return ap
 
 
@@ -197,6 +198,17 @@ def _autopilot_args(p):
                         "$MPPID_ARDUPILOT_BIN)")
     p.add_argument("--px4-bin", default=None, metavar="PATH",
                    help="PX4 SITL with SIH (<PX4>/build/px4_sitl_sih/bin/px4; default $MPPID_PX4_BIN)")
+
+
+def _add_refusals_parser(sub):
+    rf = sub.add_parser("refusals", help="the missions mppid must refuse, uploaded to a real autopilot's SITL: "
+                                         "each refused before anything flies? (markdown table, refusals.json)")
+    rf.set_defaults(func=cmd_refusals)
+    rf.add_argument("--autopilot", choices=["ardupilot", "px4"], required=True)
+    rf.add_argument("--out", type=Path, default=None,
+                    help="result folder (default results/refusals-<autopilot>-<time>)")
+    rf.add_argument("--ardupilot-bin", default=None, metavar="PATH", help="default $MPPID_ARDUPILOT_BIN")
+    rf.add_argument("--px4-bin", default=None, metavar="PATH", help="default $MPPID_PX4_BIN")
 
 
 # ---- checks shared by run and campaign -----------------------------------------------------
@@ -440,6 +452,17 @@ def cmd_tune(a) -> int:
 
     interrupt_on_stop_signals()
     return main_tune(a)
+
+
+def cmd_refusals(a) -> int:
+    from .flights.base import FlightError
+    from .refusals import run
+
+    out = a.out or paths.ROOT / "results" / f"refusals-{a.autopilot}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        return run(a.autopilot, out, a.ardupilot_bin if a.autopilot == "ardupilot" else a.px4_bin)
+    except FlightError as e:
+        raise UsageError(str(e)) from None
 
 
 def cmd_plot(a) -> int:

@@ -15,7 +15,8 @@ it (the first item is 1: ArduPilot's seq, PX4's seq + 1, ArduPilot's item 0 bein
     DO_CHANGE_SPEED       the lines after it at param2 m/s (-1, 0: unchanged)
     CONDITION_YAW         the heading param1 deg (param4 1: relative, param3 -1: counter-
                           clockwise) held at where it is while it turns, and by the legs after it
-    DO_JUMP               to item param1, param2 times more (unrolled; -1, for ever: refused)
+    DO_JUMP               to item param1, param2 times more (unrolled; -1, for ever, refused, and
+                          so is a mission unrolled past MAX_LEGS: PX4 gives a -1 back as 65535)
 Positions: MAV_FRAME_GLOBAL(_INT) (altitude above mean sea level) and
 MAV_FRAME_GLOBAL_RELATIVE_ALT(_INT) (above home) against the local frame's origin
 (GPS_GLOBAL_ORIGIN) and home (HOME_POSITION), flat earth (a mission spans a few km at most).
@@ -97,6 +98,7 @@ class _Frame:
 def unrolled(items: list[dict], first: int, start: int, number) -> list[dict]:
     """The items in flight order from `start`, DO_JUMPs taken (each param2 times)."""
     out, left, i, by_seq = [], {}, start, {it["seq"]: k for k, it in enumerate(items)}
+    jump = None      # the DO_JUMP taken last: what an unrolling past MAX_LEGS is named by
     while i < len(items):
         it = items[i]
         if it["command"] != mavlink.MAV_CMD_DO_JUMP:
@@ -112,11 +114,13 @@ def unrolled(items: list[dict], first: int, start: int, number) -> list[dict]:
             left.setdefault(i, repeat)
             if left[i] > 0:
                 left[i] -= 1
+                jump = it["seq"]
                 i = by_seq[target]
             else:
                 i += 1
         if len(out) > MAX_LEGS:
-            raise Refusal(number(it["seq"]), f"DO_JUMP unrolls the mission past {MAX_LEGS} items")
+            raise Refusal(number(it["seq"] if jump is None else jump),
+                          f"DO_JUMP unrolls the mission past {MAX_LEGS} items")
     return out
 
 
