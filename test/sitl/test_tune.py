@@ -90,7 +90,7 @@ def _study(out):
 
 
 def test_tune_resumes_after_a_kill(mppid_binary, tmp_path):
-    """A tiny study (stand-in controller, 1 s flights, 2 seeds a trial) is SIGKILLed while a
+    """A tiny study (stand-in controller, 1 s flights, one seed a trial) is SIGKILLed while a
     trial flies; the same command resumes it: the stored trials are kept, the killed one is
     closed and flown again, and the study ends with the trials asked for and an overlay."""
     optuna = need_module("optuna")
@@ -98,8 +98,8 @@ def test_tune_resumes_after_a_kill(mppid_binary, tmp_path):
 
     scen = write_scenario(tmp_path / "hold.yaml")
     out = tmp_path / "study"
-    cmd = [str(SITL), "tune", "--scenarios", str(scen), "--seeds", "1-2", "--params", "lambda,sigma",
-           "--trials", "4", "--out", str(out), "--controller", "standin", "--jobs", "1", "--keep-flights"]
+    cmd = [str(SITL), "tune", "--scenarios", str(scen), "--seeds", "1", "--params", "lambda,sigma",
+           "--trials", "3", "--out", str(out), "--controller", "standin", "--jobs", "1", "--keep-flights"]
     p = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 180
     killed_pids = None
@@ -139,7 +139,7 @@ def test_tune_resumes_after_a_kill(mppid_binary, tmp_path):
     reruns = [t for t in after if t.user_attrs.get("rerun_of") == killed[0].number]
     assert len(reruns) == 1 and reruns[0].params == killed[0].params and reruns[0].state == TrialState.COMPLETE
     counted = [t for t in after if t.state in (TrialState.COMPLETE, TrialState.PRUNED)]
-    assert len(counted) == 4
+    assert len(counted) == 3
     best = yaml.safe_load((out / "best.yaml").read_text())
     assert set(best["mppi"]) == {"lambda", "sigma"}
     assert all(s.startswith("mppi.") for s in overlay.load_sets(out / "best.yaml"))
@@ -147,13 +147,13 @@ def test_tune_resumes_after_a_kill(mppid_binary, tmp_path):
     cfg = subprocess.run([str(mppid_binary), "--config", str(out / "best_config.yaml"), "--lcm-url", "memq://",
                           "--duration", "0.05", "--log-level", "error"], capture_output=True, text=True, timeout=60)
     assert cfg.returncode == 0, cfg.stderr
-    # Run again with more trials asked for: it goes on from the 4 it holds.
-    r = subprocess.run(cmd[:cmd.index("--trials") + 1] + ["5"] + cmd[cmd.index("--trials") + 2:], cwd=ROOT,
+    # Run again with more trials asked for: it goes on from the 3 it holds.
+    r = subprocess.run(cmd[:cmd.index("--trials") + 1] + ["4"] + cmd[cmd.index("--trials") + 2:], cwd=ROOT,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert "4 trials stored, 1 to go" in r.stderr
+    assert "3 trials stored, 1 to go" in r.stderr
     # Another definition of the study is refused, naming what changed.
-    r = subprocess.run(cmd[:cmd.index("--seeds") + 1] + ["1-3"] + cmd[cmd.index("--seeds") + 2:], cwd=ROOT,
+    r = subprocess.run(cmd[:cmd.index("--seeds") + 1] + ["1-2"] + cmd[cmd.index("--seeds") + 2:], cwd=ROOT,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "seeds" in r.stderr, r.stderr
 
