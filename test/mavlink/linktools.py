@@ -73,6 +73,24 @@ class UdpTap:
     def setpoints(self):
         return [(t, m) for t, m in self.decoded("down") if m.get_type() == "SET_ATTITUDE_TARGET"]
 
+    def recent(self, direction, kind, window_us=500_000):
+        """(monotonic us, message) of the `kind` messages carried `direction` in the last
+        `window_us` of what was carried that way (empty until that much has been)."""
+        mav = mavutil.mavlink.MAVLink(None)
+        mav.robust_parsing = True
+        carried = [(t, data) for t, d, data in self.log[-1200:] if d == direction]
+        if not carried or carried[-1][0] - carried[0][0] < window_us:
+            return []
+        since = carried[-1][0] - window_us
+        return [(t, m) for t, data in carried if t >= since
+                for m in mav.parse_buffer(data) or [] if m.get_type() == kind]
+
+
+def tilt_deg(q) -> float:
+    """A MAVLink quaternion's (w, x, y, z) tilt from level, in degrees."""
+    _, x, y, _ = q
+    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+
 
 class StandInController:
     """Answers every vehicle_state_t with one command_t (hover thrust, zero rates, or what
