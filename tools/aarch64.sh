@@ -21,16 +21,17 @@
 # ~3 min under emulation), the simulator's own tests, the fuzz corpora, systemd and the
 # end-to-end tests: their code is the x86-64 stage's, not the ISA's.
 #
-#   tools/aarch64.sh [--no-build]
+#   tools/aarch64.sh [--no-build | --build-only]
 #
 # Environment: MPPID_JOBS (2) build and test jobs; CI=true makes warnings errors.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-build=1
+build=1 run=1
 case "${1:-}" in
   --no-build) build=0 ;;
+  --build-only) run=0 ;;
   "") ;;
   -h|--help) sed -n '2,26s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
   *) echo "aarch64.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
@@ -60,6 +61,7 @@ if ((build)); then
   cmake --build build-aarch64 -j"$jobs" --target "${TARGETS[@]}"
 fi
 t1=$(stamp)
+if ((!run)); then log "build $((t1 - t0)) s (tests not run: --build-only)"; exit 0; fi
 log "ctest under qemu-user (excluded: labels $EXCLUDE_LABELS; $EXCLUDE)"
 status=0
 ctest --test-dir build-aarch64 --output-on-failure --no-tests=error -j"$jobs" \
