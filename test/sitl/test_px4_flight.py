@@ -153,3 +153,29 @@ def test_what_px4_did_after_a_fault(tmp_path):
     assert rep["modes"] == [(0.2, "HOLD")]
     assert rep["alt_at_fault"] == pytest.approx(0.9) and rep["max_tilt_deg"] == 0.0
     assert rep["drift_m"] == pytest.approx(109 * 6_371_000 * math.radians(1e-7), abs=0.01)
+
+
+def test_parallel_px4s_each_have_their_own_server_socket(tmp_path):
+    """PX4's server socket is /tmp/px4-sock-<instance> whatever its working folder: the flight's
+    PX4 (as root) runs with a /tmp of its own, so a campaign's PX4s at once never share it and
+    the machine's /tmp keeps none of theirs."""
+    import os
+    import subprocess
+    from sitl_harness.flights.px4 import px4_command
+
+    if os.geteuid() != 0:
+        pytest.skip("a private /tmp needs a mount namespace (root)")
+    binary = _fake_px4(tmp_path)
+    binary.write_text('#!/bin/sh\n[ -e /tmp/px4-sock-0 ] && exit 3\ntouch /tmp/px4-sock-0\nsleep 0.5\n'
+                      'ls -A /tmp > "$3/seen"\n')  # $3: the work folder (-d -w WORK)
+    before = Path("/tmp/px4-sock-0").exists()
+    works = [tmp_path / f"w{i}" for i in range(2)]
+    procs = []
+    for w in works:
+        w.mkdir()
+        cmd = px4_command(binary, w, fifo=False, params={})
+        procs.append(subprocess.Popen(cmd[:-2] + [str(w), str(w)]))  # the fake px4 writes into its work folder
+    assert [p.wait(10) for p in procs] == [0, 0]     # 3: another PX4's socket was there
+    for w in works:  # each socket in the flight's own folder; its work and build still reachable
+        assert "px4-sock-0" in (w / "seen").read_text().split() and (w / "tmp" / "px4-sock-0").exists()
+    assert Path("/tmp/px4-sock-0").exists() == before

@@ -87,12 +87,37 @@ def px4_params(path: Path = PARAMS) -> dict[str, str]:
     return dict(found)
 
 
+# PX4's server socket is /tmp/px4-sock-<instance> whatever its working folder: two PX4s of
+# instance 0 at once (a campaign's parallel flights) would take each other's. As root, each PX4
+# sees a /tmp of its own: its working folder's tmp/ mounted there (a private mount namespace),
+# with the folders it needs that lie under the machine's /tmp (its work, its build) bound in.
+PRIVATE_TMP = r"""set -e
+own="$1/tmp"; shift
+mkdir -p "$own"
+while [ "$1" != -- ]; do
+  case "$1" in /tmp/*) mkdir -p "$1" "$own${1#/tmp}"; mount --bind "$1" "$own${1#/tmp}" ;; esac
+  shift
+done
+shift
+mount --rbind "$own" /tmp
+exec "$@"
+"""
+
+
+def private_tmp(work: Path, keep: list[Path]) -> list[str]:
+    """The prefix that runs a command with `work`/tmp as its /tmp, `keep` still at their paths."""
+    return (["unshare", "--mount", "--propagation", "private", "--", "sh", "-c", PRIVATE_TMP, "px4-tmp",
+             str(work)] + [str(k) for k in keep] + ["--"])
+
+
 def px4_command(binary: Path, work: Path, fifo: bool, params: dict[str, str]) -> list[str]:
-    """PX4 in its own working folder (parameters, dataman, ULogs) with SIH's airframe and
-    `params` on top; above mppid."""
+    """PX4 in its own working folder (parameters, dataman, ULogs) and, as root, its own /tmp,
+    with SIH's airframe and `params` on top; above mppid."""
     env = {**SIH_ENV, **{f"PX4_PARAM_{k}": v for k, v in params.items()}}
     cmd = ["env"] + [f"{k}={v}" for k, v in env.items()] + [str(binary), "-d", "-w", str(work),
                                                             str(binary.parents[1] / "etc")]
+    if os.geteuid() == 0:
+        cmd = private_tmp(work.resolve(), [work.resolve(), binary.parents[1].resolve()]) + cmd
     return (["chrt", "-f", str(IO_FIFO_PRIORITY)] + cmd) if fifo else cmd
 
 
