@@ -32,8 +32,8 @@ def _steady_flight(tap, t_start, seconds=1.0):
     """A moment to kill mppid at: the flight has run `seconds` since `t_start` (time.monotonic),
     the vehicle was level (within 15 degrees) and held its height (within 0.5 m/s) for the last
     half second, and the last setpoint's thrust is within 10 % of the last second's median:
-    PX4 flies that setpoint on until its failsafe, and a steep or falling vehicle 2 m up, or a
-    low last thrust, reaches the ground before AUTO.LAND catches it."""
+    PX4 flies that setpoint on until its failsafe (on a busy machine the kill may come later than
+    this look; the circle is flown 6 m up for that)."""
     if time.monotonic() - t_start < seconds:
         return False
     odometry = [m for _, m in tap.recent("up", "ODOMETRY")]
@@ -52,7 +52,7 @@ def test_mppid_killed_stops_stream_and_failsafe_engages(netns, procs, tmp_path, 
     thrust: PX4 flies the last setpoint on until COM_OF_LOSS_T) and nothing after it; the
     autopilot's offboard-loss failsafe lands the vehicle. The rules are checked, not the wall
     clock: a busy machine may deliver the last commands late, never different ones."""
-    c = _chain(procs, tmp_path, world="circle")
+    c = _chain(procs, tmp_path, world="circle_high")
     c.start_mppid()
     _start_link(c)
     wait_for(lambda: c.status().get("states_published", 0) >= 60 and c.status().get("streaming"), 10, "stream")
