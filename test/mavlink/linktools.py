@@ -86,12 +86,6 @@ class UdpTap:
                 for m in mav.parse_buffer(data) or [] if m.get_type() == kind]
 
 
-def tilt_deg(q) -> float:
-    """A MAVLink quaternion's (w, x, y, z) tilt from level, in degrees."""
-    _, x, y, _ = q
-    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
-
-
 class StandInController:
     """Answers every vehicle_state_t with one command_t (hover thrust, zero rates, or what
     `make_u(seq)` returns) and publishes a controller_status_t at 5 Hz with `healthy`."""

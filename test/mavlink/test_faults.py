@@ -9,7 +9,8 @@ import time
 import pytest
 
 from mavtest import wait_for
-from linktools import StandInController, all_finite, tilt_deg
+from linktools import StandInController, all_finite
+from mppi_mavlink.frames import tilt_deg
 from mavchain import Chain
 
 pytestmark = pytest.mark.timeout(90)

@@ -148,3 +148,13 @@ def test_shipped_settings_load():
     from mavtest import ROOT
     for f in sorted((ROOT / "config" / "bridge").glob("*.yaml")):
         settings.load(f)
+
+
+def test_tilt_is_the_angle_of_the_body_z_axis_from_the_vertical():
+    for roll, pitch, yaw in [(0, 0, 0), (0, 0, 2.0), (0.3, 0, 0), (0, -0.5, 1.0), (0.4, 0.3, -2.5)]:
+        cr, sr, cp, sp, cy, sy = (f(a / 2) for a in (roll, pitch, yaw) for f in (math.cos, math.sin))
+        q = (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+             cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy)
+        want = math.degrees(math.acos(math.cos(roll) * math.cos(pitch)))  # z axis . vertical
+        assert frames.tilt_deg(q) == pytest.approx(want, abs=1e-9)
+        assert frames.tilt_deg(tuple(-c for c in q)) == pytest.approx(want, abs=1e-9)

@@ -68,12 +68,6 @@ def to_local(lat_e7: int, lon_e7: int, alt_m: float, origin) -> list[float]:
     return [e, n, alt_m - oalt]
 
 
-def tilt_deg(q) -> float:
-    """Angle between the body z axis and the vertical, from a (w, x, y, z) quaternion."""
-    w, x, y, z = q
-    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
-
-
 class Recorder:
     truth_out: TruthPublisher | None = None
     have_origin = False
@@ -104,7 +98,7 @@ class Recorder:
         self.f.write(json.dumps({
             "boot_us": self.boot_us, "paired": paired, "wall_us": wall,
             "x": [round(c, 4) for c in x],
-            "v": [round(m.ve, 4), round(m.vn, 4), round(-m.vd, 4)], "tilt_deg": round(tilt_deg(q), 2),
+            "v": [round(m.ve, 4), round(m.vn, 4), round(-m.vd, 4)], "tilt_deg": round(frames.tilt_deg(q), 2),
             "est": None if self.est is None else [round(c, 4) for c in self.est],
             "mode": self.mode, "armed": self.armed}) + "\n")
 

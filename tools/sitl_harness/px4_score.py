@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from mppi_mavlink import frames
 from mppi_mavlink.layout import QuadrotorRate as Q
 
 from . import ap_score
@@ -36,11 +37,6 @@ def project(lat_e7, lon_e7, ref_lat_e7, ref_lon_e7):
     north = k * (math.cos(lat0) * np.sin(lat) - math.sin(lat0) * np.cos(lat) * cos_dlon) * PX4_EARTH_R
     east = k * np.cos(lat) * np.sin(lon - lon0) * PX4_EARTH_R
     return north, east
-
-
-def tilt_deg(q) -> float:
-    w, x, y, z = q
-    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
 
 
 def _local(truth, est, origin) -> np.ndarray:
@@ -89,7 +85,8 @@ def convert(out: Path) -> list[dict]:
             ev = next(events, None)
         j = int(np.searchsorted(est_t, r["boot_us"], side="right")) - 1
         lines.append({"boot_us": r["boot_us"], "wall_us": r["wall_us"], "mission_us": int(t_mission[i]),
-                      "x": [round(float(c), 4) for c in X[i]], "v": r["v"], "tilt_deg": round(tilt_deg(r["q"]), 2),
+                      "x": [round(float(c), 4) for c in X[i]], "v": r["v"],
+                      "tilt_deg": round(frames.tilt_deg(r["q"]), 2),
                       "est": est[j]["est"] if j >= 0 else None, "mode": mode, "armed": armed})
     with open(out / "truth.jsonl", "w") as f:
         f.writelines(json.dumps(line) + "\n" for line in lines)

@@ -53,6 +53,13 @@ def quat_normalize(q):
     return tuple(c * s for c in q)
 
 
+def tilt_deg(q) -> float:
+    """The angle between the body z axis and the vertical, degrees, of a (w, x, y, z)
+    quaternion (either frame pair: NED/FRD or ENU/FLU)."""
+    _, x, y, _ = q
+    return math.degrees(math.acos(max(-1.0, min(1.0, 1.0 - 2.0 * (x * x + y * y)))))
+
+
 def enu_to_ned(v):
     """World vector (position, velocity) ENU -> NED; also NED -> ENU (self-inverse)."""
     return (v[1], v[0], -v[2])
