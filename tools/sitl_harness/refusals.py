@@ -160,8 +160,8 @@ def run(autopilot: str, out: Path, binary: str | None = None, say=print) -> int:
         sb.stop()
     answers = json.loads((out / "answers.json").read_text()) if (out / "answers.json").is_file() else {}
     rows, ok = report(p, answers, out)
-    say("{autopilot}: {binary} at {autopilot_commit}, mppid at {mppid_commit}".format(**provenance(autopilot,
-                                                                                             p["binary"])))
+    say("{autopilot}: {binary} at {autopilot_commit}, mppid at {mppid_commit}".format(
+        **json.loads((out / "refusals.json").read_text())))
     say(table(rows))
     if died:
         say(f"refusals: {died} (see {out}/*.log)")
