@@ -4,6 +4,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <mppi_lcm/local_map_t.hpp>
 #include <mppi_lcm/point_cloud_t.hpp>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -109,6 +110,59 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   }
   EXPECT_GE(columns, 2);
   EXPECT_EQ(std::fgets(line, sizeof line, sensed), nullptr);  // one map, one line
+  std::fclose(sensed);
+}
+
+// A camera tilted 45 degrees down (a fast forward flight's attitude) sees a trunk 4 m ahead
+// only at its foot: the trunk is in the map, but not where the vehicle flies, so it is not yet
+// "sensed"; seen level, it is.
+TEST(MapperNode, ATrunkSeenOnlyAtItsFootIsNotSensedAtTheFlightHeight) {
+  lcm::LCM lc("memq://");
+  mapper::MapperNode node(mapper::load_settings("", {}), &lc);
+  std::FILE* sensed = std::tmpfile();
+  ASSERT_NE(sensed, nullptr);
+  node.record_sensed(sensed);
+  MapSink sink;
+  lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
+  std::vector<sim::Obstacle> trees(1);
+  trees[0].x = 4.0;
+  trees[0].radius = 0.3;
+  sim::Pose pose;
+  pose.p = {0.0, 0.0, 2.0};
+  const double half = 0.5 * 45.0 * M_PI / 180.0;
+  pose.q = {std::cos(half), 0.0, std::sin(half), 0.0};  // pitched 45 deg down, looking along +x
+  const auto down = depth_frame(trees, pose);
+  lc.publish("MPPI_DEPTH", &down);
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_TRUE(node.publish());
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_EQ(sink.maps.size(), 1u);
+  const auto& m = sink.maps[0];
+  const auto cell = [&](double x, double z) {
+    const int i = static_cast<int>((x - m.origin[0]) / m.resolution), j = static_cast<int>(-m.origin[1] / m.resolution),
+              k = static_cast<int>((z - m.origin[2]) / m.resolution);
+    return 1e-3 * m.distance_mm[static_cast<std::size_t>(i + m.nx * (j + m.ny * k))];
+  };
+  const auto nearest = [&](double z) {  // along the trunk's near side, at height z
+    double d = 1e9;
+    for (double x = 3.3; x < 4.0; x += 0.05) d = std::min(d, cell(x, z));
+    return d;
+  };
+  EXPECT_LT(nearest(0.6), 0.0);  // the foot: occupied
+  EXPECT_GT(nearest(2.0), 0.2);  // at the flight height: not seen, free
+  std::fflush(sensed);
+  EXPECT_EQ(std::ftell(sensed), 0L);  // nothing sensed where the vehicle flies
+
+  pose.q = {1.0, 0.0, 0.0, 0.0};  // level
+  auto level = depth_frame(trees, pose);
+  level.utime += 100000;
+  lc.publish("MPPI_DEPTH", &level);
+  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_TRUE(node.publish());
+  std::rewind(sensed);
+  char line[65536];
+  ASSERT_NE(std::fgets(line, sizeof line, sensed), nullptr);
+  EXPECT_NE(std::string(line).find("\"t\":0.100"), std::string::npos) << line;
   std::fclose(sensed);
 }
 

@@ -12,7 +12,7 @@ import pytest
 
 from sitl_harness import cli, paths, px4_faults, px4_score
 from sitl_harness.flights.base import FlightError, FlightSpec
-from sitl_harness.flights.px4 import BASELINE, PARAMS, VEHICLE, Px4Flight, px4_params
+from sitl_harness.flights.px4 import BASELINE, PARAMS, SENSOR_MOUNT, VEHICLE, Px4Flight, px4_params
 
 
 def _fake_px4(tmp_path) -> Path:
@@ -80,6 +80,26 @@ def test_px4_mppid_flight_with_a_link_cut(mppid_binary, tmp_path):
     assert bridge[bridge.index("--config") + 1] == str(paths.ROOT / "config/bridge/px4_sitl.yaml")
     assert bridge[-2:] == ["--set", f"mavlink.url=udpin:127.0.0.1:{px4_faults.BRIDGE_PORT}"]
     assert cmds["relay"][-2:] == ["--cut-s", "3.0"]
+
+
+def test_px4_sensed_survey_carries_the_camera_on_sihs_mount(mppid_binary, tmp_path):
+    """The survey's sensors through PX4 see with SIH's airframe's camera mount (tilted up for its
+    40-degree cruise, config/px4/sensor_mount.yaml); everything else is the mission's."""
+    import yaml
+    binary = _fake_px4(tmp_path)
+    spec = FlightSpec(scenario="survey_forest_sensed", seed=1, out=tmp_path / "out", realtime=True,
+                      autopilot="px4", px4_bin=str(binary))
+    flight = Px4Flight.create(spec)
+    flight.out.mkdir(parents=True)
+    sensors = flight.plan().commands["sensors"]
+    flown = yaml.safe_load(Path(sensors[sensors.index("--sensing") + 1]).read_text())["sensing"]
+    mission = yaml.safe_load((paths.MISSIONS / "survey_forest_sensed.yaml").read_text())["sensing"]
+    mount = yaml.safe_load(SENSOR_MOUNT.read_text())["sensing"]["depth_camera"]
+    assert mount["pitch_deg"] < 0 and mission["depth_camera"]["pitch_deg"] == 0
+    assert flown["depth_camera"] == {**mission["depth_camera"], **mount}
+    assert "lidar" not in flown   # a mount adds no sensor the mission does not carry
+    assert {k: v for k, v in flown.items() if k != "depth_camera"} == \
+        {k: v for k, v in mission.items() if k != "depth_camera"}
 
 
 @pytest.mark.parametrize("text,parsed", [("kill_mppid@5", ("kill_mppid", 5.0, 0.0)),

@@ -259,10 +259,14 @@ void MapperNode::write_new_columns() {
   new_columns_.clear();
   const int nx = map_.nx(), ny = map_.ny(), nz = map_.nz();
   const auto& c = map_.corner();
+  // The layers within kSensedBand of the sensor's height: where the vehicle flies.
+  const double r = map_.resolution(), zs = static_cast<double>(sensor_pos_[2]);
+  const int k0 = std::max(0, static_cast<int>(std::floor((zs - kSensedBand) / r)) - static_cast<int>(c[2]));
+  const int k1 = std::min(nz - 1, static_cast<int>(std::floor((zs + kSensedBand) / r)) - static_cast<int>(c[2]));
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
       bool occ = false;
-      for (int k = 0; k < nz && !occ; ++k) occ = map_.occupied(i + nx * (j + ny * k));
+      for (int k = k0; k <= k1 && !occ; ++k) occ = map_.occupied(i + nx * (j + ny * k));
       if (!occ) continue;
       const auto key = static_cast<std::int64_t>((static_cast<std::uint64_t>(c[0] + i) << 32) |
                                                  static_cast<std::uint32_t>(c[1] + j));
@@ -273,7 +277,6 @@ void MapperNode::write_new_columns() {
   std::fprintf(sensed_, "{\"t\":%.3f,\"utime\":%lld,\"sensor\":[%.3f,%.3f,%.3f],\"columns\":[",
                1e-6 * static_cast<double>(newest_utime_ - first_utime_), static_cast<long long>(newest_utime_),
                static_cast<double>(sensor_pos_[0]), static_cast<double>(sensor_pos_[1]), static_cast<double>(sensor_pos_[2]));
-  const double r = map_.resolution();
   for (std::size_t n = 0; n < new_columns_.size(); ++n) {
     const std::int64_t key = new_columns_[n];
     const auto u = static_cast<std::uint64_t>(key);

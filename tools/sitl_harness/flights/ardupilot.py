@@ -119,7 +119,7 @@ def gcs_command(spec: FlightSpec, mission_path: Path, out: Path, url: str, diale
 
 
 def survey_commands(spec: FlightSpec, mission_path: Path, mission: dict, out: Path, cmds: dict, fifo: bool,
-                    gcs: list[str], mppid_bridge: tuple) -> dict:
+                    gcs: list[str], mppid_bridge: tuple, mount: Path | None = None) -> dict:
     """A mission uploaded to the autopilot by the ground station (`gcs`, ap_gcs.py), which also
     publishes the world's trees: flown by mppid (`mppid-mission from-autopilot` through the
     bridge), or with --controller auto by the autopilot's own mission mode, or (`guided_legs`:
@@ -138,7 +138,7 @@ def survey_commands(spec: FlightSpec, mission_path: Path, mission: dict, out: Pa
         cmds.update(controller=ctrl, segments=tool, mission=auto)
     else:
         cmds.update(gcs=gcs, controller=ctrl, mission=tool)
-    return sensed_mod.add_sensing(spec, mission_path, mission, out, cmds, fifo)
+    return sensed_mod.add_sensing(spec, mission_path, mission, out, cmds, fifo, mount)
 
 
 class ArduPilotFlight(Flight):

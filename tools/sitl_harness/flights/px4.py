@@ -59,6 +59,9 @@ OVERLAY = paths.ROOT / "config" / "px4" / "mppid_overlay.yaml"
 # The airframe mppid and the bridge are given (tools/sysid's fit of SIH's quadrotor from a PX4
 # ULog); `--set vehicle=FILE` replaces it for both.
 VEHICLE = paths.ROOT / "config" / "vehicles" / "px4_sih_identified.yaml"
+# Where SIH's quadrotor carries a sensed mission's camera (over the mission's `sensing:`; argued
+# in the file): tilted up, as it cruises tilted 40 degrees.
+SENSOR_MOUNT = paths.ROOT / "config" / "px4" / "sensor_mount.yaml"
 OFFBOARD_URL = "udpin:127.0.0.1:14540"
 GCS_URL = "udpin:127.0.0.1:14550"   # PX4's GCS link sends here (px4-rc.mavlink), a ground station listens
 # SIH's truth for a sensed flight's camera pose: PX4 starts the display link's HIL_STATE_QUATERNION
@@ -158,7 +161,8 @@ class Px4Flight(Flight):
         if "autopilot_mission" in mission:
             cmds["recorder"] += ["--gcs-port", "0"]   # the ground station's port: PX4's messages from the display link
             gcs = gcs_command(spec, mission_path, self.out, GCS_URL, "px4")
-            return survey_commands(spec, mission_path, mission, self.out, cmds, fifo, gcs, self._mppid(mission, fifo))
+            return survey_commands(spec, mission_path, mission, self.out, cmds, fifo, gcs, self._mppid(mission, fifo),
+                                   SENSOR_MOUNT)
         if spec.controller == "auto":
             raise FlightError(f"{mission_path.name}: --controller auto flies a mission uploaded to PX4 "
                               f"(autopilot_mission:, config/missions/survey_*.yaml)")
@@ -175,7 +179,7 @@ class Px4Flight(Flight):
             cmds["relay"] = [sys.executable, "-m", "sitl_harness.px4_faults", "relay", "--out", str(self.out),
                              "--cut-s", str(cut[0][2])]
         if sensed:
-            cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo)
+            cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo, SENSOR_MOUNT)
         return cmds
 
     def _mppid(self, mission: dict, fifo: bool) -> tuple:

@@ -63,10 +63,27 @@ def sensors_command(spec: FlightSpec, mission_path: Path, mission: dict, out: Pa
             "--stats", str(out / "sensors_stats.json")]
 
 
-def add_sensing(spec: FlightSpec, mission_path: Path, mission: dict, out: Path, cmds: dict, fifo: bool) -> dict:
-    """The autopilot flight's commands with the sensors, the mapper and the truth on the bus."""
+def mounted(mission: dict, mount: Path, out: Path) -> Path:
+    """The mission's `sensing:` with an airframe's mounting over it (`mount`'s `sensing:` keys,
+    for the sensors the mission has), written to OUT/sensing.yaml for mppid-sensors' --sensing:
+    where a camera points is the vehicle's, not the mission's."""
+    import yaml
+    sensing = dict(mission.get("sensing") or {})
+    for sensor, keys in ((yaml.safe_load(mount.read_text()) or {}).get("sensing") or {}).items():
+        if isinstance(sensing.get(sensor), dict):
+            sensing[sensor] = {**sensing[sensor], **keys}
+    path = out / "sensing.yaml"
+    path.write_text(yaml.safe_dump({"sensing": sensing}, sort_keys=False))
+    return path
+
+
+def add_sensing(spec: FlightSpec, mission_path: Path, mission: dict, out: Path, cmds: dict, fifo: bool,
+                mount: Path | None = None) -> dict:
+    """The autopilot flight's commands with the sensors (on the airframe's `mount`, if given), the
+    mapper and the truth on the bus."""
+    sensing = mounted(mission, mount, out) if mount is not None else mission_path
     cmds = {**cmds, "recorder": cmds["recorder"] + ["--lcm-url", sensor_bus(spec.lcm_url)],
-            "sensors": sensors_command(spec, mission_path, mission, out),
+            "sensors": sensors_command(spec, sensing, mission, out),
             "mapper": mapper_command(spec, mission, out)}
     if not fifo:
         return cmds

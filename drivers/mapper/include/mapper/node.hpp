@@ -55,8 +55,11 @@ class MapperNode {
   // From now on, each map that holds occupied columns (x, y cells) never occupied before
   // appends a JSON line to `f`: {"t" (s since the first frame), "utime", "sensor" (its
   // position), "columns": [[x, y] world centres]}: what was sensed and when (the harness's
-  // score names each tree's first sighting from it).
+  // score names each tree's first sighting from it). A column counts once it is occupied
+  // within kSensedBand of the sensor's height, where the vehicle flies: a trunk seen only at
+  // its foot (a camera looking down) is not yet an obstacle to the flight.
   void record_sensed(std::FILE* f) { sensed_ = f; }
+  static constexpr double kSensedBand = 0.5;  // m
 
  private:
   void on_cloud(const lcm::ReceiveBuffer* rb, const std::string& channel);
