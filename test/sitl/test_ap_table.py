@@ -28,3 +28,12 @@ def test_one_row_per_mission_and_controller(tmp_path):
     assert cells[2:5] == ["3", "2/3", "0.100"]       # flights, success, RMS over the successful ones
     assert cells[-1] == "hit the ground"
     assert [c.strip() for c in rows[1].strip("|").split("|")][4] == "0.300"
+
+
+def test_folders_under_one_label_are_one_campaign(tmp_path):
+    """A campaign flown in batches (seeds 51-52, then 53) is one row, its flights together."""
+    a = _campaign(tmp_path / "b1", [_run("circle_3ms", s, 0.08) for s in (51, 52)])
+    b = _campaign(tmp_path / "b2", [_run("circle_3ms", 53, 0.5, False, "hit the ground")])
+    rows = ap_table.table([a, b], ["mppid", "mppid"]).splitlines()[2:]
+    assert len(rows) == 1
+    assert [c.strip() for c in rows[0].strip("|").split("|")][2:4] == ["3", "2/3"]

@@ -2,7 +2,8 @@
 position controller over the same missions and seeds): one markdown row per mission and
 controller. Errors are the simulated truth's (ap_score.py), means over the successful
 flights (max: the largest of any); `estimate` is the same against the autopilot's own
-position estimate (what either controller saw)."""
+position estimate (what either controller saw). Folders given one label are one campaign
+(flown in batches: seeds 51-58, 59-66, ...)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -30,7 +31,10 @@ def _load(rs) -> str:
 
 
 def table(folders: list[Path], labels: list[str]) -> str:
-    camps = [(label, load_campaign(f).runs) for f, label in zip(folders, labels)]
+    camps: dict[str, list] = {}   # folders under one label: one campaign flown in batches
+    for f, label in zip(folders, labels):
+        camps.setdefault(label, []).extend(load_campaign(f).runs)
+    camps = list(camps.items())
     missions = list(dict.fromkeys(r["scenario"] for _, runs in camps for r in runs))  # first-seen order, once each
     surveys = [m for m in missions if any("waypoints_reached" in r for _, runs in camps for r in runs
                                           if r["scenario"] == m)]
