@@ -45,15 +45,39 @@ mppi_lcm::point_cloud_t depth_frame(const std::vector<sim::Obstacle>& trees, con
   return m;
 }
 
-TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
-  lcm::LCM lc("memq://");
-  ASSERT_TRUE(lc.good());
-  mapper::MapperNode node(mapper::load_settings("", {}), &lc);
+// A mapper node on memq:// recording what it senses, and the maps it publishes.
+struct MapperRig {
+  lcm::LCM lc{"memq://"};
+  mapper::MapperNode node{mapper::load_settings("", {}), &lc};
   std::FILE* sensed = std::tmpfile();
-  ASSERT_NE(sensed, nullptr);
-  node.record_sensed(sensed);
   MapSink sink;
-  lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
+  MapperRig() {
+    node.record_sensed(sensed);
+    lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
+  }
+  ~MapperRig() { std::fclose(sensed); }
+  // The frame in, the map it makes out (false if either did not happen).
+  bool map(const mppi_lcm::point_cloud_t& frame) {
+    lc.publish("MPPI_DEPTH", &frame);
+    const std::size_t before = sink.maps.size();
+    return lc.handleTimeout(100) == 1 && node.publish() && lc.handleTimeout(100) == 1 && sink.maps.size() == before + 1;
+  }
+};
+
+// The map's distance at a world point [m].
+double distance_at(const mppi_lcm::local_map_t& m, double x, double y, double z) {
+  const int i = static_cast<int>((x - m.origin[0]) / m.resolution), j = static_cast<int>((y - m.origin[1]) / m.resolution),
+            k = static_cast<int>((z - m.origin[2]) / m.resolution);
+  return 1e-3 * m.distance_mm[static_cast<std::size_t>(i + m.nx * (j + m.ny * k))];
+}
+
+TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
+  MapperRig rig;
+  ASSERT_TRUE(rig.lc.good());
+  ASSERT_NE(rig.sensed, nullptr);
+  auto& node = rig.node;
+  auto& sink = rig.sink;
+  std::FILE* sensed = rig.sensed;
   EXPECT_FALSE(node.publish());  // nothing seen yet: nothing to say
 
   std::vector<sim::Obstacle> trees(1);
@@ -64,10 +88,7 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   pose.p = {10.0, -1.0, 2.0};
   pose.q = {0.0, 0.0, 0.0, 1.0};  // yawed 180 deg: looking along -x, at the tree
   const auto frame = depth_frame(trees, pose);
-  lc.publish("MPPI_DEPTH", &frame);
-  ASSERT_EQ(lc.handleTimeout(100), 1);
-  ASSERT_TRUE(node.publish());
-  ASSERT_EQ(lc.handleTimeout(100), 1);
+  ASSERT_TRUE(rig.map(frame));
   ASSERT_EQ(sink.maps.size(), 1u);
 
   const auto& m = sink.maps[0];
@@ -84,11 +105,7 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   EXPECT_NEAR(m.origin[0], 10.0 - 16.0, 0.25);
   EXPECT_NEAR(m.origin[2], 2.0 - 4.0, 0.25);
   // Between the vehicle and the tree, 2 m before its surface: ~2 m.
-  const auto cell = [&](double x, double y, double z) {
-    const int i = static_cast<int>((x - m.origin[0]) / m.resolution), j = static_cast<int>((y - m.origin[1]) / m.resolution),
-              k = static_cast<int>((z - m.origin[2]) / m.resolution);
-    return 1e-3 * m.distance_mm[static_cast<std::size_t>(i + m.nx * (j + m.ny * k))];
-  };
+  const auto cell = [&](double x, double y, double z) { return distance_at(m, x, y, z); };
   EXPECT_NEAR(cell(8.3, -1.0, 2.0), 2.0, 0.25);
   EXPECT_LT(cell(6.0, -1.0, 2.0), 0.0);  // inside the trunk
   EXPECT_NEAR(cell(20.0, 10.0, 2.0), 5.0, 1e-3);  // behind the camera: unknown, free, saturated
@@ -110,20 +127,14 @@ TEST(MapperNode, PublishesAValidLocalMapFromASimulatedDepthFrame) {
   }
   EXPECT_GE(columns, 2);
   EXPECT_EQ(std::fgets(line, sizeof line, sensed), nullptr);  // one map, one line
-  std::fclose(sensed);
 }
 
 // A camera tilted 45 degrees down (a fast forward flight's attitude) sees a trunk 4 m ahead
 // only at its foot: the trunk is in the map, but not where the vehicle flies, so it is not yet
 // "sensed"; seen level, it is.
 TEST(MapperNode, ATrunkSeenOnlyAtItsFootIsNotSensedAtTheFlightHeight) {
-  lcm::LCM lc("memq://");
-  mapper::MapperNode node(mapper::load_settings("", {}), &lc);
-  std::FILE* sensed = std::tmpfile();
-  ASSERT_NE(sensed, nullptr);
-  node.record_sensed(sensed);
-  MapSink sink;
-  lc.subscribe("MPPI_LOCAL_MAP", &MapSink::on, &sink);
+  MapperRig rig;
+  ASSERT_NE(rig.sensed, nullptr);
   std::vector<sim::Obstacle> trees(1);
   trees[0].x = 4.0;
   trees[0].radius = 0.3;
@@ -131,39 +142,25 @@ TEST(MapperNode, ATrunkSeenOnlyAtItsFootIsNotSensedAtTheFlightHeight) {
   pose.p = {0.0, 0.0, 2.0};
   const double half = 0.5 * 45.0 * M_PI / 180.0;
   pose.q = {std::cos(half), 0.0, std::sin(half), 0.0};  // pitched 45 deg down, looking along +x
-  const auto down = depth_frame(trees, pose);
-  lc.publish("MPPI_DEPTH", &down);
-  ASSERT_EQ(lc.handleTimeout(100), 1);
-  ASSERT_TRUE(node.publish());
-  ASSERT_EQ(lc.handleTimeout(100), 1);
-  ASSERT_EQ(sink.maps.size(), 1u);
-  const auto& m = sink.maps[0];
-  const auto cell = [&](double x, double z) {
-    const int i = static_cast<int>((x - m.origin[0]) / m.resolution), j = static_cast<int>(-m.origin[1] / m.resolution),
-              k = static_cast<int>((z - m.origin[2]) / m.resolution);
-    return 1e-3 * m.distance_mm[static_cast<std::size_t>(i + m.nx * (j + m.ny * k))];
-  };
+  ASSERT_TRUE(rig.map(depth_frame(trees, pose)));
   const auto nearest = [&](double z) {  // along the trunk's near side, at height z
     double d = 1e9;
-    for (double x = 3.3; x < 4.0; x += 0.05) d = std::min(d, cell(x, z));
+    for (double x = 3.3; x < 4.0; x += 0.05) d = std::min(d, distance_at(rig.sink.maps.back(), x, 0.0, z));
     return d;
   };
   EXPECT_LT(nearest(0.6), 0.0);  // the foot: occupied
   EXPECT_GT(nearest(2.0), 0.2);  // at the flight height: not seen, free
-  std::fflush(sensed);
-  EXPECT_EQ(std::ftell(sensed), 0L);  // nothing sensed where the vehicle flies
+  std::fflush(rig.sensed);
+  EXPECT_EQ(std::ftell(rig.sensed), 0L);  // nothing sensed where the vehicle flies
 
   pose.q = {1.0, 0.0, 0.0, 0.0};  // level
   auto level = depth_frame(trees, pose);
   level.utime += 100000;
-  lc.publish("MPPI_DEPTH", &level);
-  ASSERT_EQ(lc.handleTimeout(100), 1);
-  ASSERT_TRUE(node.publish());
-  std::rewind(sensed);
+  ASSERT_TRUE(rig.map(level));
+  std::rewind(rig.sensed);
   char line[65536];
-  ASSERT_NE(std::fgets(line, sizeof line, sensed), nullptr);
+  ASSERT_NE(std::fgets(line, sizeof line, rig.sensed), nullptr);
   EXPECT_NE(std::string(line).find("\"t\":0.100"), std::string::npos) << line;
-  std::fclose(sensed);
 }
 
 TEST(MapperNode, CountsAndIgnoresUndecodableFrames) {
