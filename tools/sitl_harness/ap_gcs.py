@@ -2,7 +2,7 @@
 `autopilot_mission` (config/missions/survey_forest_sensed.yaml): the operator's part.
 
     python -m sitl_harness.ap_gcs --url URL [--dialect ardupilot|px4] --mission FILE --seed N
-        [--home LAT,LON,ALT,HDG] --lcm-url URL --out DIR [--fly-auto]
+        [--home LAT,LON,ALT,HDG] --lcm-url URL --out DIR [--fly-auto | --loiter-push S | --position-push S]
 
 ArduCopter SITL: `--url tcp:127.0.0.1:5763` (its third serial port), `--home` the SITL's.
 PX4 SITL: `--dialect px4 --url udpin:127.0.0.1:14550` (PX4's GCS link, where QGroundControl
@@ -27,12 +27,15 @@ asked for until PX4 has one), the frame of the legs, the trees and the score.
    mission_summary.json as the mission tool writes them (the score reads both).
    With --loiter-push S (`--controller loiter`, a mission with no `autopilot_mission`): GUIDED
    take-off, Loiter, the pitch stick pushed forward for S s towards what is ahead, LAND.
+   With --position-push S (PX4, `--controller position`): PX4's AUTO.TAKEOFF, then the sticks
+   as MANUAL_CONTROL at STICK_HZ, Position mode, the pitch stick pushed forward for S s, Land.
 Without either it publishes until it is stopped: `mppid-mission from-autopilot` flies.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -53,6 +56,13 @@ DIALECTS = ("ardupilot", "px4")
 # PX4's AUTO.MISSION as SET_MODE's custom mode: main mode 4 (bits 16-23), sub mode 4 (bits 24-31),
 # px4_custom_mode.h.
 PX4_AUTO_MISSION = (4 << 16) | (4 << 24)
+PX4_AUTO_TAKEOFF = (4 << 16) | (2 << 24)
+PX4_AUTO_LOITER = (4 << 16) | (3 << 24)   # Hold: where PX4's take-off ends
+PX4_POSCTL_MAIN = 3                       # Position mode's main mode
+STICK_HZ = 20.0            # MANUAL_CONTROL, as a joystick on a ground station sends it
+PUSH_STICK = 600           # MANUAL_CONTROL x, 60 % forward: ArduCopter's 1200 us (PUSH_PWM)
+STICK_MID = 500            # MANUAL_CONTROL z at mid: PX4's Position mode holds the altitude
+SETTLE_S = 3.0             # the sticks centred before the push and after it
 ORIGIN_TIMEOUT_S = 120.0
 
 
@@ -244,6 +254,61 @@ def fly_loiter_push(conn, log, say, seconds: float, altitude: float) -> dict:
     return {"outcome": "done" if down is not None else "not landed in 60 s"}
 
 
+def watch(conn, seconds: float, until=None, pitch: int | None = None):
+    """The autopilot's messages for `seconds`, or until `until(message)` holds for one: that
+    message, else None. With `pitch`, the ground station's sticks meanwhile: MANUAL_CONTROL at
+    STICK_HZ, that pitch, roll and yaw centred, the throttle at mid."""
+    end, due = time.monotonic() + seconds, 0.0
+    while (now := time.monotonic()) < end:
+        if pitch is not None and now >= due:
+            conn.mav.manual_control_send(1, pitch, 0, STICK_MID, 0, 0)
+            due = now + 1.0 / STICK_HZ
+        wait = (min(due, end) if pitch is not None else end) - time.monotonic()
+        m = conn.recv_match(blocking=True, timeout=max(0.0, wait))
+        if m is not None and until is not None and m.get_srcSystem() == 1 and until(m):
+            return m
+    return None
+
+
+def _heartbeat(m) -> bool:
+    """The autopilot's own HEARTBEAT (not a ground station's or the bridge's, which PX4 forwards)."""
+    return m.get_type() == "HEARTBEAT" and m.type == M.MAV_TYPE_QUADROTOR
+
+
+def _px4_main_mode(m) -> int:
+    return (m.custom_mode >> 16) & 0xFF
+
+
+def fly_position_push(conn, log, say, seconds: float, altitude: float) -> dict:
+    """With mppid not flying: PX4's AUTO.TAKEOFF (MIS_TAKEOFF_ALT), then the ground station's
+    sticks (MANUAL_CONTROL, centred, throttle at mid), Position mode, the pitch stick pushed
+    forward for `seconds` towards what is ahead of the nose, released, Land; PX4's collision
+    prevention, fed by the mapper through the bridge's OBSTACLE_DISTANCE, should stop it short."""
+    if not _arm(conn, PX4_AUTO_TAKEOFF):
+        return {"outcome": "not armed in 90 s"}
+    say(f"armed in AUTO.TAKEOFF, climbing to {altitude:g} m")
+    up = watch(conn, 60.0, lambda m: m.get_type() == "GLOBAL_POSITION_INT" and m.relative_alt > 900 * altitude)
+    if up is None or watch(conn, 30.0, lambda m: _heartbeat(m) and m.custom_mode == PX4_AUTO_LOITER) is None:
+        return {"outcome": f"the take-off to {altitude:g} m did not end in Hold"}
+    watch(conn, SETTLE_S, pitch=0)   # PX4 has valid sticks before Position mode is asked for
+    conn.mav.command_long_send(1, 1, M.MAV_CMD_DO_SET_MODE, 0, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                               PX4_POSCTL_MAIN, 0, 0, 0, 0, 0)
+    if watch(conn, 5.0, lambda m: _heartbeat(m) and _px4_main_mode(m) == PX4_POSCTL_MAIN, pitch=0) is None:
+        return {"outcome": "PX4 did not take Position mode in 5 s"}
+    say(f"Position mode, the pitch stick at {PUSH_STICK / 1000:g} for {seconds:g} s")
+    log({"event": "push", "wall_us": int(time.time() * 1e6), "stick": PUSH_STICK / 1000})
+    left = watch(conn, seconds, lambda m: _heartbeat(m) and _px4_main_mode(m) != PX4_POSCTL_MAIN, pitch=PUSH_STICK)
+    log({"event": "released", "wall_us": int(time.time() * 1e6)})
+    summary = {}
+    if left is not None:   # e.g. collision prevention's own Hold, after 5 s without obstacle data
+        summary["left_position_mode"] = f"{left.custom_mode:#x}"
+        say(f"PX4 left Position mode during the push: custom mode {left.custom_mode:#x}")
+    watch(conn, SETTLE_S, pitch=0)
+    conn.mav.command_long_send(1, 1, M.MAV_CMD_NAV_LAND, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+    down = watch(conn, 60.0, lambda m: _heartbeat(m) and not m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED, pitch=0)
+    return {"outcome": "done" if down is not None else "not landed in 60 s", **summary}
+
+
 def _args(argv):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--url", required=True)
@@ -255,11 +320,16 @@ def _args(argv):
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--fly-auto", action="store_true", help="fly it with the autopilot's AUTO")
     ap.add_argument("--loiter-push", type=float, default=0.0, metavar="SECONDS",
-                    help="instead: take off, Loiter, the pitch stick pushed forward this long, land")
+                    help="instead: take off, Loiter, the pitch stick pushed forward this long, land (ArduPilot)")
+    ap.add_argument("--position-push", type=float, default=0.0, metavar="SECONDS",
+                    help="instead: take off, Position mode, the pitch stick pushed forward this long, land (PX4)")
     ap.add_argument("--timeout", type=float, default=180.0)
     a = ap.parse_args(argv)
     if a.dialect == "ardupilot" and not a.home:
         ap.error("--home: ArduPilot's mission starts with its home (the SITL's --home)")
+    if a.loiter_push > 0 and a.dialect != "ardupilot" or a.position_push > 0 and a.dialect != "px4":
+        ap.error("--loiter-push is ArduCopter's Loiter (--dialect ardupilot), --position-push PX4's Position "
+                 "mode (--dialect px4)")
     return a
 
 
@@ -287,9 +357,12 @@ def _fly(a, doc, conn, items, trees, say) -> dict:
              "vehicle_radius": float(doc.get("vehicle_radius", 0.2)), "clock": "boot", "settle": 3.0})
         if a.loiter_push > 0:
             flown = fly_loiter_push(conn, log, say, a.loiter_push, float(doc.get("takeoff", 2.0)))
+        elif a.position_push > 0:
+            flown = fly_position_push(conn, log, say, a.position_push, float(doc.get("takeoff", 2.0)))
         else:
             flown = fly_auto(conn, last_waypoint(items), log, say, a.timeout, a.dialect)
-        summary = {"mission": doc["name"], "seed": a.seed, "controller": "loiter" if a.loiter_push > 0 else "auto", **flown}
+        controller = "loiter" if a.loiter_push > 0 else "position" if a.position_push > 0 else "auto"
+        summary = {"mission": doc["name"], "seed": a.seed, "controller": controller, **flown}
         log({"event": "end", **summary})
     (a.out / "mission_summary.json").write_text(json.dumps(summary, indent=1))
     say(f"outcome: {summary['outcome']}")
@@ -321,7 +394,7 @@ def main(argv=None) -> int:
         say(f"mission uploaded: {len(items)} items, {len(trees)} trees in the world")
     threading.Thread(target=publish_world, args=(a.lcm_url, trees, stop), daemon=True).start()
     print(json.dumps({"event": "ready"}), flush=True)
-    if not (a.fly_auto or a.loiter_push > 0):
+    if not (a.fly_auto or a.loiter_push > 0 or a.position_push > 0):
         while not stop.wait(0.5):
             pass
         return 0

@@ -27,7 +27,7 @@ GROUND_Z = 0.05
 
 
 # The controllers that are the autopilot's own (no mppid, no LCM log to time).
-AUTOPILOT_CONTROLLERS = ("guided", "px4", "auto", "loiter")
+AUTOPILOT_CONTROLLERS = ("guided", "px4", "auto", "loiter", "position")
 
 
 def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> dict:
@@ -56,6 +56,7 @@ def score_flight(out: Path, spec, info: dict, autopilot: str = "ardupilot") -> d
     if world:
         res.update(survey.figures(world, t_truth * 1e-6, X[:, Q.PX:Q.PZ + 1], np.array([r["v"] for r in truth])))
     res.update(_safety(truth, events, X, flying, head, res.get("last_item_index")))
+    res.update(_push(mission, truth, X, head))
     res.update(_timing(out) if spec.controller not in AUTOPILOT_CONTROLLERS else {})
     res.update(_sensing(out, head, t_truth, X))
     done = summary.get("outcome") == "done" and res.get("waypoints_reached") == res.get("waypoints")
@@ -145,6 +146,37 @@ def _safety(truth, events, X, flying, head, end: int | None = None) -> dict:
         d = [min(math.hypot(p[0] - x, p[1] - y) - r - vr for x, y, r in trees) for p in X[air]]
         res["min_clearance"] = float(min(d)) if d else None
     return res
+
+
+PUSH_AFTER_S = 3.0     # the push's figures run on this long after the stick's release
+STOPPED_SPEED = 0.3    # m/s: slower than this at the release, the vehicle had stopped
+
+
+def _push(mission, truth, X, head) -> dict:
+    """A flight that pushes the stick towards the trees (--controller loiter, position: the
+    ground station's `push` and `released` events): "push", from the push to PUSH_AFTER_S after
+    the release, the closest the vehicle came to a tree (surface, less the vehicle's radius, as
+    min_clearance), its clearance, horizontal speed and place at the release, whether it had
+    stopped there, and its largest horizontal speed while pushed."""
+    ev = {m["event"]: m["wall_us"] for m in mission if m.get("event") in ("push", "released")}
+    trees = head.get("trees") or []
+    if {"push", "released"} - set(ev) or not trees:
+        return {}
+    wall = np.array([r["wall_us"] for r in truth], float)
+    pushed = (wall >= ev["push"]) & (wall <= ev["released"])
+    window = (wall >= ev["push"]) & (wall <= ev["released"] + PUSH_AFTER_S * 1e6)
+    if not pushed.any():
+        return {}
+    vr = float(head.get("vehicle_radius", 0.2))
+    clear = np.array([min(math.hypot(p[0] - x, p[1] - y) - r - vr for x, y, r in trees) for p in X[:, :2]])
+    speed = np.array([math.hypot(r["v"][0], r["v"][1]) for r in truth])
+    i = int(np.flatnonzero(pushed)[-1])
+    return {"push": {"seconds": round((ev["released"] - ev["push"]) * 1e-6, 2),
+                     "closest_m": round(float(clear[window].min()), 3), "at_release_m": round(float(clear[i]), 3),
+                     "speed_at_release": round(float(speed[i]), 3), "max_speed": round(float(speed[pushed].max()), 3),
+                     "at_release_xy": [round(float(c), 2) for c in X[i, :2]],
+                     "start_xy": [round(float(c), 2) for c in X[np.flatnonzero(pushed)[0], :2]],
+                     "stopped": bool(speed[i] < STOPPED_SPEED)}}
 
 
 def _sensing(out: Path, head: dict, t_truth: np.ndarray, X: np.ndarray) -> dict:

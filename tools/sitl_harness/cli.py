@@ -14,8 +14,8 @@ from . import paths
 # --controller: mppid, its DDP baseline, the hover stand-in, and the autopilots' own (guided:
 # ArduCopter's GUIDED; px4: PX4's offboard position control; auto: an uploaded mission in the
 # autopilot's own mission mode, ArduCopter's AUTO with BendyRuler or PX4's AUTO.MISSION; loiter:
-# ArduCopter's Loiter, pushed towards a trunk).
-CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto", "loiter"]
+# ArduCopter's Loiter, pushed towards a trunk; position: PX4's Position mode, pushed likewise).
+CONTROLLERS = ["mppid", "ddp", "standin", "guided", "px4", "auto", "loiter", "position"]
 
 
 class UsageError(Exception):
@@ -73,7 +73,9 @@ def _add_run_parser(sub):
                         "ardupilot); px4: PX4's own offboard position control (--autopilot px4); auto: a mission "
                         "uploaded to the autopilot flown in its own mission mode (ArduCopter's AUTO with BendyRuler, "
                         "PX4's AUTO.MISSION; config/missions/survey_*.yaml); loiter: "
-                        "ArduCopter's Loiter pushed towards a sensed trunk, mppid not flying (loiter_toward_trunk)")
+                        "ArduCopter's Loiter pushed towards a sensed trunk, mppid not flying (loiter_toward_trunk); "
+                        "position: PX4's Position mode pushed likewise, its collision prevention fed by the map "
+                        "(position_toward_trunk)")
     _autopilot_args(r)
     r.add_argument("--overlay", action="append", default=[], type=Path, metavar="FILE.yaml",
                    help="settings overlay (e.g. from `sitl tune`): its keys become --set pairs, before --set")
@@ -125,7 +127,9 @@ def _add_campaign_parser(sub):
     c.add_argument("--controller", choices=CONTROLLERS, default="mppid",
                    help="mppid (MPPI), ddp (mppid --controller ddp: the MPC-DDP baseline), the stand-in, guided "
                         "(ArduCopter's position controller, --autopilot ardupilot), auto (an uploaded survey in the "
-                        "autopilot's mission mode: ArduCopter's AUTO with BendyRuler, PX4's AUTO.MISSION), loiter (ArduCopter's Loiter pushed at a trunk) or px4 "
+                        "autopilot's mission mode: ArduCopter's AUTO with BendyRuler, PX4's AUTO.MISSION), loiter "
+                        "(ArduCopter's Loiter pushed at a trunk), position (PX4's Position mode pushed at a trunk) "
+                        "or px4 "
                         "(PX4's offboard position control, --autopilot px4)")
     _autopilot_args(c)
     c.add_argument("--realtime", action="store_true")
@@ -214,7 +218,7 @@ def _add_refusals_parser(sub):
 # ---- checks shared by run and campaign -----------------------------------------------------
 def _autopilot_check(a) -> str:
     """Why the autopilot options do not fit the others ('' when they do)."""
-    own = {"ardupilot": ("guided", "auto", "loiter"), "px4": ("px4", "auto")}  # each autopilot's own controllers
+    own = {"ardupilot": ("guided", "auto", "loiter"), "px4": ("px4", "auto", "position")}  # each autopilot's own
     owners = [autopilot for autopilot, ctrls in own.items() if a.controller in ctrls]
     if owners and a.autopilot not in owners:
         return (f"--controller {a.controller} is {' or '.join(owners)}'s own controller: it needs --autopilot "

@@ -104,7 +104,9 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bri
     for kv in load_sets(overlay) + list((mission.get("mppid") or {}).get("set", [])) + sets:
         ctrl += ["--set", str(kv)]
     sock = out / "bridge.sock"
-    bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(bridge_config), "--lcm-url", spec.lcm_url,
+    # The bridge reads a sensed mission's maps (OBSTACLE_DISTANCE): mppid's receive buffer.
+    bridge = [sys.executable, "-m", "mppi_mavlink", "run", "--config", str(bridge_config), "--lcm-url",
+              sensed_mod.controller_url(spec, mission),
               "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
               "--set", f"trace.file={out / 'bridge_trace.jsonl'}"]  # each setpoint's path, stage by stage
     if fifo:

@@ -23,6 +23,11 @@ bridge and mppid flies it in OFFBOARD (PX4 lands at its NAV_LAND: the bridge's `
 `--controller auto`: PX4 flies it itself in AUTO.MISSION (no avoidance in PX4's missions at the
 commit flown: collision prevention acts in Position mode only).
 
+`--controller position` (config/missions/position_toward_trunk.yaml): PX4's own collision
+prevention with mppid not flying: the bridge sends mppid-mapper's map as OBSTACLE_DISTANCE, and
+ap_gcs.py on PX4's GCS link takes off, switches to Position mode and pushes the pitch stick
+(MANUAL_CONTROL) towards a trunk only the camera sees, with config/px4/collision_prevention.params.
+
 `--controller px4` flies the same mission with PX4's own offboard position control
 (px4_offboard.py on the offboard link: SET_POSITION_TARGET_LOCAL_NED with the reference's
 position, velocity and acceleration at 50 Hz; no mppid, no bridge): the baseline.
@@ -62,6 +67,10 @@ VEHICLE = paths.ROOT / "config" / "vehicles" / "px4_sih_identified.yaml"
 # Where SIH's quadrotor carries a sensed mission's camera (over the mission's `sensing:`; argued
 # in the file): tilted up, as it cruises tilted 40 degrees.
 SENSOR_MOUNT = paths.ROOT / "config" / "px4" / "sensor_mount.yaml"
+# PX4's collision prevention and the ground station's sticks (argued in the file): loaded for
+# `--controller position` only.
+COLLISION_PREVENTION = paths.ROOT / "config" / "px4" / "collision_prevention.params"
+POSITION_PUSH_S = 12.0  # the pitch stick held forward in Position mode (ArduCopter's Loiter push's)
 OFFBOARD_URL = "udpin:127.0.0.1:14540"
 GCS_URL = "udpin:127.0.0.1:14550"   # PX4's GCS link sends here (px4-rc.mavlink), a ground station listens
 # SIH's truth for a sensed flight's camera pose: PX4 starts the display link's HIL_STATE_QUATERNION
@@ -149,8 +158,9 @@ class Px4Flight(Flight):
         fifo = fifo_allowed()
         work = self.out / "px4"
         work.mkdir(exist_ok=True)
-        params = {**px4_params(PARAMS), **px4_params(BASELINE), "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0)),
-                  **dict(kv.split("=", 1) for kv in spec.autopilot_params)}
+        own = px4_params(COLLISION_PREVENTION) if spec.controller == "position" else {}
+        params = {**px4_params(PARAMS), **px4_params(BASELINE), **own,
+                  "MIS_TAKEOFF_ALT": str(mission.get("takeoff", 2.0)), **dict(kv.split("=", 1) for kv in spec.autopilot_params)}
         sensed = sensed_mod.sensed(mission)
         cmds = {
             "logger": logger_command(spec, self.out, sensed_mod.log_exclusions(mission)),
@@ -158,6 +168,8 @@ class Px4Flight(Flight):
             + (["--truth-hz", f"{TRUTH_HZ:g}"] if sensed else []),
             "sim": px4_command(self.binary, work, fifo, params),
         }
+        if spec.controller == "position":
+            return self._position_commands(mission_path, mission, cmds, fifo)
         if "autopilot_mission" in mission:
             cmds["recorder"] += ["--gcs-port", "0"]   # the ground station's port: PX4's messages from the display link
             gcs = gcs_command(spec, mission_path, self.out, GCS_URL, "px4")
@@ -181,6 +193,18 @@ class Px4Flight(Flight):
         if sensed:
             cmds = sensed_mod.add_sensing(spec, mission_path, mission, self.out, cmds, fifo, SENSOR_MOUNT)
         return cmds
+
+    def _position_commands(self, mission_path: Path, mission: dict, cmds: dict, fifo: bool) -> dict:
+        """PX4's Position mode pushed towards what the sensors see, mppid not flying: the bridge
+        (the map as OBSTACLE_DISTANCE), the sensors and the mapper, the ground station on PX4's
+        GCS link with the sticks (the recorder takes PX4's messages from the display link)."""
+        if not sensed_mod.sensed(mission) or "autopilot_mission" in mission:
+            raise FlightError(f"{mission_path.name}: --controller position flies a sensed mission with no "
+                              f"autopilot_mission (config/missions/position_toward_trunk.yaml)")
+        gcs = gcs_command(self.spec, mission_path, self.out, GCS_URL, "px4")
+        cmds = {**cmds, "recorder": cmds["recorder"] + ["--gcs-port", "0"], "bridge": self._mppid(mission, fifo)[1],
+                "mission": gcs + ["--position-push", f"{POSITION_PUSH_S:g}"]}
+        return sensed_mod.add_sensing(self.spec, mission_path, mission, self.out, cmds, fifo, SENSOR_MOUNT)
 
     def _mppid(self, mission: dict, fifo: bool) -> tuple:
         """mppid and the bridge with PX4's configuration, airframe and overlay; the bridge's socket."""
