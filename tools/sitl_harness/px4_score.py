@@ -169,6 +169,44 @@ def ulog_modes(out: Path, truth: list[dict], fault: dict, window_s: float = 30.0
     return out_
 
 
+def _boot_us(truth: list[dict], wall_us: int) -> float:
+    """A wall time on PX4's clock, through the nearest truth sample."""
+    near = min((r for r in truth if "x" in r), key=lambda r: abs(r["wall_us"] - wall_us))
+    return near["boot_us"] + (wall_us - near["wall_us"])
+
+
+def ulog_collision_prevention(out: Path, truth: list[dict]) -> dict | None:
+    """What PX4's collision prevention had while the stick was pushed (--controller position),
+    from its ULog: the OBSTACLE_DISTANCE messages it took (obstacle_distance) and their rate, its
+    map's nearest obstacle (obstacle_distance_fused, the 72 bins) at the release, and how often it
+    adapted the stick's setpoint (collision_constraints)."""
+    logs = sorted((out / "px4" / "log").glob("*/*.ulg"))
+    ev = {m["event"]: m["wall_us"] for m in read_jsonl(out / "mission.jsonl") if m.get("event") in ("push", "released")}
+    if not logs or {"push", "released"} - set(ev) or not any("x" in r for r in truth):
+        return None
+    try:
+        from pyulog import ULog
+    except ImportError:
+        return None
+    t0, t1 = _boot_us(truth, ev["push"]), _boot_us(truth, ev["released"])
+    topics = {d.name: d.data for d in ULog(str(logs[-1]), ["obstacle_distance", "obstacle_distance_fused",
+                                                            "collision_constraints"]).data_list}
+    res = {}
+    for name in ("obstacle_distance", "collision_constraints"):
+        t = topics.get(name, {}).get("timestamp", np.array([]))
+        n = int(np.count_nonzero((t >= t0) & (t <= t1)))
+        res[f"{name}_msgs"] = n
+        res[f"{name}_hz"] = round(n / ((t1 - t0) * 1e-6), 1)
+    fused = topics.get("obstacle_distance_fused")
+    if fused is not None and len(fused["timestamp"]):
+        i = max(int(np.searchsorted(fused["timestamp"], t1, side="right")) - 1, 0)
+        bins = np.array([fused[f"distances[{k}]"][i] for k in range(72)], float)
+        j = int(np.argmin(bins))
+        res["nearest_at_release_m"] = None if bins[j] >= 65535 else round(float(bins[j]) * 0.01, 2)
+        res["nearest_bin_deg"] = 5 * j
+    return res
+
+
 def score_flight(out: Path, spec, info: dict) -> dict:
     out = Path(out)
     truth = convert(out)
@@ -177,6 +215,8 @@ def score_flight(out: Path, spec, info: dict) -> dict:
     if spec.controller != "px4":
         res.update(state_ages(out))
     res.pop("state_to_command_samples_ms", None)
+    if spec.controller == "position":
+        res["collision_prevention"] = ulog_collision_prevention(out, truth)
     if info.get("faults"):
         res["faults"] = [{**fault_report(truth, f), "px4_modes": ulog_modes(out, truth, f)} for f in info["faults"]]
     return res
