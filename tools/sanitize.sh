@@ -9,14 +9,17 @@
 #            loop, deadline guard, latest-value slot, rings; driver_tests: the LCM receive
 #            thread with the loop), OpenMP made visible to TSan by LLVM's Archer tool.
 #
-#   tools/sanitize.sh [--skip-asan] [--skip-fuzz] [--skip-tsan] [--fuzz-seconds N]
+#   tools/sanitize.sh [--skip-asan] [--skip-fuzz] [--skip-tsan] [--fuzz-seconds N] [--build-only]
+#
+#   --build-only   configure and build build-asan and build-tsan, run nothing (tools/test.sh
+#                  builds them so beside ctest and pytest; this script's run then finds them built)
 #
 # Environment: MPPID_JOBS (2) build jobs; CI=true makes clang warnings errors.
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
-do_asan=1 do_fuzz=1 do_tsan=1
+do_asan=1 do_fuzz=1 do_tsan=1 build_only=0
 fuzz_seconds="${MPPID_FUZZ_SECONDS:-30}"
 while (($#)); do
   case "$1" in
@@ -24,7 +27,8 @@ while (($#)); do
     --skip-fuzz) do_fuzz=0 ;;
     --skip-tsan) do_tsan=0 ;;
     --fuzz-seconds) fuzz_seconds="$2"; shift ;;
-    -h|--help) sed -n '2,15s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
+    --build-only) build_only=1 ;;
+    -h|--help) sed -n '2,18s/^# \{0,1\}//p' "${BASH_SOURCE[0]}"; exit 0 ;;
     *) echo "sanitize.sh: unknown argument '$1' (try --help)" >&2; exit 2 ;;
   esac
   shift
@@ -51,12 +55,27 @@ for s in /usr/bin/llvm-symbolizer-14 /usr/lib/llvm-14/bin/llvm-symbolizer; do
   [[ -x "$s" ]] && { export ASAN_SYMBOLIZER_PATH="$s" TSAN_SYMBOLIZER_PATH="$s"; break; }
 done
 
-status=0
-if ((do_asan)); then
-  t0=$(stamp)
+build_asan() {
   log "asan: configure and build build-asan (tests and fuzz targets)"
   configure asan
   cmake --build build-asan -j"$jobs"
+}
+build_tsan() {
+  log "tsan: configure and build build-tsan (rt_tests, driver_tests)"
+  configure tsan
+  cmake --build build-tsan -j"$jobs" --target rt_tests driver_tests
+}
+if ((build_only)); then
+  if ((do_asan)); then build_asan; fi
+  if ((do_tsan)); then build_tsan; fi
+  log "built (--build-only)"
+  exit 0
+fi
+
+status=0
+if ((do_asan)); then
+  t0=$(stamp)
+  build_asan
   t1=$(stamp)
   # Not under ASan, each for the reason given:
   #  - ClosedLoop.RacecarLapsTheEllipse, ClosedLoop.RateQuadrotorTracksCircle, Forest seeds 1
@@ -86,9 +105,7 @@ fi
 
 if ((do_tsan)); then
   t0=$(stamp)
-  log "tsan: configure and build build-tsan (rt_tests, driver_tests)"
-  configure tsan
-  cmake --build build-tsan -j"$jobs" --target rt_tests driver_tests
+  build_tsan
   t1=$(stamp)
   archer=/usr/lib/llvm-14/lib/libarcher.so
   [[ -f "$archer" ]] || { echo "sanitize.sh: $archer missing (libomp-14-dev)" >&2; exit 1; }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sets up and builds (tools/setup.sh), then runs every test: the hygiene check
 # (tools/check-hygiene.py), ctest over the build, pytest over test/ on two workers (a real-time
-# forest flight among them), a short soak with scheduled faults (tools/soak, every fault once,
+# forest flight among them; the sanitizer and aarch64 builds beside them at SCHED_IDLE,
+# results/builds.log), a short soak with scheduled faults (tools/soak, every fault once,
 # flown beside the sanitizer stage), the sanitizer and fuzzing stage (tools/sanitize.sh:
 # ASan+UBSan build of every test, each libFuzzer target 30 s, TSan of the threaded tests),
 # then the aarch64 cross build (tools/aarch64.sh) and the package stage (tools/package-test.sh:
@@ -41,6 +42,21 @@ stage_names=() stage_secs=() stage_t0=0  # SECONDS: since the script began, so s
 stage_done() { stage_names+=("$1"); stage_secs+=($((SECONDS - stage_t0))); stage_t0=$SECONDS; }
 stage_done setup
 
+# The sanitizer and aarch64 builds (tools/sanitize.sh --build-only, tools/aarch64.sh
+# --build-only) start now, beside ctest and pytest, at SCHED_IDLE: they take only the CPU time
+# nothing else wants, and pytest leaves much of it (its flights wait on real time and take
+# turns). From an empty compile cache they are ~20 minutes of compiling on 2 cores; the stages
+# below wait for them, then find them built (and build whatever a failure here left).
+builds_pid=""
+if ((!quick)); then
+  mkdir -p results
+  idle=(chrt --idle 0)
+  "${idle[@]}" true 2>/dev/null || idle=(nice -n 19)
+  echo "[test] the sanitizer and aarch64 builds beside ctest and pytest (${idle[*]}; their log: results/builds.log)"
+  "${idle[@]}" bash -c 'tools/sanitize.sh --build-only && tools/aarch64.sh --build-only' >results/builds.log 2>&1 &
+  builds_pid=$!
+fi
+
 echo "[test] tools/check-hygiene.py (the tracked files: no development talk, no third-party recipe, sizes)"
 python3 tools/check-hygiene.py || status=1
 stage_done hygiene
@@ -67,7 +83,11 @@ fi
 stage_done pytest
 
 if ((!quick)); then
-  # The soak flies in real time (SCHED_FIFO) beside the sanitizer stage's builds and fuzzers:
+  echo "[test] waiting for the sanitizer and aarch64 builds (results/builds.log)"
+  wait "$builds_pid" || echo "[test] those builds failed (rc $?; results/builds.log): the stages below build again and report"
+  grep -E '^\[(sanitize|aarch64)\]' results/builds.log || true
+  stage_done builds
+  # The soak flies in real time (SCHED_FIFO) beside the sanitizer stage's tests and fuzzers:
   # a busy machine, as a companion computer is, and 2.5 minutes of CI's time given back.
   echo "[test] tools/soak --minutes ${MPPID_SOAK_MINUTES:-2.5} (beside the sanitizer stage; its log: results/soak-test.log)"
   mkdir -p results
