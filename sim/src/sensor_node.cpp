@@ -151,7 +151,13 @@ void SensorNode::run(const volatile std::sig_atomic_t* stop) {
     }
     publish_due(wall_());
   }
-  // Stopping loses nothing: the frames already captured go out now, before their latency.
+  // Stopping loses nothing: what is already on the buses is taken (a busy machine leaves the
+  // last truths queued), and the frames captured go out now, before their latency.
+  for (int n = 0; n < kDrainMax; ++n) {
+    const int world = in_->handleTimeout(0);
+    const int truth = one_bus ? 0 : out_->handleTimeout(0);
+    if (world <= 0 && truth <= 0) break;
+  }
   if (epoch_us_ >= 0) rig_.publish_due(std::numeric_limits<double>::infinity());
 }
 

@@ -63,6 +63,7 @@ class SensorNode {
   void write_stats(std::FILE* f) const;
 
  private:
+  static constexpr int kDrainMax = 100000;  // messages taken at most when stopping (a bus that never empties)
   void on_world_msg(const lcm::ReceiveBuffer* rb, const std::string& channel, const mppi_lcm::obstacles_t* m);
   void on_truth_msg(const lcm::ReceiveBuffer* rb, const std::string& channel);
   bool check_truth(const void* data, std::size_t size, std::int64_t now_us, Pose* pose, std::int64_t* sample_us);
