@@ -286,9 +286,16 @@ def test_a_mission_changed_in_flight_to_one_refused_holds(netns, procs, tmp_path
         assert any("item 2: NAV_SPLINE_WAYPOINT" in t and "holding" in t for t in texts(c))
         st = c.status()
         assert st["armed"] and st["engaged"] and st["mode"] == "GUIDED" and not c.events("landed")
-        x0 = ctl.last_x[:3]
-        time.sleep(1.0)
-        assert max(abs(a - b) for a, b in zip(ctl.last_x[:3], x0)) < 0.3 and x0[2] > 1.5   # held in the air
+        ref, _ = ctl.ref
+        # Where it was: at the first waypoint, within the acceptance radius that ended the leg.
+        assert ref["kind"] == "hold" and 1.5 < ref["center"][0] < 3.5 and abs(ref["center"][1]) < 0.3, ref
+        # Held in the air: the vehicle, brought to rest from the leg's speed, stays at the hold.
+        wait_for(lambda: math.hypot(*ctl.last_x[3:6]) < 0.1 and math.dist(ctl.last_x[:3], ref["center"]) < 0.2,
+                 15, "the vehicle at rest at the hold")
+        for _ in range(10):
+            assert math.dist(ctl.last_x[:3], ref["center"]) < 0.3 and ctl.last_x[2] > 1.5, (ctl.last_x[:3], ref)
+            time.sleep(0.1)
+        assert c.status()["mode"] == "GUIDED" and not c.events("landed")
     finally:
         ctl.close()
 

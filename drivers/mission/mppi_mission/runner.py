@@ -39,14 +39,19 @@ class Runner:
 
     # ---- the reference, at the link's rate --------------------------------------------------
     def _publisher(self):
+        """Each tick the current step; at the stop once more, so that a step set in the last
+        tick (the hold of a refused mission) still reaches mppid before the tool exits."""
         period = 1.0 / self.link.tick_hz
-        while not self.stop.wait(period):
+        stopping = False
+        while not stopping:
+            stopping = self.stop.wait(period)
             with self.lock:
                 step, t0 = self.step, self.t0_us
             if step is None:
                 continue
             self.link.send(step.ref, t0, self.trees)
-            self._sample(step, t0)
+            if not stopping:
+                self._sample(step, t0)
 
     def _sample(self, step, t0):
         """The newest state against the reference at that state's own time."""
