@@ -5,8 +5,8 @@ against the stand-in autopilot (sim/mavlink_vehicle, copied in as a test fixture
 
 What an operator does, in that order: the units' own command lines (ExecStart= of
 /usr/lib/systemd/system/mppid*.service: the LCM route, the recorder, mppid, the bridge; no
-systemd in a chroot, so this starts them as it would, as root, the bridge at SCHED_FIFO 85 as
-its unit asks), and for each flight the autopilot's link profile copied to
+systemd in a chroot, so this starts them as it would, as root: the bridge's `--realtime 85`
+as its unit gives it), and for each flight the autopilot's link profile copied to
 /etc/mppid/mavlink-bridge.yaml and the bridge restarted (docs/first-flight.md), then
 `mppid-mission fly /usr/share/mppid/missions/NAME.yaml`: hover against a PX4 stand-in on UDP
 (px4_udp.yaml), the 3 m/s circle against an ArduPilot stand-in (ardupilot_udp.yaml), mppid
@@ -38,6 +38,7 @@ import package_sitl
 UNITS = Path("/usr/lib/systemd/system")
 OUT = Path("/tmp/package-flight")
 STANDIN = Path("/opt/standin")
+STANDIN_PRIORITY = "85"   # the stand-in autopilot, a flight controller of its own: SCHED_FIFO
 DOC = Path("/usr/share/doc/mppid/first-flight.md")
 SOCK = "/run/mppid-mavlink/control.sock"
 # The stand-in's bars (test/mavlink/test_flight.py: circle RMSE < 0.3 m after the ramp).
@@ -137,14 +138,13 @@ def start_link(st: Stack, flight: str, autopilot: str):
     """The operator's edit for this autopilot, the bridge (re)started, the stand-in booted."""
     (OUT / flight).mkdir(parents=True, exist_ok=True)
     shutil.copy(f"/usr/share/mppid/bridge/{PROFILE[autopilot]}_udp.yaml", "/etc/mppid/mavlink-bridge.yaml")
-    prio = unit_value("mppid-mavlink-bridge.service", "CPUSchedulingPriority")
-    st.start("bridge", ["chrt", "-f", prio] + exec_lines("mppid-mavlink-bridge.service")[0]
+    st.start("bridge", exec_lines("mppid-mavlink-bridge.service")[0]
              + ["--set", f"trace.file={OUT / flight / 'bridge_trace.jsonl'}"])
     if autopilot == "arducopter":
         package_sitl.start(st, OUT / flight)
         return
     port, params = AUTOPILOTS[autopilot]
-    cmd = ["chrt", "-f", prio, "python3", "-m", "mavlink_vehicle", "--url", f"udpout:127.0.0.1:{port}",
+    cmd = ["chrt", "-f", STANDIN_PRIORITY, "python3", "-m", "mavlink_vehicle", "--url", f"udpout:127.0.0.1:{port}",
            "--autopilot", autopilot, "--out", str(OUT / flight / "standin")]
     for p in params:
         cmd += ["--param", p]
@@ -306,9 +306,14 @@ def mppid_stats() -> dict:
 
 
 def fly_one(st: Stack, token: str, doc_first: bool, results: dict, alive: dict) -> str:
-    """One flight of --flights (NAME:AUTOPILOT[:kill]) on a fresh link; its results key."""
+    """One flight of --flights (NAME:AUTOPILOT[:kill]) on a fresh link (the bridge restarted,
+    mppid and the recorder running on); its results key."""
     name, autopilot, *variant = token.split(":")
-    key = name + ("_kill" if variant == ["kill"] else "")
+    base = key = name + ("_kill" if variant == ["kill"] else "")
+    n = 1
+    while key in results:        # the same flight again (a longer measurement): circle_3ms_2, ...
+        n += 1
+        key = f"{base}_{n}"
     start_link(st, key, autopilot)
     bridge_ready(90.0 if autopilot == "arducopter" else 40.0)
     if doc_first:

@@ -108,6 +108,15 @@ def test_mppid_and_the_bridge_fly_one_vehicle_file_from_etc():
                                         "/etc/mppid/realsense.yaml"])
 
 
+def test_the_bridge_takes_its_priority_once_started_above_mppids_loop():
+    """Its latency path above mppid's loop (SCHED_FIFO 80, drivers/rt's default), within the
+    unit's RLIMIT_RTPRIO; its start time-shared: no CPUSchedulingPolicy= (that would import
+    pymavlink, numpy and lcm above the loop, a second held off a shared core)."""
+    u, b = unit("mppid-mavlink-bridge.service"), exec_start("mppid-mavlink-bridge.service")
+    assert "CPUSchedulingPolicy" not in u and "CPUSchedulingPriority" not in u
+    assert 80 < int(option(b, "--realtime")) <= int(u["LimitRTPRIO"][0])
+
+
 def test_the_mapper_is_enabled_on_its_own_and_maps_before_mppid_starts():
     t, u = unit("mppid.target"), unit(MAPPER)
     assert MAPPER not in words(t, "Wants") | words(t, "Also"), "a vehicle without a sensor runs no mapper"

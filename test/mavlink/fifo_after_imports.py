@@ -1,11 +1,12 @@
 """`python fifo_after_imports.py PRIO MODULE [ARGS...]`: runs `python -m MODULE ARGS...` at
 SCHED_FIFO PRIO, its imports done first at the normal priority.
 
-The link's processes (simulated autopilot, router, bridge) run above mppid as in service
-(mavchain.py): short I/O work. Their start is not short: a second or so of importing
+The link's processes (simulated autopilot, router) run above mppid as the bridge does in
+service (mavchain.py): short I/O work. Their start is not short: a second or so of importing
 pymavlink, numpy and lcm, which at SCHED_FIFO 85 held off everything below it on that core, a
 real-time mppid of another test worker included (its loop pinned there missed half a second
-of cycles and the vehicle fell). So they import first, then take their priority."""
+of cycles and the vehicle fell). So they import first, then take their priority, as the
+bridge's `--realtime` does itself (mppi_mavlink/realtime.py)."""
 import importlib
 import os
 import runpy

@@ -25,6 +25,8 @@ MPPID_SETS = ("mppi.rollouts=512",)
 RT = os.environ.get("MAVLINK_TEST_RT", "1") != "0" and os.geteuid() == 0
 # The link's Python processes: `python -m MODULE`, at SCHED_FIFO 85 once imported.
 IO_LAUNCH = [PYTHON, Path(__file__).resolve().parent / "fifo_after_imports.py", "85"] if RT else [PYTHON, "-m"]
+# The bridge as its unit runs it: its latency path's threads at SCHED_FIFO 85 once started.
+BRIDGE_RT = ["--realtime", "85"] if RT else []
 
 
 class Chain:
@@ -75,7 +77,7 @@ class Chain:
         self._take_turn()
         # The simulated autopilot sends to the bridge's UDP port whatever the config names.
         url = url or f"udpin:127.0.0.1:{VEHICLE_PORT}"
-        cmd = IO_LAUNCH + ["mppi_mavlink", "run", "--config", self.bridge_config, "--lcm-url", LCM_URL,
+        cmd = [PYTHON, "-m", "mppi_mavlink", "run", *BRIDGE_RT, "--config", self.bridge_config, "--lcm-url", LCM_URL,
                "--set", f"control.socket={self.sock}", "--set", f"trace.file={self.out / 'bridge_trace.jsonl'}",
                "--url", url]
         for kv in self.bridge_sets:

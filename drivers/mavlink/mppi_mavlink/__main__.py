@@ -24,6 +24,8 @@ def main(argv=None) -> int:
     r.add_argument("--vehicle", help="vehicle file (config/vehicles/*.yaml; overrides vehicle.file): mppid's --vehicle")
     r.add_argument("--lcm-url", help="LCM URL (overrides lcm.url)")
     r.add_argument("--log-level", default="info")
+    r.add_argument("--realtime", type=int, metavar="PRIO",
+                   help="SCHED_FIFO PRIO for the latency path's threads once started (overrides realtime.priority)")
     for c in CONTROL_CMDS:
         p = sub.add_parser(c, help=f"ask a running bridge to {c}")
         p.add_argument("--socket", default=settings_mod.DEFAULTS["control"]["socket"])
@@ -61,6 +63,8 @@ def _run(a) -> int:
         sets.append(f"mavlink.url={a.url}")
     if a.vehicle:
         sets.append(f"vehicle.file={a.vehicle}")
+    if a.realtime is not None:
+        sets.append(f"realtime.priority={a.realtime}")
     try:
         s = settings_mod.load(a.config, sets)
     except (settings_mod.SettingsError, OSError) as e:

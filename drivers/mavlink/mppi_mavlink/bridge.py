@@ -23,7 +23,7 @@ import logging
 import threading
 import time
 
-from . import autopilots, lcm_types, report, telemetry
+from . import autopilots, lcm_types, realtime, report, telemetry
 from .autopilot import Autopilot, CommandError
 from .autopilots import decode_param  # noqa: F401  (re-exported: test_frames)
 from .autopilots.base import mavlink
@@ -186,7 +186,7 @@ class Bridge:
             log.info("link up: autopilot %d heartbeat, mode %s, %s", ap.target_system, ap.mode,
                      "armed" if ap.armed else "disarmed")
             self.link_up_mono = now
-            threading.Thread(target=self._on_link_up, daemon=True).start()
+            realtime.thread(self._on_link_up, "link-up").start()
         else:
             ap.link_losses += 1
             log.error("link lost: autopilot HEARTBEAT overdue by %.1f s (%.1f s since the last)", timeout, now - hb)
@@ -320,7 +320,7 @@ class Bridge:
         # Until now mppid's setpoints were not flown (the autopilot's take-off, a pre-stream):
         # what its estimates (disturbance, mass, delay) learnt from them is wrong. Asked for
         # beside `offboard`'s answer; not fatal.
-        threading.Thread(target=self._restart_mppid_estimates, name="restart-estimates", daemon=True).start()
+        realtime.thread(self._restart_mppid_estimates, "restart-estimates").start()
 
     def _restart_mppid_estimates(self):
         why = self.mppid.ask("daemon.restart_estimates", 1.0)
@@ -388,7 +388,8 @@ class Bridge:
         except OSError as e:  # a TCP autopilot (a SITL) not listening yet: housekeeping retries
             log.warning("cannot open %s yet (%s): retrying every %g s", self.s["mavlink"]["url"], e,
                         self.s["mavlink"]["reconnect_period_s"])
-        self.threads = [threading.Thread(target=f, name=n, daemon=True) for f, n in (
+        prio = self.s["realtime"]["priority"]   # the latency path's threads (realtime.py)
+        self.threads = [realtime.thread(f, n, prio) for f, n in (
             (lambda: self.link.receive_loop(self.stop, self._on_mavlink), "mavlink-rx"), (self._lcm_loop, "lcm"),
             (self._housekeeping, "housekeeping"))]
         for t in self.threads:

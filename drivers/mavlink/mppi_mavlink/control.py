@@ -14,6 +14,8 @@ import os
 import socket
 import threading
 
+from . import realtime
+
 log = logging.getLogger("mppi_mavlink")
 
 
@@ -35,7 +37,7 @@ class ControlServer:
         self.sock.listen(4)
         self.sock.settimeout(0.2)
         self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._loop, name="control", daemon=True)
+        self.thread = realtime.thread(self._loop, "control")
 
     def start(self):
         self.thread.start()

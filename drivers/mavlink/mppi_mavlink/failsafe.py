@@ -12,10 +12,9 @@ ArduPilot BRAKE), the operator told; `offboard` outside it is refused."""
 from __future__ import annotations
 
 import logging
-import threading
 import time
 
-from . import fence as fence_mod
+from . import fence as fence_mod, realtime
 from .autopilot import CommandError
 from .engagement import ENGAGED
 from .notices import WARNING
@@ -62,7 +61,7 @@ class Failsafe:
                                  f"({self.fwd.last_drop or 'none came'})")
         if self.handback_pending and self.ap.link_up and not self.busy and now >= self.next_try:
             self.busy = True
-            threading.Thread(target=self._hand_back, name="hand-back", daemon=True).start()
+            realtime.thread(self._hand_back, "hand-back").start()
 
     def _hand_back(self):
         try:

@@ -39,6 +39,7 @@ from collections import deque
 
 import numpy as np
 
+from . import realtime
 from .autopilots.base import mavlink
 from .layout import QuadrotorRate as Q
 
@@ -325,7 +326,7 @@ class ObstacleSender:
     def start(self, stop: threading.Event):
         if not self.o["enabled"]:
             return
-        self.thread = threading.Thread(target=self._loop, args=(stop,), name="obstacle-distance", daemon=True)
+        self.thread = realtime.thread(self._loop, "obstacle-distance", args=(stop,))
         self.thread.start()
 
     def _loop(self, stop: threading.Event):

@@ -80,6 +80,9 @@ DEFAULTS = {
               "min": None, "max": None,             # box: [x, y] corners, m
               "min_z": None, "max_z": None},        # m, either shape
     "control": {"socket": "/run/mppid-mavlink/control.sock"},
+    # SCHED_FIFO for the threads on the latency path once the bridge is built (realtime.py);
+    # 0: time-shared. The unit gives 85 (`run --realtime 85`), above mppid's loop (80).
+    "realtime": {"priority": 0},
     "trace": {"file": None},              # JSONL of every forwarded setpoint (latency measurement)
     # The map to the autopilot: mppid-mapper's map as OBSTACLE_DISTANCE(_3D) (obstacle_distance.py).
     "obstacle_distance": obstacle_distance.DEFAULTS,
@@ -210,6 +213,9 @@ def validate(s: dict):
         raise SettingsError(f"telemetry.min_state_hz ({s['telemetry']['min_state_hz']:g}) must not exceed "
                             f"telemetry.state_hz ({s['telemetry']['state_hz']:g})")
     num("takeoff", "altitude", 0.1, 1000)
+    num("realtime", "priority", 0, 99)
+    if not isinstance(s["realtime"]["priority"], int):
+        raise SettingsError(f"realtime.priority: must be an integer in [0, 99], got {s['realtime']['priority']!r}")
     try:
         fence.parse({k: v for k, v in s["fence"].items() if v is not None})
     except fence.FenceError as e:

@@ -90,7 +90,8 @@ def fly(a, out: Path) -> tuple[int, int]:
         procs.append(subprocess.Popen([str(c) for c in cmd], stdout=f, stderr=subprocess.STDOUT, cwd=ROOT, env=env))
 
     try:
-        start("bridge", rt + [PY, "-m", "mppi_mavlink", "run", "--config", ROOT / "config/bridge/px4_sitl.yaml",
+        start("bridge", [PY, "-m", "mppi_mavlink", "run", "--config", ROOT / "config/bridge/px4_sitl.yaml",
+                         *([] if a.no_rt else ["--realtime", "85"]),
                               "--set", f"control.socket={sock}", "--set", f"trace.file={out / 'bridge_trace.jsonl'}"])
         start("mppid", [find_mppid(), "--config", ROOT / f"config/tasks/{a.task}.yaml", "--lcm-url", LCM_URL,
                         "--backend", "cpu", "--set", f"mppi.rollouts={a.rollouts}"] + ([] if a.no_rt else ["--realtime"]))

@@ -50,7 +50,7 @@ LOITER_AVOID = paths.ROOT / "config" / "ardupilot" / "loiter_avoid.parm"  # --co
 LOITER_PUSH_S = 12.0  # the pitch stick held forward in Loiter (--controller loiter)
 GCS_URL = "tcp:127.0.0.1:5763"  # the SITL's third serial port: the ground station's
 BRIDGE_CONFIG = paths.ROOT / "config" / "bridge" / "ardupilot_sitl.yaml"
-IO_FIFO_PRIORITY = 85   # the bridge, as its unit runs it (above mppid's 80)
+IO_FIFO_PRIORITY = 85   # the bridge's latency path, as its unit runs it (above mppid's 80)
 # mppid's settings through ArduCopter, over the task file (argued there), then the mission's
 # own (its `mppid.set`), then --set.
 OVERLAY = paths.ROOT / "config" / "ardupilot" / "mppid_overlay.yaml"
@@ -109,8 +109,8 @@ def mppid_and_bridge(spec: FlightSpec, mission: dict, out: Path, fifo: bool, bri
               sensed_mod.controller_url(spec, mission),
               "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
               "--set", f"trace.file={out / 'bridge_trace.jsonl'}"]  # each setpoint's path, stage by stage
-    if fifo:
-        bridge = ["chrt", "-f", str(IO_FIFO_PRIORITY)] + bridge
+    if fifo:   # its latency path's threads, once started (mppi_mavlink/realtime.py)
+        bridge += ["--realtime", str(IO_FIFO_PRIORITY)]
     return ctrl, bridge, sock
 
 

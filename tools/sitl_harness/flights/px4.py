@@ -35,8 +35,8 @@ position, velocity and acceleration at 50 Hz; no mppid, no bridge): the baseline
 PX4 runs in a folder of the flight's own (OUT/px4: fresh parameters every flight, its ULog in
 OUT/px4/log/), with config/px4/px4_mppid.params (the parameters docs/failsafes.md argues)
 and config/px4/offboard_baseline.params given as PX4_PARAM_ variables, which PX4's SITL start-up script applies after the airframe's.
-PX4 and the bridge run at SCHED_FIFO 85 (above mppid's 80), as the bridge's unit runs it: at
-normal priority SIH's loop stalls for 0.2 s now and then on a loaded machine (docs/px4.md).
+PX4 runs at SCHED_FIFO 85 (above mppid's 80: at normal priority SIH's loop stalls for 0.2 s now
+and then on a loaded machine, docs/px4.md), the bridge with `--realtime 85` as its unit runs it.
 """
 from __future__ import annotations
 
