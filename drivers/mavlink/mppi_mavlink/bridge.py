@@ -389,6 +389,8 @@ class Bridge:
             log.warning("cannot open %s yet (%s): retrying every %g s", self.s["mavlink"]["url"], e,
                         self.s["mavlink"]["reconnect_period_s"])
         prio = self.s["realtime"]["priority"]   # the latency path's threads (realtime.py)
+        if prio:
+            realtime.settle()
         self.threads = [realtime.thread(f, n, prio) for f, n in (
             (lambda: self.link.receive_loop(self.stop, self._on_mavlink), "mavlink-rx"), (self._lcm_loop, "lcm"),
             (self._housekeeping, "housekeeping"))]

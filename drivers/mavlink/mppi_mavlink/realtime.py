@@ -7,9 +7,15 @@ and bounded per message. Everything else stays time-shared, below mppid's loop (
 the start (a second of importing pymavlink, numpy and lcm, which at SCHED_FIFO would hold mppid
 off its core on a one-core budget), the control socket's requests (missions, parameters), the
 map cast into OBSTACLE_DISTANCE, and the threads those start.
+
+A latency thread is also where Python's collector runs when an allocation there trips it: a
+full collection walks every object the imports made (~44,000; 10-17 ms on the 2-core VM), at
+SCHED_FIFO above mppid's loop. `settle()` collects once at the start and freezes what is left,
+so that later collections walk only what the bridge allocates while it runs.
 """
 from __future__ import annotations
 
+import gc
 import logging
 import os
 import threading
@@ -29,6 +35,14 @@ def enter(priority: int) -> bool:
     except OSError as e:
         log.warning("%s: SCHED_FIFO %d refused (%s): time-shared", threading.current_thread().name, priority, e)
         return False
+
+
+def settle() -> int:
+    """Collect what the start left, then freeze the rest out of every later collection
+    (gc.freeze): the number of objects frozen."""
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
 
 
 def thread(target, name: str, priority: int = 0, args=()) -> threading.Thread:
