@@ -2,7 +2,9 @@
 """What held mppid's loop thread off its core: each time the loop was preempted (switched out
 while runnable), who took the core and how long until the loop ran again, from a scheduler
 trace of that core. Prints JSON: per preempting thread (name and kernel priority), how often,
-the total and the longest; and the preemptions longer than --long-ms, with their time.
+the total and the longest; the preemptions longer than --long-ms, with their time; and the
+loop's longest cycles (woken to asleep again), each split into the time the loop itself ran
+and the time it was preempted: a cycle that ran long on its own had the core to itself.
 
     perf record -e sched:sched_switch -C 1 -o sched.data &    # the core mppid is pinned to
     ... the flight ...; kill -INT %1
@@ -47,11 +49,29 @@ def preemptions(events, loop: int):
             pending = None
 
 
+def cycles(events, loop: int, prio: int):
+    """(start s, wall s, own running s) of each of the loop's cycles at its real-time priority."""
+    start = running = None
+    own = 0.0
+    for t, prev, _, state, _, nxt, next_prio in events:
+        if nxt == loop:
+            if start is None and next_prio == prio:
+                start, own = t, 0.0
+            running = t
+        if prev == loop:
+            if running is not None:
+                own, running = own + t - running, None
+            if state.startswith("S") and start is not None:
+                yield start, t - start, own
+                start = None
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("trace", help="perf script output (see above)")
     ap.add_argument("--loop-prio", type=int, default=18)
     ap.add_argument("--long-ms", type=float, default=1.5)
+    ap.add_argument("--cycles", type=int, default=10, help="the longest cycles to list")
     a = ap.parse_args()
     with open(a.trace) as f:
         events = list(switches(f))
@@ -67,7 +87,10 @@ def main() -> int:
     out = {"loop_tid": loop, "trace_s": round(events[-1][0] - t0, 1),
            "by": {k: {**v, "total_ms": round(v["total_ms"], 1), "max_ms": round(v["max_ms"], 2)}
                   for k, v in sorted(by.items(), key=lambda kv: -kv[1]["total_ms"])},
-           "longer": long}
+           "longer": long,
+           "longest_cycles": [{"t_s": round(t - t0, 3), "wall_ms": round(w * 1e3, 1), "own_ms": round(o * 1e3, 1),
+                               "preempted_ms": round((w - o) * 1e3, 1)}
+                              for t, w, o in sorted(cycles(events, loop, a.loop_prio), key=lambda c: -c[1])[:a.cycles]]}
     print(json.dumps(out, indent=1))
     return 0
 
