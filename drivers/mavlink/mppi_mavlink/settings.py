@@ -213,22 +213,24 @@ def validate(s: dict):
         raise SettingsError(f"telemetry.min_state_hz ({s['telemetry']['min_state_hz']:g}) must not exceed "
                             f"telemetry.state_hz ({s['telemetry']['state_hz']:g})")
     num("takeoff", "altitude", 0.1, 1000)
-    num("realtime", "priority", 0, 99)
-    if not isinstance(s["realtime"]["priority"], int):
-        raise SettingsError(f"realtime.priority: must be an integer in [0, 99], got {s['realtime']['priority']!r}")
+    _integer(s, "realtime", "priority", 0, 99)
     try:
         fence.parse({k: v for k, v in s["fence"].items() if v is not None})
     except fence.FenceError as e:
         raise SettingsError(str(e)) from None
-    num("mavlink", "signing_link_id", 0, 255)
-    if not isinstance(s["mavlink"]["signing_link_id"], int):
-        raise SettingsError("mavlink.signing_link_id: must be an integer in [0, 255]")
+    _integer(s, "mavlink", "signing_link_id", 0, 255)
     k = s["mavlink"]["signing_key_file"]
     if k is not None and (not isinstance(k, str) or not k):
         raise SettingsError(f"mavlink.signing_key_file: must be a file name or null, got {k!r}")
     if not isinstance(s["mavlink"]["url"], str) or not s["mavlink"]["url"]:
         raise SettingsError("mavlink.url: must be a pymavlink connection string")
     obstacle_distance.validate(s, _raise)
+
+
+def _integer(s: dict, sec: str, key: str, lo: int, hi: int):
+    v = s[sec][key]
+    if not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi:
+        raise SettingsError(f"{sec}.{key}: must be an integer in [{lo}, {hi}], got {v!r}")
 
 
 def _raise(message: str):
