@@ -26,6 +26,7 @@ DEFAULT_TESTS=(
   "test/sitl/test_live_and_replay.py::test_lockstep_flight_with_live_updates_replays_bit_for_bit"
   "test/sitl/test_live_and_replay.py::test_rollouts_and_horizon_change_in_a_realtime_flight_without_a_late_cycle"
   "test/sitl/test_mission.py::test_the_mission_tool_flies_a_figure_eight_on_mppid_sim"
+  "test/mavlink/test_autopilot_mission.py::test_a_mission_changed_in_flight_to_one_refused_holds"
 )
 
 runs=20 cpu=2 list=0 tests=()
