@@ -21,7 +21,7 @@ from sitl_harness.flights.px4 import Px4Flight
 from sitl_harness.flights.sim import SimFlight
 from sitl_harness.overlay import load_sets
 from sitl_harness.results import load_campaign, write_campaign
-from sitl_harness.sandbox import Sandbox, SandboxError
+from sitl_harness.sandbox import Sandbox, SandboxError, fifo_allowed
 
 HARNESS = ROOT / "tools" / "sitl_harness"
 
@@ -123,6 +123,10 @@ def test_ardupilot_guided_flight_commands(tmp_path):
         ArduPilotFlight(FlightSpec(scenario="forest_4m", out=tmp_path / "o2"), binary).plan()
 
 
+def option(argv: list[str], name: str) -> str:
+    return argv[argv.index(name) + 1]
+
+
 def test_ardupilot_mppid_flight_commands(mppid_binary, tmp_path):
     binary = fake_ardupilot(tmp_path)
     vehicle = tmp_path / "fitted.yaml"
@@ -138,11 +142,17 @@ def test_ardupilot_mppid_flight_commands(mppid_binary, tmp_path):
     assert ctrl[ctrl.index("--vehicle") + 1] == str(vehicle)   # --set vehicle= replaces the airframe
     sets = [ctrl[i + 1] for i, c in enumerate(ctrl) if c == "--set"]
     assert sets == ["mppi.seed=51"] + load_sets(OVERLAY) + ["mppi.lambda=7"]
-    bridge = cmds["bridge"][cmds["bridge"].index("-m"):]
+    bridge = cmds["bridge"]
     sock = flight.out / "bridge.sock"
-    assert bridge == ["-m", "mppi_mavlink", "run", "--config", str(paths.ROOT / "config/bridge/ardupilot_sitl.yaml"),
-                      "--lcm-url", spec.lcm_url, "--set", f"control.socket={sock}", "--set", f"vehicle.file={vehicle}",
-                      "--set", f"trace.file={sock.parent / 'bridge_trace.jsonl'}"]  # the stage times (docs/latency.md)
+    assert bridge[bridge.index("-m") + 1:bridge.index("-m") + 3] == ["mppi_mavlink", "run"]
+    assert option(bridge, "--config") == str(paths.ROOT / "config/bridge/ardupilot_sitl.yaml")
+    assert option(bridge, "--lcm-url") == spec.lcm_url
+    bridge_sets = dict(bridge[i + 1].split("=", 1) for i, c in enumerate(bridge) if c == "--set")
+    assert bridge_sets == {"control.socket": str(sock), "vehicle.file": str(vehicle),   # mppid's airframe
+                           "trace.file": str(sock.parent / "bridge_trace.jsonl")}      # the stage times (docs/latency.md)
+    # As its unit runs it where SCHED_FIFO is allowed: its latency threads above mppid's loop, once started.
+    assert "chrt" not in bridge
+    assert (int(option(bridge, "--realtime")) > 80) if fifo_allowed() else "--realtime" not in bridge
     assert cmds["mission"][-2:] == ["--bridge", str(sock)]
     default = ArduPilotFlight.create(FlightSpec(scenario="hover", out=tmp_path / "o3", realtime=True,
                                                 autopilot="ardupilot", ardupilot_bin=str(binary)))
