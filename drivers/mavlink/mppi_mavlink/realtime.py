@@ -53,7 +53,3 @@ def thread(target, name: str, priority: int = 0, args=()) -> threading.Thread:
         target(*args)
     return threading.Thread(target=run, name=name, daemon=True)
 
-
-def policy_of(t: threading.Thread) -> tuple[int, int]:
-    """(policy, priority) of a running thread, as the OS schedules it."""
-    return os.sched_getscheduler(t.native_id), os.sched_getparam(t.native_id).sched_priority
